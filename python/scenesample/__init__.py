@@ -1,0 +1,53 @@
+"""scenesample: sample 3D triangle scenes with images, points and rays; rebuild geometry and
+views from the samples; measure what each method costs and how accurate it is.
+
+Conventions (shared by every function):
+
+- Geometry and images are float32; ids are int32 with -1 for "nothing"; faces are uint32.
+- Cameras follow OpenGL / pyrender / glTF: a 4x4 camera-to-world pose, looking along -Z with +Y
+  up, ``yfov`` in radians, image row 0 at the top, pixel centres at +0.5.
+- Depth is camera-space z (positive), ``+inf`` where no surface (pyrender uses 0).
+- Ray hits: ``t`` in units of the direction's length, ``+inf`` and triangle -1 on a miss.
+- Every result carries ``timings`` (seconds per stage).
+"""
+
+from __future__ import annotations
+
+from . import errors, scenes
+from ._api import cast_rays, device_info, discretize
+from ._core import Camera
+from ._core import __version__ as __version__
+from ._scene import Scene
+from .errors import (
+    ExrError,
+    GpuError,
+    GpuLimitError,
+    GpuUnavailableError,
+    InputError,
+    SceneError,
+    SceneFileError,
+    ScenesampleError,
+    SceneWarning,
+)
+from .results import DepthImages, RayHits
+
+__all__ = [
+    "Camera",
+    "DepthImages",
+    "ExrError",
+    "GpuError",
+    "GpuLimitError",
+    "GpuUnavailableError",
+    "InputError",
+    "RayHits",
+    "Scene",
+    "SceneError",
+    "SceneFileError",
+    "SceneWarning",
+    "ScenesampleError",
+    "cast_rays",
+    "device_info",
+    "discretize",
+    "errors",
+    "scenes",
+]

@@ -1,0 +1,124 @@
+"""The verbs: ``discretize`` and ray casting (``reconstruct``, ``splat`` and ``evaluate`` arrive
+with the capabilities that define them)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any, Union
+
+import numpy as np
+
+from . import _core
+from ._scene import Scene
+from .errors import InputError
+from .results import DepthImages, RayHits
+
+__all__ = ["discretize", "cast_rays", "device_info"]
+
+Camera = _core.Camera
+DISCRETIZE_METHODS = ("conventional",)
+
+
+def _scene_core(scene: Any) -> _core.Scene:
+    if isinstance(scene, Scene):
+        return scene._core
+    raise InputError(f"scene must be a scenesample.Scene, got {type(scene).__name__}")
+
+
+def _camera_list(cameras: Union[Camera, Sequence[Camera]]) -> list[Camera]:
+    cams = [cameras] if isinstance(cameras, Camera) else list(cameras)
+    for i, c in enumerate(cams):
+        if not isinstance(c, Camera):
+            raise InputError(f"cameras[{i}] must be a scenesample.Camera, got {type(c).__name__}")
+    if not cams:
+        raise InputError("discretize needs at least one camera")
+    return cams
+
+
+def discretize(
+    scene: Scene,
+    cameras: Union[Camera, Sequence[Camera]],
+    method: str = "conventional",
+    *,
+    cull_backfaces: bool = False,
+) -> DepthImages:
+    """Sample a scene with depth images on the GPU.
+
+    Parameters
+    ----------
+    scene : Scene
+    cameras : Camera or sequence of Camera
+        One image per camera; poses and projections may differ, resolutions must match.
+    method : {"conventional"}
+        ``"conventional"``: every camera samples every surface it sees (one raster pass per
+        image, nearest surface at each pixel centre, no multisampling).
+    cull_backfaces : bool
+        Drop triangles whose counter-clockwise front faces away (off by default).
+
+    Returns
+    -------
+    DepthImages
+        ``depth`` (n, H, W) float32 camera-space z (+inf empty), ``triangle`` (n, H, W) int32
+        (-1 empty), ``normal``/``position``/``color`` (n, H, W, 3) float32, ``cameras``,
+        ``timings``.
+
+    Raises
+    ------
+    GpuUnavailableError
+        No GPU adapter (install ``mesa-vulkan-drivers`` for a software one).
+    GpuLimitError
+        The images exceed the device's texture or buffer limits.
+    InputError
+        Cameras of different resolutions, or no camera.
+    """
+    if method not in DISCRETIZE_METHODS:
+        raise InputError(f"method must be one of {list(DISCRETIZE_METHODS)}, got {method!r}")
+    cams = _camera_list(cameras)
+    d = _core.discretize_conventional(_scene_core(scene), cams, bool(cull_backfaces))
+    return DepthImages._from_core(d)
+
+
+def cast_rays(
+    scene: Scene,
+    origins: Any,
+    directions: Any,
+    *,
+    t_min: float = 0.0,
+    t_max: float = float("inf"),
+) -> RayHits:
+    """Closest hit of each ray, on the CPU (obvhs BVH, cached per scene; all cores; GIL released).
+
+    The triangle test is watertight (Woop, Benthin and Wald 2013): a ray through a shared edge
+    or vertex of a closed mesh never slips through. Both faces of a triangle count.
+
+    Parameters
+    ----------
+    scene : Scene
+    origins : (N, 3) array_like of float
+    directions : (N, 3) array_like of float
+        Finite and non-zero; need not be unit length.
+    t_min, t_max : float
+        Accept hits with ``t_min <= t < t_max``, in units of each direction's length.
+
+    Returns
+    -------
+    RayHits
+        ``t`` (N,) float32 (+inf on a miss), ``triangle`` (N,) int32 (-1), ``barycentric``
+        (N, 2) float32, ``timings``.
+    """
+    o = np.asarray(origins)
+    d = np.asarray(directions)
+    if o.ndim == 1 and o.shape[:1] == (3,):
+        o = o[None]
+    if d.ndim == 1 and d.shape[:1] == (3,):
+        d = d[None]
+    r = _core.cast_rays(_scene_core(scene), o, d, float(t_min), float(t_max))
+    return RayHits(**r)
+
+
+def device_info() -> dict[str, Any]:
+    """The GPU adapter scenesample uses: ``name``, ``backend``, ``device_type``, ``driver``,
+    ``timestamps`` (whether GPU timings are available) and the limits that bound requests.
+
+    Raises :class:`GpuUnavailableError` when there is none."""
+    return _core.device_info()

@@ -1,0 +1,232 @@
+"""The ``Scene`` façade: loading dispatch (glTF natively, other formats through trimesh),
+warnings, and numpydoc documentation over ``scenesample._core.Scene``."""
+
+from __future__ import annotations
+
+import os
+import warnings
+from pathlib import Path
+from typing import Any, Optional
+
+import numpy as np
+
+from . import _core
+from .errors import SceneFileError, SceneWarning
+
+__all__ = ["Scene"]
+
+_GLTF_SUFFIXES = {".gltf", ".glb"}
+
+
+class Scene:
+    """A validated triangle scene.
+
+    Build one with :meth:`load`, :meth:`from_arrays` or :meth:`from_trimesh`. Scenes are
+    immutable; the BVH used by :func:`scenesample.cast_rays` and the GPU buffers used by
+    :func:`scenesample.discretize` are built on first use and cached.
+
+    Triangle ids everywhere in scenesample are indices into :attr:`faces`.
+    """
+
+    __slots__ = ("_core",)
+
+    def __init__(self, core: _core.Scene) -> None:
+        if not isinstance(core, _core.Scene):
+            raise TypeError("use Scene.load, Scene.from_arrays or Scene.from_trimesh")
+        self._core = core
+
+    # -- construction -------------------------------------------------------------------------
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> Scene:
+        """Load a scene file.
+
+        glTF 2.0 (``.gltf`` with external or data-URI buffers, ``.glb``) is read natively: every
+        triangle primitive of every mesh instance (node hierarchy flattened with world transforms,
+        ``EXT_mesh_gpu_instancing`` expanded; strips and fans converted), metallic-roughness
+        materials, ``KHR_lights_punctual`` lights and glTF cameras. Points and lines, missing
+        images and unknown extensions are skipped with a :class:`SceneWarning`. Other formats
+        (OBJ, PLY, STL, ...) are read with trimesh when it is installed.
+
+        Parameters
+        ----------
+        path : str or PathLike
+            The file to read.
+
+        Raises
+        ------
+        SceneFileError
+            The file (or a buffer it references) is missing, truncated or corrupt.
+        SceneError
+            The content is invalid (non-finite vertices, out-of-range indices, node cycles,
+            accessors of the wrong type or out of bounds, a required extension we cannot decode).
+        """
+        p = Path(path)
+        if p.suffix.lower() in _GLTF_SUFFIXES:
+            scene = cls(_core.Scene.load_gltf(str(p)))
+            for message in scene.warnings:
+                warnings.warn(message, SceneWarning, stacklevel=2)
+            return scene
+        if not p.exists():
+            raise SceneFileError(f"{p}: no such file")
+        try:
+            import trimesh
+        except ImportError:
+            raise SceneFileError(
+                f"{p}: only glTF (.gltf, .glb) is read natively; install trimesh to read "
+                f"{p.suffix or 'this'} files"
+            ) from None
+        try:
+            loaded = trimesh.load(str(p), force="scene", process=False)
+        except Exception as e:  # trimesh raises many types for unreadable files
+            raise SceneFileError(f"{p}: trimesh could not read it: {e}") from e
+        return cls.from_trimesh(loaded)
+
+    @classmethod
+    def from_arrays(
+        cls,
+        vertices: Any,
+        faces: Any,
+        *,
+        normals: Optional[Any] = None,
+        colors: Optional[Any] = None,
+    ) -> Scene:
+        """A scene from plain arrays; face order is kept, so triangle ids are face indices.
+
+        Parameters
+        ----------
+        vertices : (N, 3) array_like of float
+            Vertex positions, converted to float32; must be finite.
+        faces : (M, 3) array_like of int
+            Vertex indices, any integer dtype; each in ``0..N``.
+        normals : (N, 3) array_like of float, optional
+            Per-vertex normals, kept as given (depth images use geometric normals).
+        colors : (N, 3) array_like of float, optional
+            Per-vertex linear RGB base colour; white when omitted.
+        """
+        return cls(_core.Scene.from_arrays(vertices, faces, normals, colors))
+
+    @classmethod
+    def from_trimesh(cls, obj: Any) -> Scene:
+        """A scene from a ``trimesh.Trimesh`` or ``trimesh.Scene`` (flattened with its graph's
+        world transforms). Faces keep their order: mesh after mesh, in graph order.
+        Per-vertex colours are kept when the visual has them."""
+        import trimesh
+
+        if isinstance(obj, trimesh.Trimesh):
+            meshes = [(obj, np.eye(4))]
+        elif isinstance(obj, trimesh.Scene):
+            meshes = []
+            for node in obj.graph.nodes_geometry:
+                transform, geometry = obj.graph[node]
+                mesh = obj.geometry[geometry]
+                if isinstance(mesh, trimesh.Trimesh):
+                    meshes.append((mesh, transform))
+        else:
+            raise TypeError(f"from_trimesh takes a trimesh.Trimesh or trimesh.Scene, got {type(obj)}")
+        if not meshes:
+            return cls.from_arrays(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
+        verts, faces, colors = [], [], []
+        offset = 0
+        for mesh, transform in meshes:
+            v = np.asarray(mesh.vertices, dtype=np.float64)
+            v = v @ np.asarray(transform)[:3, :3].T + np.asarray(transform)[:3, 3]
+            f = np.asarray(mesh.faces, dtype=np.int64)
+            # A mirroring transform reverses the winding; restore counter-clockwise fronts.
+            if np.linalg.det(np.asarray(transform)[:3, :3]) < 0:
+                f = f[:, ::-1]
+            verts.append(v)
+            faces.append(f + offset)
+            colors.append(_vertex_colors(mesh))
+            offset += len(v)
+        return cls.from_arrays(np.concatenate(verts), np.concatenate(faces), colors=np.concatenate(colors))
+
+    # -- data ----------------------------------------------------------------------------------
+
+    @property
+    def vertices(self) -> np.ndarray:
+        """(N, 3) float32 world positions."""
+        return self._core.vertices
+
+    @property
+    def faces(self) -> np.ndarray:
+        """(M, 3) uint32 vertex indices; row i is triangle id i."""
+        return self._core.faces
+
+    @property
+    def normals(self) -> Optional[np.ndarray]:
+        """(N, 3) float32 per-vertex normals given to :meth:`from_arrays`, else None."""
+        return self._core.normals
+
+    @property
+    def colors(self) -> np.ndarray:
+        """(N, 3) float32 per-vertex linear base colour (glTF: material base colour x COLOR_0)."""
+        return self._core.colors
+
+    @property
+    def triangle_count(self) -> int:
+        """Number of triangles M (degenerate ones included)."""
+        return self._core.triangle_count
+
+    @property
+    def degenerate_count(self) -> int:
+        """Number of zero-area triangles (kept, never rasterised, zero normal)."""
+        return self._core.degenerate_count
+
+    @property
+    def bounds(self) -> np.ndarray:
+        """(2, 3) float32 ``[min, max]`` of the vertices that faces use."""
+        return self._core.bounds
+
+    @property
+    def material_ids(self) -> np.ndarray:
+        """(M,) int32 index into :attr:`materials`; -1 is glTF's default material."""
+        return self._core.material_ids
+
+    @property
+    def object_ids(self) -> np.ndarray:
+        """(M,) int32 index into :attr:`objects` (one object per glTF mesh instance)."""
+        return self._core.object_ids
+
+    @property
+    def objects(self) -> list[str]:
+        """Object names (node or mesh name; ``name#i`` for GPU instances)."""
+        return self._core.objects
+
+    @property
+    def materials(self) -> list[dict[str, Any]]:
+        """Materials as dicts: ``name``, ``base_color`` (linear RGBA: factor x mean texel of the
+        base-colour texture, sRGB decoded, or the factor alone), ``base_color_factor``,
+        ``base_color_textured``, ``metallic``, ``roughness``, ``emissive``, ``double_sided``."""
+        return self._core.materials
+
+    @property
+    def lights(self) -> list[dict[str, Any]]:
+        """``KHR_lights_punctual`` lights as dicts: ``name``, ``type`` (point, spot, directional),
+        ``color``, ``intensity``, ``range``, world ``position`` and unit ``direction``,
+        ``inner_cone_angle``, ``outer_cone_angle``."""
+        return self._core.lights
+
+    @property
+    def cameras(self) -> list[_core.Camera]:
+        """glTF cameras with world poses (scale removed); 512 pixels high, width from the aspect
+        ratio."""
+        return self._core.cameras
+
+    @property
+    def warnings(self) -> list[str]:
+        """What loading skipped or approximated (also emitted as :class:`SceneWarning`)."""
+        return self._core.warnings
+
+    def __repr__(self) -> str:
+        return repr(self._core)
+
+
+def _vertex_colors(mesh: Any) -> np.ndarray:
+    n = len(mesh.vertices)
+    visual = getattr(mesh, "visual", None)
+    if visual is not None and getattr(visual, "kind", None) == "vertex":
+        c = np.asarray(visual.vertex_colors, dtype=np.float64)[:, :3] / 255.0
+        # sRGB-encoded 8-bit colours to linear, like glTF base colours.
+        return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+    return np.ones((n, 3))

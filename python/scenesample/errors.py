@@ -1,0 +1,59 @@
+"""Typed exceptions raised by scenesample.
+
+Every error a user can cause is one of these, with a message that names the offending argument
+or file element. Each also inherits the built-in exception a Python user would try first
+(``ValueError`` for bad values, ``OSError`` for unreadable files, ``RuntimeError`` for the GPU).
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "ScenesampleError",
+    "InputError",
+    "SceneError",
+    "SceneFileError",
+    "GpuError",
+    "GpuUnavailableError",
+    "GpuLimitError",
+    "ExrError",
+    "SceneWarning",
+]
+
+
+class ScenesampleError(Exception):
+    """Base class of every scenesample exception."""
+
+
+class InputError(ScenesampleError, ValueError):
+    """An argument has the wrong shape, dtype or value."""
+
+
+class SceneError(ScenesampleError, ValueError):
+    """Scene content cannot be used: non-finite vertices, bad indices, node cycles, bad accessors,
+    no triangles."""
+
+
+class SceneFileError(SceneError, OSError):
+    """A scene file, or a file it references, is missing, truncated or corrupt."""
+
+
+class GpuError(ScenesampleError, RuntimeError):
+    """The GPU reported an error while running work."""
+
+
+class GpuUnavailableError(GpuError):
+    """No usable GPU adapter. On a machine without a GPU, Mesa's software Vulkan driver
+    (Debian package ``mesa-vulkan-drivers``) provides one."""
+
+
+class GpuLimitError(GpuError, ValueError):
+    """A request exceeds the device's limits (refused before anything is submitted)."""
+
+
+class ExrError(ScenesampleError, OSError):
+    """An EXR file could not be written or read back."""
+
+
+class SceneWarning(UserWarning):
+    """A scene loaded, but something in it was skipped or approximated (missing image, unknown
+    extension, point or line primitives)."""

@@ -1,0 +1,152 @@
+"""Result objects: small classes whose fields are numpy arrays, with ``as_dict()``."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+import numpy as np
+
+from . import _core
+from .errors import InputError
+
+__all__ = ["DepthImages", "RayHits"]
+
+
+@dataclass(eq=False, repr=False)
+class DepthImages:
+    """Depth images of a scene, one per camera (all cameras share a resolution).
+
+    Attributes
+    ----------
+    depth : (n, H, W) float32
+        Camera-space z (distance along the view axis, positive), ``+inf`` where no surface.
+    triangle : (n, H, W) int32
+        Scene face index of the surface at the pixel centre, -1 where no surface.
+    normal : (n, H, W, 3) float32
+        Unit world geometric normal of that triangle (from its winding, not flipped toward the
+        camera); zero where no surface.
+    position : (n, H, W, 3) float32
+        World position of the surface point; NaN where no surface.
+    color : (n, H, W, 3) float32
+        Linear base colour interpolated from the vertices; zero where no surface.
+    cameras : list of Camera
+        The camera of each image.
+    timings : dict of str to float
+        Seconds per stage: ``upload`` (scene to GPU, 0 when cached), ``raster`` (wall time of
+        the GPU passes), ``raster_gpu`` (GPU timestamps, when the adapter has them),
+        ``readback``, ``resolve`` (depth, position, normal and colour from the GPU's triangle
+        ids and barycentrics, in float64 on the CPU) and ``total``.
+    """
+
+    depth: np.ndarray
+    triangle: np.ndarray
+    normal: np.ndarray
+    position: np.ndarray
+    color: np.ndarray
+    cameras: list[Any]
+    timings: dict[str, float] = field(default_factory=dict)
+
+    @classmethod
+    def _from_core(cls, d: dict[str, Any]) -> DepthImages:
+        return cls(**d)
+
+    @property
+    def n(self) -> int:
+        """Number of images."""
+        return int(self.depth.shape[0])
+
+    @property
+    def height(self) -> int:
+        return int(self.depth.shape[1])
+
+    @property
+    def width(self) -> int:
+        return int(self.depth.shape[2])
+
+    @property
+    def mask(self) -> np.ndarray:
+        """(n, H, W) bool: pixels that see a surface."""
+        return self.triangle >= 0
+
+    def __len__(self) -> int:
+        return self.n
+
+    def as_dict(self) -> dict[str, Any]:
+        """Every field by name (arrays are not copied)."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    def save_exr(self, path: str | os.PathLike[str]) -> None:
+        """Write all images to one multi-part EXR file, one part per image (``view0``, ...).
+
+        Channels: ``Z`` (depth), ``triangle`` (uint32 holding the int32 bits: -1 is
+        0xFFFFFFFF), ``N.X N.Y N.Z``, ``P.X P.Y P.Z``, ``R G B``; each part carries its camera
+        as JSON in the ``scenesample.camera`` attribute. ZIP compression, so
+        :meth:`load_exr` returns every array bit for bit.
+        """
+        n, h, w = self.depth.shape
+        shapes = {"triangle": (n, h, w), "normal": (n, h, w, 3), "position": (n, h, w, 3), "color": (n, h, w, 3)}
+        for name, shape in shapes.items():
+            if getattr(self, name).shape != shape:
+                raise InputError(f"{name} has shape {getattr(self, name).shape}, expected {shape}")
+        if len(self.cameras) != n:
+            raise InputError(f"{len(self.cameras)} cameras for {n} images")
+        _core.write_exr(
+            os.fspath(path),
+            w,
+            h,
+            np.ascontiguousarray(self.depth, dtype=np.float32).reshape(-1, 1),
+            np.ascontiguousarray(self.triangle, dtype=np.int32).reshape(-1),
+            np.ascontiguousarray(self.normal, dtype=np.float32).reshape(-1, 3),
+            np.ascontiguousarray(self.position, dtype=np.float32).reshape(-1, 3),
+            np.ascontiguousarray(self.color, dtype=np.float32).reshape(-1, 3),
+            list(self.cameras),
+        )
+
+    @classmethod
+    def load_exr(cls, path: str | os.PathLike[str]) -> DepthImages:
+        """Read a file written by :meth:`save_exr` (timings are empty)."""
+        d = _core.read_exr(os.fspath(path))
+        d["timings"] = {}
+        return cls(**d)
+
+    def __repr__(self) -> str:
+        covered = float(self.mask.mean()) if self.depth.size else 0.0
+        return f"DepthImages(n={self.n}, {self.width}x{self.height}, covered={covered:.1%}, total={self.timings.get('total', float('nan')):.4f}s)"
+
+
+@dataclass(eq=False, repr=False)
+class RayHits:
+    """Closest hits of a batch of rays.
+
+    Attributes
+    ----------
+    t : (N,) float32
+        Hit distance in units of each direction's length; ``+inf`` on a miss.
+    triangle : (N,) int32
+        Scene face index; -1 on a miss.
+    barycentric : (N, 2) float32
+        (u, v) with hit point = (1-u-v)*v0 + u*v1 + v*v2 (Embree's convention); 0 on a miss.
+    timings : dict of str to float
+        ``bvh_build`` (0 when the scene's BVH was cached) and ``trace`` seconds.
+    """
+
+    t: np.ndarray
+    triangle: np.ndarray
+    barycentric: np.ndarray
+    timings: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def hit(self) -> np.ndarray:
+        """(N,) bool: rays that hit a triangle."""
+        return self.triangle >= 0
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+    def as_dict(self) -> dict[str, Any]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    def __repr__(self) -> str:
+        return f"RayHits(n={len(self)}, hit={int(self.hit.sum())}, trace={self.timings.get('trace', float('nan')):.4f}s)"

@@ -1,0 +1,158 @@
+"""Seeded, deterministic procedural scenes, and the real third-party scenes of ``../shared``.
+
+Every generator takes a ``seed`` and returns a :class:`scenesample.Scene`; the same arguments give
+the same triangles, bit for bit.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+
+from ._scene import Scene
+
+__all__ = ["icosphere", "shapes", "shared_scenes_dir", "shared_scene_files"]
+
+
+def _icosphere_arrays(subdivisions: int) -> tuple[np.ndarray, np.ndarray]:
+    t = (1.0 + 5.0**0.5) / 2.0
+    v = [(-1, t, 0), (1, t, 0), (-1, -t, 0), (1, -t, 0), (0, -1, t), (0, 1, t),
+         (0, -1, -t), (0, 1, -t), (t, 0, -1), (t, 0, 1), (-t, 0, -1), (-t, 0, 1)]  # fmt: skip
+    verts = [np.array(p, dtype=np.float64) / np.linalg.norm(p) for p in v]
+    faces = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4),
+             (11, 10, 2), (10, 7, 6), (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8),
+             (3, 8, 9), (4, 9, 5), (2, 4, 11), (6, 2, 10), (8, 6, 7), (9, 8, 1)]  # fmt: skip
+    for _ in range(subdivisions):
+        cache: dict[tuple[int, int], int] = {}
+
+        def mid(a: int, b: int) -> int:
+            key = (min(a, b), max(a, b))
+            if key not in cache:
+                m = verts[a] + verts[b]
+                verts.append(m / np.linalg.norm(m))
+                cache[key] = len(verts) - 1
+            return cache[key]
+
+        nxt = []
+        for a, b, c in faces:
+            ab, bc, ca = mid(a, b), mid(b, c), mid(c, a)
+            nxt += [(a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca)]
+        faces = nxt
+    return np.array(verts), np.array(faces, dtype=np.int64)
+
+
+def icosphere(subdivisions: int = 3, radius: float = 1.0, center=(0.0, 0.0, 0.0)) -> Scene:
+    """A closed icosphere: 20 * 4**subdivisions triangles sharing every edge and vertex."""
+    v, f = _icosphere_arrays(subdivisions)
+    return Scene.from_arrays(v * radius + np.asarray(center, dtype=np.float64), f)
+
+
+def _box(lo: np.ndarray, hi: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """An axis-aligned box, each face an n x n grid of quads (outward counter-clockwise)."""
+    verts, faces = [], []
+    s = np.linspace(0.0, 1.0, n + 1)
+    uu, vv = np.meshgrid(s, s, indexing="ij")
+    for axis in range(3):
+        for side in (0, 1):
+            a, b = (axis + 1) % 3, (axis + 2) % 3
+            p = np.zeros(((n + 1) ** 2, 3))
+            p[:, axis] = (lo, hi)[side][axis]
+            p[:, a] = lo[a] + uu.ravel() * (hi[a] - lo[a])
+            p[:, b] = lo[b] + vv.ravel() * (hi[b] - lo[b])
+            base = sum(len(x) for x in verts)
+            idx = np.arange((n + 1) ** 2).reshape(n + 1, n + 1) + base
+            q = np.stack([idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]], -1).reshape(-1, 4)
+            tri = np.concatenate([q[:, [0, 1, 2]], q[:, [0, 2, 3]]])
+            if side == 0:
+                tri = tri[:, ::-1]
+            verts.append(p)
+            faces.append(tri)
+    return np.concatenate(verts), np.concatenate(faces)
+
+
+def _torus(r_major: float, r_minor: float, nu: int, nv: int) -> tuple[np.ndarray, np.ndarray]:
+    u = np.linspace(0, 2 * np.pi, nu, endpoint=False)
+    v = np.linspace(0, 2 * np.pi, nv, endpoint=False)
+    uu, vv = np.meshgrid(u, v, indexing="ij")
+    x = (r_major + r_minor * np.cos(vv)) * np.cos(uu)
+    z = (r_major + r_minor * np.cos(vv)) * np.sin(uu)
+    y = r_minor * np.sin(vv)
+    verts = np.stack([x, y, z], -1).reshape(-1, 3)
+    i, j = np.meshgrid(np.arange(nu), np.arange(nv), indexing="ij")
+    a = i * nv + j
+    b = ((i + 1) % nu) * nv + j
+    c = ((i + 1) % nu) * nv + (j + 1) % nv
+    d = i * nv + (j + 1) % nv
+    faces = np.concatenate([np.stack([a, d, c], -1).reshape(-1, 3), np.stack([a, c, b], -1).reshape(-1, 3)])
+    return verts, faces
+
+
+def shapes(seed: int = 0, detail: int = 2, offset=(0.0, 0.0, 0.0), scale: float = 1.0) -> Scene:
+    """A multi-object scene: a ground grid, boxes, spheres and tori placed at random (seeded).
+
+    ``detail`` sets the tessellation: about 12K triangles at 1, 45K at 2, 180K at 3.
+    ``offset`` and ``scale`` move the whole scene (to test precision far from the origin).
+    Each object has its own colour, so colour images show which object a pixel sees.
+    """
+    rng = np.random.default_rng(seed)
+    parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    g = 8 * detail
+    ground_v, ground_f = _box(np.array([-6.0, -0.2, -6.0]), np.array([6.0, 0.0, 6.0]), g)
+    parts.append((ground_v, ground_f, np.array([0.6, 0.6, 0.55])))
+    sphere_v, sphere_f = _icosphere_arrays(detail + 1)
+    torus_v, torus_f = _torus(1.0, 0.3, 24 * detail, 12 * detail)
+    for _ in range(12):
+        kind = rng.integers(3)
+        pos = np.array([rng.uniform(-4.5, 4.5), 0.0, rng.uniform(-4.5, 4.5)])
+        size = rng.uniform(0.4, 1.2)
+        color = rng.uniform(0.2, 0.95, size=3)
+        if kind == 0:
+            half = np.array([size, size * rng.uniform(0.5, 2.0), size]) * 0.5
+            v, f = _box(pos - half * [1, 0, 1], pos + half * [1, 2, 1], 2 * detail)
+        elif kind == 1:
+            v, f = sphere_v * size * 0.6 + pos + [0, size * 0.6, 0], sphere_f
+        else:
+            v, f = torus_v * size * 0.6 + pos + [0, size * 0.25, 0], torus_f
+        parts.append((v, f, color))
+    verts, faces, colors = [], [], []
+    n = 0
+    for v, f, c in parts:
+        verts.append(v)
+        faces.append(f + n)
+        colors.append(np.broadcast_to(c, v.shape))
+        n += len(v)
+    v = np.concatenate(verts) * scale + np.asarray(offset, dtype=np.float64)
+    return Scene.from_arrays(v, np.concatenate(faces), colors=np.concatenate(colors))
+
+
+def shared_scenes_dir() -> Optional[Path]:
+    """The folder of real third-party scenes: ``$SCENESAMPLE_SCENES``, else ``../shared/scenes``
+    beside the current directory or beside this source checkout; None when absent."""
+    env = os.environ.get("SCENESAMPLE_SCENES")
+    candidates = [Path(env)] if env else []
+    candidates += [Path.cwd() / ".." / "shared" / "scenes", Path(__file__).resolve().parents[3] / "shared" / "scenes"]
+    for c in candidates:
+        if c.is_dir():
+            return c.resolve()
+    return None
+
+
+_SCENE_SUFFIXES = (".glb", ".gltf", ".obj")
+
+
+def shared_scene_files() -> dict[str, Path]:
+    """Scene name -> main file (glTF/GLB preferred over OBJ) for each folder of the shared
+    scenes, sorted by name; empty when the folder is absent."""
+    root = shared_scenes_dir()
+    if root is None:
+        return {}
+    out = {}
+    for d in sorted(p for p in root.iterdir() if p.is_dir()):
+        files = sorted(f for f in d.iterdir() if f.suffix.lower() in _SCENE_SUFFIXES)
+        files.sort(key=lambda f: _SCENE_SUFFIXES.index(f.suffix.lower()))
+        if files:
+            out[d.name] = files[0]
+    return out

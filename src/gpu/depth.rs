@@ -1,0 +1,473 @@
+//! Raster pass of `shaders/depth.wgsl`: per camera, the nearest triangle id and its
+//! perspective-correct barycentrics at every pixel centre (no multisampling).
+
+use std::time::Instant;
+
+use bytemuck::{Pod, Zeroable};
+
+use super::{GpuContext, SceneBuffers};
+use crate::camera::Camera;
+use crate::error::{Error, Result};
+use crate::scene::Scene;
+
+const SHADER: &str = include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/shaders/depth.wgsl"));
+const BARY_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rg32Float;
+const TRI_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Sint;
+const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+/// Upper bound on readback memory held at once; larger requests are split into chunks.
+const READBACK_BUDGET: u64 = 256 << 20;
+
+/// Host copy of `View` in depth.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct ViewUniform {
+    view_proj: [[f32; 4]; 4],
+}
+const _: () = assert!(std::mem::size_of::<ViewUniform>() == 64);
+
+pub struct DepthPipeline {
+    layout: wgpu::BindGroupLayout,
+    /// Index 0: no culling; 1: back faces (counter-clockwise front) culled.
+    pipelines: [wgpu::RenderPipeline; 2],
+}
+
+impl DepthPipeline {
+    pub fn new(device: &wgpu::Device) -> Self {
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("depth.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(SHADER.into()),
+        });
+        let storage = |binding| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::VERTEX,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only: true },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("depth.wgsl bindings"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::VERTEX,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        // One camera per dynamic offset into a shared uniform buffer.
+                        has_dynamic_offset: true,
+                        min_binding_size: wgpu::BufferSize::new(64),
+                    },
+                    count: None,
+                },
+                storage(1),
+                storage(2),
+            ],
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("depth.wgsl layout"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let make = |cull: Option<wgpu::Face>| {
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some("depth.wgsl"),
+                layout: Some(&pipeline_layout),
+                vertex: wgpu::VertexState {
+                    module: &module,
+                    entry_point: Some("vs_main"),
+                    compilation_options: Default::default(),
+                    buffers: &[],
+                },
+                primitive: wgpu::PrimitiveState {
+                    topology: wgpu::PrimitiveTopology::TriangleList,
+                    front_face: wgpu::FrontFace::Ccw,
+                    cull_mode: cull,
+                    ..Default::default()
+                },
+                depth_stencil: Some(wgpu::DepthStencilState {
+                    format: DEPTH_FORMAT,
+                    depth_write_enabled: Some(true),
+                    // Reversed depth: larger is nearer (see Camera::projection_matrix).
+                    depth_compare: Some(wgpu::CompareFunction::Greater),
+                    stencil: Default::default(),
+                    bias: Default::default(),
+                }),
+                multisample: Default::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &module,
+                    entry_point: Some("fs_main"),
+                    compilation_options: Default::default(),
+                    targets: &[Some(BARY_FORMAT.into()), Some(TRI_FORMAT.into())],
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        };
+        Self {
+            layout,
+            pipelines: [make(None), make(Some(wgpu::Face::Back))],
+        }
+    }
+}
+
+/// What the GPU returns for `n` images of `width`×`height`, row-major, image after image.
+pub struct RasterOutput {
+    pub bary: Vec<[f32; 2]>,
+    pub triangle: Vec<i32>,
+    /// Scene upload time (0 when the buffers were cached).
+    pub upload_seconds: f64,
+    /// Wall time of encoding, submitting and waiting for the raster passes.
+    pub raster_seconds: f64,
+    /// GPU time of the raster passes from timestamp queries, when the adapter has them.
+    pub gpu_seconds: Option<f64>,
+    pub readback_seconds: f64,
+}
+
+fn align(x: u64, a: u64) -> u64 {
+    x.div_ceil(a) * a
+}
+
+/// Rasterise `scene` from every camera (all of one resolution).
+pub fn rasterize(
+    ctx: &GpuContext,
+    scene: &Scene,
+    cameras: &[Camera],
+    cull_backfaces: bool,
+) -> Result<RasterOutput> {
+    let (w, h) = (cameras[0].width, cameras[0].height);
+    let max_dim = ctx.limits.max_texture_dimension_2d;
+    if w > max_dim || h > max_dim {
+        return Err(Error::GpuLimit(format!(
+            "images of {w}x{h} exceed this device's largest texture ({max_dim}x{max_dim}); \
+             use a smaller resolution"
+        )));
+    }
+    let _guard = ctx
+        .lock
+        .lock()
+        .map_err(|_| Error::Gpu("GPU lock poisoned".into()))?;
+    let cached = scene.gpu.lock().map(|s| s.is_some()).unwrap_or(false);
+    let buffers = SceneBuffers::of(ctx, scene)?;
+    let upload_seconds = if cached { 0.0 } else { buffers.upload_seconds };
+
+    let row_bary = align(w as u64 * 8, wgpu::COPY_BYTES_PER_ROW_ALIGNMENT as u64);
+    let row_tri = align(w as u64 * 4, wgpu::COPY_BYTES_PER_ROW_ALIGNMENT as u64);
+    let per_image = (row_bary + row_tri) * h as u64;
+    let max_buffer = ctx.limits.max_buffer_size;
+    if row_bary * h as u64 > max_buffer {
+        return Err(Error::GpuLimit(format!(
+            "one {w}x{h} image needs a {} byte readback buffer, more than this device's \
+             limit of {max_buffer} bytes",
+            row_bary * h as u64
+        )));
+    }
+    let chunk = ((READBACK_BUDGET.min(max_buffer) / per_image).max(1) as usize).min(cameras.len());
+
+    let npx = (w * h) as usize;
+    let mut out = RasterOutput {
+        bary: vec![[0.0; 2]; npx * cameras.len()],
+        triangle: vec![-1; npx * cameras.len()],
+        upload_seconds,
+        raster_seconds: 0.0,
+        gpu_seconds: ctx.timestamps.then_some(0.0),
+        readback_seconds: 0.0,
+    };
+    let targets = Targets::new(&ctx.device, w, h);
+    let pipeline = ctx.depth_pipeline();
+    for (c, cams) in cameras.chunks(chunk).enumerate() {
+        let first = c * chunk;
+        render_chunk(
+            ctx,
+            scene,
+            &buffers,
+            pipeline,
+            &targets,
+            cams,
+            cull_backfaces,
+            (row_bary, row_tri),
+            &mut out,
+            first,
+        )?;
+    }
+    Ok(out)
+}
+
+struct Targets {
+    bary: wgpu::Texture,
+    tri: wgpu::Texture,
+    bary_view: wgpu::TextureView,
+    tri_view: wgpu::TextureView,
+    depth_view: wgpu::TextureView,
+    w: u32,
+    h: u32,
+}
+
+impl Targets {
+    fn new(device: &wgpu::Device, w: u32, h: u32) -> Self {
+        let tex = |label, format, usage| {
+            device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(label),
+                size: wgpu::Extent3d {
+                    width: w,
+                    height: h,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage,
+                view_formats: &[],
+            })
+        };
+        let color = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC;
+        let bary = tex("barycentrics", BARY_FORMAT, color);
+        let tri = tex("triangle ids", TRI_FORMAT, color);
+        let depth = tex(
+            "depth",
+            DEPTH_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT,
+        );
+        Self {
+            bary_view: bary.create_view(&Default::default()),
+            tri_view: tri.create_view(&Default::default()),
+            depth_view: depth.create_view(&Default::default()),
+            bary,
+            tri,
+            w,
+            h,
+        }
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn render_chunk(
+    ctx: &GpuContext,
+    scene: &Scene,
+    buffers: &SceneBuffers,
+    pipeline: &DepthPipeline,
+    targets: &Targets,
+    cameras: &[Camera],
+    cull_backfaces: bool,
+    (row_bary, row_tri): (u64, u64),
+    out: &mut RasterOutput,
+    first: usize,
+) -> Result<()> {
+    use wgpu::util::DeviceExt;
+    let device = &ctx.device;
+    let start = Instant::now();
+    let (w, h) = (targets.w, targets.h);
+    let n = cameras.len() as u64;
+    let stride = align(64, ctx.limits.min_uniform_buffer_offset_alignment as u64);
+    let centre = scene.center();
+    let bounds = scene.bounds();
+    let mut uniforms = vec![0u8; (stride * n) as usize];
+    for (i, cam) in cameras.iter().enumerate() {
+        let (near, far) = cam.clip_range(bounds);
+        let m = cam.projection_matrix(near, far) * cam.view_matrix_relative(centre);
+        let u = ViewUniform {
+            view_proj: m.as_mat4().to_cols_array_2d(),
+        };
+        let at = i * stride as usize;
+        uniforms[at..at + 64].copy_from_slice(bytemuck::bytes_of(&u));
+    }
+    let uniform_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("view uniforms"),
+        contents: &uniforms,
+        usage: wgpu::BufferUsages::UNIFORM,
+    });
+    let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("depth.wgsl bindings"),
+        layout: &pipeline.layout,
+        entries: &[
+            wgpu::BindGroupEntry {
+                binding: 0,
+                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                    buffer: &uniform_buf,
+                    offset: 0,
+                    size: wgpu::BufferSize::new(64),
+                }),
+            },
+            wgpu::BindGroupEntry {
+                binding: 1,
+                resource: buffers.positions.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 2,
+                resource: buffers.faces.as_entire_binding(),
+            },
+        ],
+    });
+    let readback = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("readback"),
+        size: (row_bary + row_tri) * h as u64 * n,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let queries = ctx.timestamps.then(|| {
+        let set = device.create_query_set(&wgpu::QuerySetDescriptor {
+            label: Some("raster timestamps"),
+            ty: wgpu::QueryType::Timestamp,
+            count: 2 * n as u32,
+        });
+        let resolve = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("timestamp resolve"),
+            size: 16 * n,
+            usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let read = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("timestamp readback"),
+            size: 16 * n,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        (set, resolve, read)
+    });
+
+    let mut encoder = device.create_command_encoder(&Default::default());
+    let image_bytes = (row_bary + row_tri) * h as u64;
+    for i in 0..n {
+        {
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("depth.wgsl"),
+                color_attachments: &[
+                    Some(wgpu::RenderPassColorAttachment {
+                        view: &targets.bary_view,
+                        depth_slice: None,
+                        resolve_target: None,
+                        ops: wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                            store: wgpu::StoreOp::Store,
+                        },
+                    }),
+                    Some(wgpu::RenderPassColorAttachment {
+                        view: &targets.tri_view,
+                        depth_slice: None,
+                        resolve_target: None,
+                        ops: wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(wgpu::Color {
+                                r: -1.0,
+                                g: 0.0,
+                                b: 0.0,
+                                a: 0.0,
+                            }),
+                            store: wgpu::StoreOp::Store,
+                        },
+                    }),
+                ],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &targets.depth_view,
+                    depth_ops: Some(wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(0.0),
+                        store: wgpu::StoreOp::Discard,
+                    }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: queries.as_ref().map(|(set, _, _)| {
+                    wgpu::RenderPassTimestampWrites {
+                        query_set: set,
+                        beginning_of_pass_write_index: Some(2 * i as u32),
+                        end_of_pass_write_index: Some(2 * i as u32 + 1),
+                    }
+                }),
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_pipeline(&pipeline.pipelines[cull_backfaces as usize]);
+            pass.set_bind_group(0, &bind, &[(i * stride) as u32]);
+            pass.draw(0..3 * buffers.triangle_count, 0..1);
+        }
+        let base = i * image_bytes;
+        copy(&mut encoder, &targets.bary, &readback, base, row_bary, w, h);
+        copy(
+            &mut encoder,
+            &targets.tri,
+            &readback,
+            base + row_bary * h as u64,
+            row_tri,
+            w,
+            h,
+        );
+    }
+    if let Some((set, resolve, read)) = &queries {
+        encoder.resolve_query_set(set, 0..2 * n as u32, resolve, 0);
+        encoder.copy_buffer_to_buffer(resolve, 0, read, 0, 16 * n);
+    }
+    ctx.queue.submit([encoder.finish()]);
+    let slice = readback.slice(..);
+    slice.map_async(wgpu::MapMode::Read, |_| {});
+    if let Some((_, _, read)) = &queries {
+        read.slice(..).map_async(wgpu::MapMode::Read, |_| {});
+    }
+    ctx.wait()?;
+    out.raster_seconds += start.elapsed().as_secs_f64();
+
+    let start = Instant::now();
+    {
+        let data = slice
+            .get_mapped_range()
+            .map_err(|e| Error::Gpu(format!("mapping the readback buffer failed: {e}")))?;
+        let npx = (w * h) as usize;
+        for i in 0..n as usize {
+            let img = &data[i * image_bytes as usize..];
+            let k = (first + i) * npx;
+            for row in 0..h as usize {
+                let b = &img[row * row_bary as usize..][..w as usize * 8];
+                out.bary[k + row * w as usize..][..w as usize]
+                    .copy_from_slice(bytemuck::cast_slice(b));
+                let t = &img[(row_bary * h as u64) as usize + row * row_tri as usize..]
+                    [..w as usize * 4];
+                out.triangle[k + row * w as usize..][..w as usize]
+                    .copy_from_slice(bytemuck::cast_slice(t));
+            }
+        }
+    }
+    readback.unmap();
+    if let Some((_, _, read)) = &queries {
+        let period = ctx.queue.get_timestamp_period() as f64 * 1e-9;
+        let data = read
+            .slice(..)
+            .get_mapped_range()
+            .map_err(|e| Error::Gpu(format!("mapping the timestamps failed: {e}")))?;
+        let ts: &[u64] = bytemuck::cast_slice(&data);
+        let gpu: f64 = ts
+            .chunks(2)
+            .map(|p| p[1].saturating_sub(p[0]) as f64 * period)
+            .sum();
+        if let Some(total) = out.gpu_seconds.as_mut() {
+            *total += gpu;
+        }
+    }
+    out.readback_seconds += start.elapsed().as_secs_f64();
+    ctx.check_errors()
+}
+
+fn copy(
+    encoder: &mut wgpu::CommandEncoder,
+    tex: &wgpu::Texture,
+    buf: &wgpu::Buffer,
+    offset: u64,
+    row: u64,
+    w: u32,
+    h: u32,
+) {
+    encoder.copy_texture_to_buffer(
+        tex.as_image_copy(),
+        wgpu::TexelCopyBufferInfo {
+            buffer: buf,
+            layout: wgpu::TexelCopyBufferLayout {
+                offset,
+                bytes_per_row: Some(row as u32),
+                rows_per_image: Some(h),
+            },
+        },
+        wgpu::Extent3d {
+            width: w,
+            height: h,
+            depth_or_array_layers: 1,
+        },
+    );
+}

@@ -1,0 +1,261 @@
+//! The GPU: one wgpu device per process, created lazily and reused; scene buffers uploaded once
+//! per scene; pipelines compiled once. Headless (no window or surface).
+
+pub mod depth;
+
+use std::sync::{Arc, Mutex, OnceLock};
+
+use crate::error::{Error, Result};
+use crate::scene::Scene;
+
+/// Features the raster passes need; `PRIMITIVE_INDEX` gives the triangle id of each fragment.
+const REQUIRED: wgpu::Features = wgpu::Features::PRIMITIVE_INDEX;
+
+/// The process-wide device, its queue and what it can do.
+pub struct GpuContext {
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pub info: wgpu::AdapterInfo,
+    pub limits: wgpu::Limits,
+    pub timestamps: bool,
+    /// Errors wgpu reports asynchronously (validation, out of memory, device loss); drained
+    /// after each submission and turned into `Error::Gpu`, so none of them panics.
+    errors: Arc<Mutex<Vec<String>>>,
+    /// Serialises submissions from several Python threads.
+    pub(crate) lock: Mutex<()>,
+    depth_pipeline: OnceLock<depth::DepthPipeline>,
+}
+
+static CONTEXT: OnceLock<std::result::Result<Arc<GpuContext>, String>> = OnceLock::new();
+
+/// The shared GPU context, created on first call. Fails with `GpuUnavailable` when no adapter
+/// with the required features exists.
+pub fn context() -> Result<Arc<GpuContext>> {
+    CONTEXT
+        .get_or_init(|| create().map(Arc::new))
+        .clone()
+        .map_err(Error::GpuUnavailable)
+}
+
+const NO_ADAPTER_HELP: &str = "On a machine without a GPU, Mesa's software Vulkan driver \
+provides one: install the Debian/Ubuntu package `mesa-vulkan-drivers` \
+(apt-get install -y mesa-vulkan-drivers).";
+
+fn create() -> std::result::Result<GpuContext, String> {
+    let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+    desc.backends = wgpu::Backends::VULKAN;
+    let instance = wgpu::Instance::new(desc);
+    let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+        power_preference: wgpu::PowerPreference::HighPerformance,
+        force_fallback_adapter: false,
+        compatible_surface: None,
+        apply_limit_buckets: false,
+    }))
+    .map_err(|e| format!("no Vulkan adapter found ({e}). {NO_ADAPTER_HELP}"))?;
+    let info = adapter.get_info();
+    let features = adapter.features();
+    if !features.contains(REQUIRED) {
+        return Err(format!(
+            "the adapter '{}' ({:?}) lacks the feature PRIMITIVE_INDEX needed for triangle ids. \
+             {NO_ADAPTER_HELP}",
+            info.name, info.backend
+        ));
+    }
+    let timestamps = features.contains(wgpu::Features::TIMESTAMP_QUERY);
+    let mut wanted = REQUIRED;
+    if timestamps {
+        wanted |= wgpu::Features::TIMESTAMP_QUERY;
+    }
+    for f in [
+        wgpu::Features::SHADER_INT64,
+        wgpu::Features::SHADER_INT64_ATOMIC_MIN_MAX,
+    ] {
+        if features.contains(f) {
+            wanted |= f;
+        }
+    }
+    let limits = adapter.limits();
+    let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        label: Some("scenesample"),
+        required_features: wanted,
+        required_limits: limits.clone(),
+        experimental_features: wgpu::ExperimentalFeatures::disabled(),
+        memory_hints: wgpu::MemoryHints::Performance,
+        trace: wgpu::Trace::Off,
+    }))
+    .map_err(|e| {
+        format!(
+            "could not open the adapter '{}': {e}. {NO_ADAPTER_HELP}",
+            info.name
+        )
+    })?;
+    let errors = Arc::new(Mutex::new(Vec::new()));
+    let sink = errors.clone();
+    device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
+        if let Ok(mut v) = sink.lock() {
+            v.push(e.to_string());
+        }
+    }));
+    Ok(GpuContext {
+        device,
+        queue,
+        info,
+        limits,
+        timestamps,
+        errors,
+        lock: Mutex::new(()),
+        depth_pipeline: OnceLock::new(),
+    })
+}
+
+impl GpuContext {
+    /// Raise any error wgpu reported since the last check.
+    pub fn check_errors(&self) -> Result<()> {
+        let mut errs = self
+            .errors
+            .lock()
+            .map_err(|_| Error::Gpu("GPU error log poisoned".into()))?;
+        if errs.is_empty() {
+            return Ok(());
+        }
+        let msg = errs.join("; ");
+        errs.clear();
+        Err(Error::Gpu(format!("the GPU reported: {msg}")))
+    }
+
+    /// Block until the queue is idle.
+    pub fn wait(&self) -> Result<()> {
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| Error::Gpu(format!("waiting for the GPU failed: {e}")))?;
+        self.check_errors()
+    }
+
+    pub fn depth_pipeline(&self) -> &depth::DepthPipeline {
+        self.depth_pipeline
+            .get_or_init(|| depth::DepthPipeline::new(&self.device))
+    }
+}
+
+/// What `scenesample.device_info()` reports.
+#[derive(Debug, Clone)]
+pub struct DeviceInfo {
+    pub name: String,
+    pub backend: String,
+    pub device_type: String,
+    pub driver: String,
+    pub timestamps: bool,
+    pub max_texture_dimension_2d: u32,
+    pub max_storage_buffer_binding_size: u64,
+}
+
+pub fn device_info() -> Result<DeviceInfo> {
+    let ctx = context()?;
+    Ok(DeviceInfo {
+        name: ctx.info.name.clone(),
+        backend: format!("{:?}", ctx.info.backend),
+        device_type: format!("{:?}", ctx.info.device_type),
+        driver: format!("{} {}", ctx.info.driver, ctx.info.driver_info),
+        timestamps: ctx.timestamps,
+        max_texture_dimension_2d: ctx.limits.max_texture_dimension_2d,
+        max_storage_buffer_binding_size: ctx.limits.max_storage_buffer_binding_size as u64,
+    })
+}
+
+/// A scene's geometry on the GPU: vertex positions relative to the scene centre and the faces.
+#[derive(Debug)]
+pub struct SceneBuffers {
+    pub positions: wgpu::Buffer,
+    pub faces: wgpu::Buffer,
+    pub triangle_count: u32,
+    pub upload_seconds: f64,
+}
+
+impl SceneBuffers {
+    /// The scene's buffers, uploaded on first use and cached on the scene.
+    pub fn of(ctx: &GpuContext, scene: &Scene) -> Result<Arc<SceneBuffers>> {
+        let mut slot = scene
+            .gpu
+            .lock()
+            .map_err(|_| Error::Gpu("scene GPU cache poisoned".into()))?;
+        if let Some(b) = slot.as_ref() {
+            return Ok(b.clone());
+        }
+        let b = Arc::new(Self::upload(ctx, scene)?);
+        *slot = Some(b.clone());
+        Ok(b)
+    }
+
+    fn upload(ctx: &GpuContext, scene: &Scene) -> Result<Self> {
+        use wgpu::util::DeviceExt;
+        let start = std::time::Instant::now();
+        let c = scene.center();
+        let rel: Vec<f32> = scene
+            .vertices()
+            .iter()
+            .flat_map(|v| [0, 1, 2].map(|k| (v[k] as f64 - c[k]) as f32))
+            .collect();
+        let faces: Vec<u32> = scene.faces().iter().flatten().copied().collect();
+        let limit = ctx.limits.max_storage_buffer_binding_size as u64;
+        for (name, bytes) in [
+            ("vertex positions", rel.len() * 4),
+            ("faces", faces.len() * 4),
+        ] {
+            if bytes as u64 > limit {
+                return Err(Error::GpuLimit(format!(
+                    "the scene's {name} take {bytes} bytes, more than this device's storage \
+                     binding limit of {limit} bytes; split the scene"
+                )));
+            }
+        }
+        let usage = wgpu::BufferUsages::STORAGE;
+        let positions = ctx
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("scene positions"),
+                contents: bytemuck::cast_slice(&rel),
+                usage,
+            });
+        let faces_buf = ctx
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("scene faces"),
+                contents: bytemuck::cast_slice(&faces),
+                usage,
+            });
+        ctx.check_errors()?;
+        Ok(Self {
+            positions,
+            faces: faces_buf,
+            triangle_count: scene.triangle_count() as u32,
+            upload_seconds: start.elapsed().as_secs_f64(),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    /// Every shader in shaders/ must parse and validate; needs no GPU.
+    #[test]
+    fn every_shader_validates_with_naga() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders");
+        let mut count = 0;
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.extension().and_then(|e| e.to_str()) != Some("wgsl") {
+                continue;
+            }
+            let src = std::fs::read_to_string(&path).unwrap();
+            let module = naga::front::wgsl::parse_str(&src)
+                .unwrap_or_else(|e| panic!("{}: {}", path.display(), e.emit_to_string(&src)));
+            naga::valid::Validator::new(
+                naga::valid::ValidationFlags::all(),
+                naga::valid::Capabilities::all(),
+            )
+            .validate(&module)
+            .unwrap_or_else(|e| panic!("{}: {}", path.display(), e.emit_to_string(&src)));
+            count += 1;
+        }
+        assert!(count > 0, "no shaders found in {}", dir.display());
+    }
+}

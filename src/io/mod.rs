@@ -1,0 +1,3 @@
+//! File formats: EXR for depth images.
+
+pub mod exr;

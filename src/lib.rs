@@ -1,0 +1,19 @@
+//! scenesample: sample triangle scenes with images, points and rays; rebuild, splat and measure.
+//!
+//! The algorithms live in plain Rust modules (testable with `cargo test`); the Python module
+//! `scenesample._core` is declared in `py/` and compiled only with the `python` feature.
+
+pub mod camera;
+pub mod discretize;
+pub mod error;
+pub mod gpu;
+pub mod io;
+pub mod scene;
+pub mod trace;
+
+#[cfg(feature = "python")]
+mod py;
+
+pub use camera::Camera;
+pub use error::{Error, Result};
+pub use scene::Scene;

@@ -1,0 +1,268 @@
+//! `scenesample._core.Camera`: immutable; camera math in float64.
+
+use glam::{DVec2, DVec3};
+use pyo3::prelude::*;
+
+use super::convert::{array, mat4, mat4_to_numpy, rows_f64, vec3};
+use super::errors::{input, IntoPy};
+use crate::camera::{Camera, Projection};
+
+#[pyclass(
+    name = "Camera",
+    module = "scenesample._core",
+    frozen,
+    eq,
+    from_py_object
+)]
+#[derive(Clone, PartialEq)]
+pub struct PyCamera {
+    pub inner: Camera,
+}
+
+impl From<Camera> for PyCamera {
+    fn from(inner: Camera) -> Self {
+        Self { inner }
+    }
+}
+
+#[pymethods]
+impl PyCamera {
+    #[staticmethod]
+    #[pyo3(signature = (eye, target, up=None, *, yfov, width, height, znear=None, zfar=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn look_at(
+        py: Python<'_>,
+        eye: &Bound<'_, PyAny>,
+        target: &Bound<'_, PyAny>,
+        up: Option<&Bound<'_, PyAny>>,
+        yfov: f64,
+        width: u32,
+        height: u32,
+        znear: Option<f64>,
+        zfar: Option<f64>,
+    ) -> PyResult<Self> {
+        let up = up.map(|u| vec3(u, "up")).transpose()?.unwrap_or(DVec3::Y);
+        Camera::look_at(
+            vec3(eye, "eye")?,
+            vec3(target, "target")?,
+            up,
+            yfov,
+            width,
+            height,
+            znear,
+            zfar,
+        )
+        .py_err(py)
+        .map(Self::from)
+    }
+
+    #[staticmethod]
+    #[pyo3(signature = (pose, *, yfov, width, height, znear=None, zfar=None))]
+    fn from_pose(
+        py: Python<'_>,
+        pose: &Bound<'_, PyAny>,
+        yfov: f64,
+        width: u32,
+        height: u32,
+        znear: Option<f64>,
+        zfar: Option<f64>,
+    ) -> PyResult<Self> {
+        Camera::new(
+            mat4(pose, "pose")?,
+            Projection::Perspective { yfov },
+            width,
+            height,
+            znear,
+            zfar,
+        )
+        .py_err(py)
+        .map(Self::from)
+    }
+
+    #[staticmethod]
+    #[pyo3(signature = (pose, *, xmag, ymag, width, height, znear=None, zfar=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn orthographic(
+        py: Python<'_>,
+        pose: &Bound<'_, PyAny>,
+        xmag: f64,
+        ymag: f64,
+        width: u32,
+        height: u32,
+        znear: Option<f64>,
+        zfar: Option<f64>,
+    ) -> PyResult<Self> {
+        Camera::new(
+            mat4(pose, "pose")?,
+            Projection::Orthographic { xmag, ymag },
+            width,
+            height,
+            znear,
+            zfar,
+        )
+        .py_err(py)
+        .map(Self::from)
+    }
+
+    #[staticmethod]
+    #[pyo3(signature = (center, resolution, *, znear=None, zfar=None))]
+    fn cube(
+        py: Python<'_>,
+        center: &Bound<'_, PyAny>,
+        resolution: u32,
+        znear: Option<f64>,
+        zfar: Option<f64>,
+    ) -> PyResult<Vec<Self>> {
+        let c = Camera::cube(vec3(center, "center")?, resolution, znear, zfar).py_err(py)?;
+        Ok(c.into_iter().map(Self::from).collect())
+    }
+
+    fn with_resolution(&self, py: Python<'_>, width: u32, height: u32) -> PyResult<Self> {
+        self.inner
+            .with_resolution(width, height)
+            .py_err(py)
+            .map(Self::from)
+    }
+
+    #[getter]
+    fn pose<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        mat4_to_numpy(py, &self.inner.pose)
+    }
+    #[getter]
+    fn projection(&self) -> &'static str {
+        match self.inner.projection {
+            Projection::Perspective { .. } => "perspective",
+            Projection::Orthographic { .. } => "orthographic",
+        }
+    }
+    #[getter]
+    fn yfov(&self) -> Option<f64> {
+        match self.inner.projection {
+            Projection::Perspective { yfov } => Some(yfov),
+            _ => None,
+        }
+    }
+    #[getter]
+    fn xmag(&self) -> Option<f64> {
+        match self.inner.projection {
+            Projection::Orthographic { xmag, .. } => Some(xmag),
+            _ => None,
+        }
+    }
+    #[getter]
+    fn ymag(&self) -> Option<f64> {
+        match self.inner.projection {
+            Projection::Orthographic { ymag, .. } => Some(ymag),
+            _ => None,
+        }
+    }
+    #[getter]
+    fn width(&self) -> u32 {
+        self.inner.width
+    }
+    #[getter]
+    fn height(&self) -> u32 {
+        self.inner.height
+    }
+    #[getter]
+    fn znear(&self) -> Option<f64> {
+        self.inner.znear
+    }
+    #[getter]
+    fn zfar(&self) -> Option<f64> {
+        self.inner.zfar
+    }
+    #[getter]
+    fn name(&self) -> Option<String> {
+        self.inner.name.clone()
+    }
+    #[getter]
+    fn eye(&self) -> [f64; 3] {
+        self.inner.eye().to_array()
+    }
+    #[getter]
+    fn forward(&self) -> [f64; 3] {
+        self.inner.forward().to_array()
+    }
+
+    /// (n, 3) world points → ((n, 2) pixel x/y, (n,) camera-space depth), float64.
+    fn project<'py>(
+        &self,
+        py: Python<'py>,
+        points: &Bound<'py, PyAny>,
+    ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+        let p = rows_f64::<3>(points, "points")?;
+        let (mut px, mut d) = (Vec::with_capacity(2 * p.len()), Vec::with_capacity(p.len()));
+        for q in &p {
+            let (xy, depth) = self.inner.project(DVec3::from_array(*q));
+            px.extend([xy.x, xy.y]);
+            d.push(depth);
+        }
+        Ok((array(py, px, &[p.len(), 2])?, array(py, d, &[p.len()])?))
+    }
+
+    /// (n, 2) pixel x/y and (n,) depth → (n, 3) world points, float64.
+    fn unproject<'py>(
+        &self,
+        py: Python<'py>,
+        pixels: &Bound<'py, PyAny>,
+        depth: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let px = rows_f64::<2>(pixels, "pixels")?;
+        let np = py.import("numpy")?;
+        let d = rows_f64::<1>(&np.call_method1("reshape", (depth, (-1, 1)))?, "depth")?;
+        if d.len() != px.len() {
+            return Err(input(
+                py,
+                format!("pixels has {} rows but depth has {}", px.len(), d.len()),
+            ));
+        }
+        let out: Vec<f64> = px
+            .iter()
+            .zip(&d)
+            .flat_map(|(p, z)| self.inner.unproject(DVec2::from_array(*p), z[0]).to_array())
+            .collect();
+        array(py, out, &[px.len(), 3])
+    }
+
+    /// Rays through every pixel centre: origins and directions, each (H, W, 3) float32.
+    /// Unit directions by default; with `normalize=False` each direction's camera-space z
+    /// is −1, so a hit's `t` equals its depth.
+    #[pyo3(signature = (*, normalize=true))]
+    fn pixel_rays<'py>(
+        &self,
+        py: Python<'py>,
+        normalize: bool,
+    ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+        let (w, h) = (self.inner.width as usize, self.inner.height as usize);
+        let mut o = Vec::with_capacity(w * h * 3);
+        let mut d = Vec::with_capacity(w * h * 3);
+        for y in 0..h {
+            for x in 0..w {
+                let (orig, dir) = self
+                    .inner
+                    .ray_z1(DVec2::new(x as f64 + 0.5, y as f64 + 0.5));
+                let dir = if normalize { dir.normalize() } else { dir };
+                o.extend(orig.as_vec3().to_array());
+                d.extend(dir.as_vec3().to_array());
+            }
+        }
+        Ok((array(py, o, &[h, w, 3])?, array(py, d, &[h, w, 3])?))
+    }
+
+    fn __repr__(&self) -> String {
+        let c = &self.inner;
+        let proj = match c.projection {
+            Projection::Perspective { yfov } => format!("yfov={yfov:.6}"),
+            Projection::Orthographic { xmag, ymag } => format!("xmag={xmag}, ymag={ymag}"),
+        };
+        format!(
+            "Camera({}, eye={:?}, forward={:?}, {proj}, {}x{})",
+            self.projection(),
+            c.eye().to_array(),
+            c.forward().to_array(),
+            c.width,
+            c.height
+        )
+    }
+}

@@ -1,0 +1,24 @@
+//! The only code that touches PyO3: the `scenesample._core` module, numpy conversion, error
+//! mapping and GIL release. Every function here converts, calls a plain-Rust algorithm, and
+//! converts back.
+
+mod camera;
+mod convert;
+mod errors;
+mod render;
+mod scene;
+
+use pyo3::prelude::*;
+
+#[pymodule]
+fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<scene::PyScene>()?;
+    m.add_class::<camera::PyCamera>()?;
+    m.add_function(wrap_pyfunction!(render::discretize_conventional, m)?)?;
+    m.add_function(wrap_pyfunction!(render::cast_rays, m)?)?;
+    m.add_function(wrap_pyfunction!(render::device_info, m)?)?;
+    m.add_function(wrap_pyfunction!(render::write_exr, m)?)?;
+    m.add_function(wrap_pyfunction!(render::read_exr, m)?)?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

@@ -1,0 +1,151 @@
+//! Depth images, ray casts, device info and EXR, returned as dicts of fresh numpy arrays that
+//! the Python façade wraps in result objects.
+
+use std::path::PathBuf;
+
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use super::camera::PyCamera;
+use super::convert::{array, flat_i32, rows_array, rows_f32};
+use super::errors::{input, IntoPy};
+use super::scene::PyScene;
+use crate::discretize::DepthImages;
+
+fn images_dict<'py>(py: Python<'py>, img: DepthImages) -> PyResult<Bound<'py, PyDict>> {
+    let (n, h, w) = (img.n, img.height as usize, img.width as usize);
+    let d = PyDict::new(py);
+    d.set_item("depth", array(py, img.depth, &[n, h, w])?)?;
+    d.set_item("triangle", array(py, img.triangle, &[n, h, w])?)?;
+    d.set_item("normal", rows_array(py, &img.normal, &[n, h, w, 3])?)?;
+    d.set_item("position", rows_array(py, &img.position, &[n, h, w, 3])?)?;
+    d.set_item("color", rows_array(py, &img.color, &[n, h, w, 3])?)?;
+    let cams: Vec<PyCamera> = img.cameras.into_iter().map(PyCamera::from).collect();
+    d.set_item("cameras", cams)?;
+    let t = PyDict::new(py);
+    for (k, v) in img.timings {
+        t.set_item(k, v)?;
+    }
+    d.set_item("timings", t)?;
+    Ok(d)
+}
+
+#[pyfunction]
+#[pyo3(signature = (scene, cameras, cull_backfaces=false))]
+pub fn discretize_conventional<'py>(
+    py: Python<'py>,
+    scene: &PyScene,
+    cameras: Vec<PyCamera>,
+    cull_backfaces: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let cams: Vec<_> = cameras.into_iter().map(|c| c.inner).collect();
+    let s = scene.inner.clone();
+    let img = py
+        .detach(|| crate::discretize::discretize_conventional(&s, &cams, cull_backfaces))
+        .py_err(py)?;
+    images_dict(py, img)
+}
+
+#[pyfunction]
+#[pyo3(signature = (scene, origins, directions, t_min=0.0, t_max=f32::INFINITY))]
+pub fn cast_rays<'py>(
+    py: Python<'py>,
+    scene: &PyScene,
+    origins: &Bound<'py, PyAny>,
+    directions: &Bound<'py, PyAny>,
+    t_min: f32,
+    t_max: f32,
+) -> PyResult<Bound<'py, PyDict>> {
+    let o = rows_f32::<3>(origins, "origins")?;
+    let dirs = rows_f32::<3>(directions, "directions")?;
+    let s = scene.inner.clone();
+    let hits = py
+        .detach(|| crate::trace::cast_rays(&s, &o, &dirs, t_min, t_max))
+        .py_err(py)?;
+    let n = hits.t.len();
+    let d = PyDict::new(py);
+    d.set_item("t", array(py, hits.t, &[n])?)?;
+    d.set_item("triangle", array(py, hits.triangle, &[n])?)?;
+    d.set_item("barycentric", rows_array(py, &hits.barycentric, &[n, 2])?)?;
+    let t = PyDict::new(py);
+    t.set_item("bvh_build", hits.bvh_build_seconds)?;
+    t.set_item("trace", hits.trace_seconds)?;
+    d.set_item("timings", t)?;
+    Ok(d)
+}
+
+#[pyfunction]
+pub fn device_info<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+    let info = py.detach(crate::gpu::device_info).py_err(py)?;
+    let d = PyDict::new(py);
+    d.set_item("name", info.name)?;
+    d.set_item("backend", info.backend)?;
+    d.set_item("device_type", info.device_type)?;
+    d.set_item("driver", info.driver)?;
+    d.set_item("timestamps", info.timestamps)?;
+    d.set_item("max_texture_dimension_2d", info.max_texture_dimension_2d)?;
+    d.set_item(
+        "max_storage_buffer_binding_size",
+        info.max_storage_buffer_binding_size,
+    )?;
+    Ok(d)
+}
+
+/// Write flattened image fields (the façade flattens and checks shapes) to an EXR file.
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+pub fn write_exr(
+    py: Python<'_>,
+    path: PathBuf,
+    width: u32,
+    height: u32,
+    depth: &Bound<'_, PyAny>,
+    triangle: &Bound<'_, PyAny>,
+    normal: &Bound<'_, PyAny>,
+    position: &Bound<'_, PyAny>,
+    color: &Bound<'_, PyAny>,
+    cameras: Vec<PyCamera>,
+) -> PyResult<()> {
+    let npx = width as usize * height as usize;
+    let n = cameras.len();
+    let depth: Vec<f32> = rows_f32::<1>(depth, "depth")?
+        .into_iter()
+        .map(|d| d[0])
+        .collect();
+    let img = DepthImages {
+        n,
+        width,
+        height,
+        depth,
+        triangle: flat_i32(triangle, "triangle")?,
+        normal: rows_f32::<3>(normal, "normal")?,
+        position: rows_f32::<3>(position, "position")?,
+        color: rows_f32::<3>(color, "color")?,
+        cameras: cameras.into_iter().map(|c| c.inner).collect(),
+        timings: vec![],
+    };
+    for (name, len) in [
+        ("depth", img.depth.len()),
+        ("triangle", img.triangle.len()),
+        ("normal", img.normal.len()),
+        ("position", img.position.len()),
+        ("color", img.color.len()),
+    ] {
+        if len != n * npx {
+            return Err(input(
+                py,
+                format!("{name} has {len} pixels, expected {n} images of {width}x{height}"),
+            ));
+        }
+    }
+    py.detach(|| crate::io::exr::write_depth_images(&path, &img))
+        .py_err(py)
+}
+
+#[pyfunction]
+pub fn read_exr<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyDict>> {
+    let img = py
+        .detach(|| crate::io::exr::read_depth_images(&path))
+        .py_err(py)?;
+    images_dict(py, img)
+}

@@ -1,0 +1,163 @@
+//! `scenesample._core.Scene`: a validated scene shared by reference (cloning is free).
+
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+
+use super::camera::PyCamera;
+use super::convert::{array, faces, rows_array, rows_f32};
+use super::errors::IntoPy;
+use crate::scene::{LightKind, Scene};
+
+#[pyclass(name = "Scene", module = "scenesample._core", frozen)]
+pub struct PyScene {
+    pub inner: Arc<Scene>,
+}
+
+#[pymethods]
+impl PyScene {
+    /// Load a glTF 2.0 file (.gltf or .glb).
+    #[staticmethod]
+    fn load_gltf(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
+        let scene = py.detach(|| crate::scene::gltf::load(&path)).py_err(py)?;
+        Ok(Self {
+            inner: Arc::new(scene),
+        })
+    }
+
+    #[staticmethod]
+    #[pyo3(signature = (vertices, faces, normals=None, colors=None))]
+    fn from_arrays(
+        py: Python<'_>,
+        vertices: &Bound<'_, PyAny>,
+        faces: &Bound<'_, PyAny>,
+        normals: Option<&Bound<'_, PyAny>>,
+        colors: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<Self> {
+        let v = rows_f32::<3>(vertices, "vertices")?;
+        let f = self::faces(faces, "faces", v.len())?;
+        let n = normals.map(|n| rows_f32::<3>(n, "normals")).transpose()?;
+        let c = colors.map(|c| rows_f32::<3>(c, "colors")).transpose()?;
+        let scene = Scene::from_arrays(v, f, n, c).py_err(py)?;
+        Ok(Self {
+            inner: Arc::new(scene),
+        })
+    }
+
+    #[getter]
+    fn vertices<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let v = self.inner.vertices();
+        rows_array(py, v, &[v.len(), 3])
+    }
+    #[getter]
+    fn faces<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let f = self.inner.faces();
+        rows_array(py, f, &[f.len(), 3])
+    }
+    #[getter]
+    fn normals<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyAny>>> {
+        self.inner
+            .normals()
+            .map(|n| rows_array(py, n, &[n.len(), 3]))
+            .transpose()
+    }
+    #[getter]
+    fn colors<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let c = self.inner.colors();
+        rows_array(py, c, &[c.len(), 3])
+    }
+    #[getter]
+    fn material_ids<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let m = self.inner.material_ids();
+        array(py, m.to_vec(), &[m.len()])
+    }
+    #[getter]
+    fn object_ids<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let m = self.inner.object_ids();
+        array(py, m.to_vec(), &[m.len()])
+    }
+    #[getter]
+    fn objects(&self) -> Vec<String> {
+        self.inner.objects().to_vec()
+    }
+    #[getter]
+    fn triangle_count(&self) -> usize {
+        self.inner.triangle_count()
+    }
+    #[getter]
+    fn degenerate_count(&self) -> usize {
+        self.inner.degenerate_count()
+    }
+    #[getter]
+    fn bounds<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        rows_array(py, &self.inner.bounds(), &[2, 3])
+    }
+    #[getter]
+    fn warnings(&self) -> Vec<String> {
+        self.inner.warnings().to_vec()
+    }
+    #[getter]
+    fn materials<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
+        let out = PyList::empty(py);
+        for m in self.inner.materials() {
+            let d = PyDict::new(py);
+            d.set_item("name", &m.name)?;
+            d.set_item("base_color", m.base_color.to_vec())?;
+            d.set_item("base_color_factor", m.base_color_factor.to_vec())?;
+            d.set_item("base_color_textured", m.base_color_textured)?;
+            d.set_item("metallic", m.metallic)?;
+            d.set_item("roughness", m.roughness)?;
+            d.set_item("emissive", m.emissive.to_vec())?;
+            d.set_item("double_sided", m.double_sided)?;
+            out.append(d)?;
+        }
+        Ok(out)
+    }
+    #[getter]
+    fn lights<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
+        let out = PyList::empty(py);
+        for l in self.inner.lights() {
+            let d = PyDict::new(py);
+            let kind = match l.kind {
+                LightKind::Directional => "directional",
+                LightKind::Point => "point",
+                LightKind::Spot => "spot",
+            };
+            d.set_item("name", &l.name)?;
+            d.set_item("type", kind)?;
+            d.set_item("color", l.color.to_vec())?;
+            d.set_item("intensity", l.intensity)?;
+            d.set_item("range", l.range)?;
+            d.set_item("position", l.position.to_vec())?;
+            d.set_item("direction", l.direction.to_vec())?;
+            d.set_item("inner_cone_angle", l.inner_cone_angle)?;
+            d.set_item("outer_cone_angle", l.outer_cone_angle)?;
+            out.append(d)?;
+        }
+        Ok(out)
+    }
+    #[getter]
+    fn cameras(&self) -> Vec<PyCamera> {
+        self.inner
+            .cameras()
+            .iter()
+            .cloned()
+            .map(PyCamera::from)
+            .collect()
+    }
+
+    fn __repr__(&self) -> String {
+        let b = self.inner.bounds();
+        format!(
+            "Scene({} triangles, {} vertices, {} materials, {} lights, bounds {:?}..{:?})",
+            self.inner.triangle_count(),
+            self.inner.vertices().len(),
+            self.inner.materials().len(),
+            self.inner.lights().len(),
+            b[0],
+            b[1]
+        )
+    }
+}

@@ -1,0 +1,729 @@
+//! glTF 2.0 loading (`.gltf` with external or data-URI buffers, `.glb`) into `SceneParts`:
+//! every triangle primitive of every mesh instance (node hierarchy flattened with f64 world
+//! transforms, `EXT_mesh_gpu_instancing` expanded), metallic-roughness materials,
+//! `KHR_lights_punctual` lights and glTF cameras. Every accessor is bounds- and type-checked
+//! before it is read, so a malformed file gives an error naming the element, never a panic.
+
+use std::collections::{HashMap, HashSet};
+use std::path::{Path, PathBuf};
+
+use base64::Engine;
+use glam::{DMat4, DQuat, DVec3, DVec4};
+use gltf::accessor::{DataType, Dimensions};
+use gltf::mesh::Mode;
+
+use super::{Light, LightKind, Material, Scene, SceneParts};
+use crate::camera::{rigid_from, Camera, Projection};
+use crate::error::{Error, Result};
+
+/// Extensions whose content we read.
+const HANDLED: &[&str] = &[
+    "KHR_lights_punctual",
+    "EXT_mesh_gpu_instancing",
+    "KHR_materials_emissive_strength",
+];
+
+/// Extensions we can honour when a file requires them: geometry is intact without them, and
+/// only shading detail that no method here simulates is lost (a warning says so).
+fn honourable(ext: &str) -> bool {
+    HANDLED.contains(&ext) || ext.starts_with("KHR_materials_") || ext == "KHR_texture_transform"
+}
+
+/// Default image height for glTF cameras (glTF cameras carry no resolution).
+pub const CAMERA_HEIGHT: u32 = 512;
+
+/// Load a glTF 2.0 file. Non-fatal problems (missing images, unknown extensions, point and
+/// line primitives) are returned as `SceneParts::warnings`.
+pub fn load(path: &Path) -> Result<Scene> {
+    let parts = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| load_parts(path)))
+        .unwrap_or_else(|p| {
+            let msg = p
+                .downcast_ref::<String>()
+                .cloned()
+                .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
+                .unwrap_or_default();
+            Err(file_err(
+                path,
+                format!("internal error while reading the file ({msg}); please report it"),
+            ))
+        })?;
+    Scene::new(parts).map_err(|e| match e {
+        Error::Scene(m) => Error::Scene(format!("{}: {m}", path.display())),
+        other => other,
+    })
+}
+
+fn file_err(path: &Path, message: impl Into<String>) -> Error {
+    Error::SceneFile {
+        path: path.to_path_buf(),
+        message: message.into(),
+    }
+}
+
+fn scene_err(path: &Path, message: impl std::fmt::Display) -> Error {
+    Error::Scene(format!("{}: {message}", path.display()))
+}
+
+fn load_parts(path: &Path) -> Result<SceneParts> {
+    let bytes =
+        std::fs::read(path).map_err(|e| file_err(path, format!("cannot read the file: {e}")))?;
+    let gltf::Gltf { document, blob } =
+        gltf::Gltf::from_slice_without_validation(&bytes).map_err(|e| {
+            file_err(
+                path,
+                format!("not a readable glTF/GLB file (truncated or corrupt?): {e}"),
+            )
+        })?;
+    let mut root = document.into_json();
+    let mut warnings = Vec::new();
+    for ext in &root.extensions_required {
+        if !honourable(ext) {
+            return Err(scene_err(
+                path,
+                format!("the file requires the extension {ext}, which scenesample cannot decode (e.g. compressed geometry); re-export it without {ext}"),
+            ));
+        }
+    }
+    for ext in &root.extensions_used {
+        if !HANDLED.contains(&ext.as_str()) {
+            warnings.push(format!(
+                "{}: extension {ext} is not simulated and was ignored",
+                path.display()
+            ));
+        }
+    }
+    // gltf's validator rejects required extensions it does not know; we checked them above.
+    root.extensions_required.clear();
+    let doc = gltf::Document::from_json(root)
+        .map_err(|e| scene_err(path, format!("invalid glTF: {e}")))?;
+    let base = path.parent().unwrap_or(Path::new("."));
+    let buffers = load_buffers(path, &doc, base, blob)?;
+    let mut loader = Loader {
+        path,
+        doc: &doc,
+        buffers,
+        base,
+        parts: SceneParts {
+            warnings,
+            ..Default::default()
+        },
+        image_means: HashMap::new(),
+    };
+    loader.materials();
+    loader.nodes()?;
+    Ok(loader.parts)
+}
+
+fn load_buffers(
+    path: &Path,
+    doc: &gltf::Document,
+    base: &Path,
+    mut blob: Option<Vec<u8>>,
+) -> Result<Vec<Vec<u8>>> {
+    let mut out = Vec::new();
+    for b in doc.buffers() {
+        let data = match b.source() {
+            gltf::buffer::Source::Bin => blob.take().ok_or_else(|| {
+                scene_err(
+                    path,
+                    format!(
+                        "buffer {} refers to the GLB binary chunk, which is missing",
+                        b.index()
+                    ),
+                )
+            })?,
+            gltf::buffer::Source::Uri(uri) => read_uri(uri, base)
+                .map_err(|m| file_err(path, format!("buffer {} ('{uri}'): {m}", b.index())))?,
+        };
+        if data.len() < b.length() {
+            return Err(file_err(
+                path,
+                format!(
+                    "buffer {} has {} bytes but declares byteLength {} (truncated?)",
+                    b.index(),
+                    data.len(),
+                    b.length()
+                ),
+            ));
+        }
+        out.push(data);
+    }
+    Ok(out)
+}
+
+/// Bytes of a data URI or of a file relative to `base` (percent-decoded).
+fn read_uri(uri: &str, base: &Path) -> std::result::Result<Vec<u8>, String> {
+    if let Some(rest) = uri.strip_prefix("data:") {
+        let (meta, data) = rest
+            .split_once(',')
+            .ok_or("malformed data URI (no comma)")?;
+        if !meta.ends_with(";base64") {
+            return Err("only base64 data URIs are supported".into());
+        }
+        return base64::engine::general_purpose::STANDARD
+            .decode(data)
+            .map_err(|e| format!("bad base64 data URI: {e}"));
+    }
+    let file: PathBuf = base.join(percent_decode(uri));
+    std::fs::read(&file).map_err(|e| format!("cannot read {}: {e}", file.display()))
+}
+
+fn percent_decode(s: &str) -> String {
+    let b = s.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        let hex = |c: u8| (c as char).to_digit(16);
+        if b[i] == b'%' && i + 2 < b.len() {
+            if let (Some(h), Some(l)) = (hex(b[i + 1]), hex(b[i + 2])) {
+                out.push((h * 16 + l) as u8);
+                i += 3;
+                continue;
+            }
+        }
+        out.push(b[i]);
+        i += 1;
+    }
+    String::from_utf8_lossy(&out).into_owned()
+}
+
+struct Loader<'a> {
+    path: &'a Path,
+    doc: &'a gltf::Document,
+    buffers: Vec<Vec<u8>>,
+    base: &'a Path,
+    parts: SceneParts,
+    image_means: HashMap<usize, Option<[f32; 4]>>,
+}
+
+impl Loader<'_> {
+    fn err(&self, m: impl std::fmt::Display) -> Error {
+        scene_err(self.path, m)
+    }
+
+    fn warn(&mut self, m: impl std::fmt::Display) {
+        self.parts
+            .warnings
+            .push(format!("{}: {m}", self.path.display()));
+    }
+
+    /// Materials: base colour = factor × mean texel of the base-colour texture (sRGB decoded to
+    /// linear, averaged over the whole image), or the factor alone without a readable texture.
+    fn materials(&mut self) {
+        let doc = self.doc;
+        for m in doc.materials() {
+            let pbr = m.pbr_metallic_roughness();
+            let factor = pbr.base_color_factor();
+            let mean = pbr
+                .base_color_texture()
+                .and_then(|t| self.image_mean(t.texture().source(), m.index().unwrap_or(0)));
+            let base_color = match mean {
+                Some(t) => [0, 1, 2, 3].map(|k| factor[k] * t[k]),
+                None => factor,
+            };
+            let strength = m
+                .extension_value("KHR_materials_emissive_strength")
+                .and_then(|v| v.get("emissiveStrength"))
+                .and_then(|v| v.as_f64())
+                .unwrap_or(1.0) as f32;
+            self.parts.materials.push(Material {
+                name: m.name().unwrap_or("").to_string(),
+                base_color,
+                base_color_factor: factor,
+                base_color_textured: mean.is_some(),
+                metallic: pbr.metallic_factor(),
+                roughness: pbr.roughness_factor(),
+                emissive: m.emissive_factor().map(|e| e * strength),
+                double_sided: m.double_sided(),
+            });
+        }
+    }
+
+    fn image_mean(&mut self, image: gltf::Image, material: usize) -> Option<[f32; 4]> {
+        if let Some(m) = self.image_means.get(&image.index()) {
+            return *m;
+        }
+        let bytes = match image.source() {
+            gltf::image::Source::View { view, .. } => {
+                let buf = &self.buffers[view.buffer().index()];
+                buf.get(view.offset()..view.offset() + view.length())
+                    .map(<[u8]>::to_vec)
+                    .ok_or_else(|| "its buffer view is out of bounds".to_string())
+            }
+            gltf::image::Source::Uri { uri, .. } => read_uri(uri, self.base),
+        };
+        let decoded = bytes.and_then(|b| image::load_from_memory(&b).map_err(|e| e.to_string()));
+        let mean = match decoded {
+            Ok(img) => Some(mean_linear_rgba(&img.to_rgba8())),
+            Err(e) => {
+                self.warn(format!(
+                    "image {} of material {material} could not be read ({e}); its base colour uses the factor alone",
+                    image.index()
+                ));
+                None
+            }
+        };
+        self.image_means.insert(image.index(), mean);
+        mean
+    }
+
+    fn nodes(&mut self) -> Result<()> {
+        let doc = self.doc;
+        let roots: Vec<gltf::Node> = match doc.default_scene().or_else(|| doc.scenes().next()) {
+            Some(s) => s.nodes().collect(),
+            None => {
+                let children: HashSet<usize> = doc
+                    .nodes()
+                    .flat_map(|n| n.children().map(|c| c.index()))
+                    .collect();
+                doc.nodes()
+                    .filter(|n| !children.contains(&n.index()))
+                    .collect()
+            }
+        };
+        for n in roots {
+            self.visit(n, DMat4::IDENTITY, &mut Vec::new())?;
+        }
+        Ok(())
+    }
+
+    fn visit(&mut self, node: gltf::Node, parent: DMat4, stack: &mut Vec<usize>) -> Result<()> {
+        if stack.contains(&node.index()) {
+            return Err(self.err(format!(
+                "node {} is its own ancestor (node cycle {:?} -> {})",
+                node.index(),
+                stack,
+                node.index()
+            )));
+        }
+        let local = DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(f64::from)));
+        let world = parent * local;
+        if !world.is_finite() {
+            return Err(self.err(format!("node {} has a non-finite transform", node.index())));
+        }
+        stack.push(node.index());
+        if let Some(mesh) = node.mesh() {
+            let name = node
+                .name()
+                .or(mesh.name())
+                .map(str::to_string)
+                .unwrap_or_else(|| format!("node{}", node.index()));
+            match self.instances(&node)? {
+                None => self.mesh(&mesh, world, name)?,
+                Some(inst) => {
+                    for (i, m) in inst.iter().enumerate() {
+                        self.mesh(&mesh, world * *m, format!("{name}#{i}"))?;
+                    }
+                }
+            }
+        }
+        if let Some(light) = node.light() {
+            self.light(&light, world);
+        }
+        if let Some(cam) = node.camera() {
+            self.camera(&cam, world, node.name())?;
+        }
+        for child in node.children() {
+            self.visit(child, world, stack)?;
+        }
+        stack.pop();
+        Ok(())
+    }
+
+    /// `EXT_mesh_gpu_instancing`: per-instance TRS matrices, or `None` without the extension.
+    fn instances(&self, node: &gltf::Node) -> Result<Option<Vec<DMat4>>> {
+        let Some(ext) = node.extension_value("EXT_mesh_gpu_instancing") else {
+            return Ok(None);
+        };
+        let attrs = ext
+            .get("attributes")
+            .and_then(|a| a.as_object())
+            .ok_or_else(|| {
+                self.err(format!(
+                    "node {}: EXT_mesh_gpu_instancing has no attributes",
+                    node.index()
+                ))
+            })?;
+        let read = |key: &str, dims: Dimensions| -> Result<Option<Vec<Vec<f32>>>> {
+            let Some(idx) = attrs.get(key).and_then(|v| v.as_u64()) else {
+                return Ok(None);
+            };
+            let what = format!("node {} instancing {key}", node.index());
+            let acc = self
+                .doc
+                .accessors()
+                .nth(idx as usize)
+                .ok_or_else(|| self.err(format!("{what}: accessor {idx} does not exist")))?;
+            self.check_accessor(&acc, &what, &[dims], &[DataType::F32])?;
+            let n = dims.multiplicity();
+            let get = |b: gltf::Buffer| self.buffers.get(b.index()).map(Vec::as_slice);
+            let rows: Vec<Vec<f32>> = match n {
+                3 => gltf::accessor::Iter::<[f32; 3]>::new(acc, get)
+                    .map(|i| i.map(|v| v.to_vec()).collect()),
+                _ => gltf::accessor::Iter::<[f32; 4]>::new(acc, get)
+                    .map(|i| i.map(|v| v.to_vec()).collect()),
+            }
+            .ok_or_else(|| self.err(format!("{what}: accessor {idx} could not be read")))?;
+            Ok(Some(rows))
+        };
+        let t = read("TRANSLATION", Dimensions::Vec3)?;
+        let r = read("ROTATION", Dimensions::Vec4)?;
+        let s = read("SCALE", Dimensions::Vec3)?;
+        let count = [&t, &r, &s]
+            .iter()
+            .filter_map(|x| x.as_ref().map(Vec::len))
+            .max()
+            .unwrap_or(0);
+        if [&t, &r, &s]
+            .iter()
+            .any(|x| x.as_ref().is_some_and(|v| v.len() != count))
+        {
+            return Err(self.err(format!(
+                "node {}: EXT_mesh_gpu_instancing attributes have different counts",
+                node.index()
+            )));
+        }
+        let mats = (0..count)
+            .map(|i| {
+                let tr = t.as_ref().map_or(DVec3::ZERO, |v| {
+                    DVec3::new(v[i][0] as f64, v[i][1] as f64, v[i][2] as f64)
+                });
+                let ro = r.as_ref().map_or(DQuat::IDENTITY, |v| {
+                    DQuat::from_xyzw(
+                        v[i][0] as f64,
+                        v[i][1] as f64,
+                        v[i][2] as f64,
+                        v[i][3] as f64,
+                    )
+                    .normalize()
+                });
+                let sc = s.as_ref().map_or(DVec3::ONE, |v| {
+                    DVec3::new(v[i][0] as f64, v[i][1] as f64, v[i][2] as f64)
+                });
+                DMat4::from_scale_rotation_translation(sc, ro, tr)
+            })
+            .collect();
+        Ok(Some(mats))
+    }
+
+    /// Check an accessor's type and that every byte it reads lies inside its buffer view and
+    /// buffer (including sparse index/value views).
+    fn check_accessor(
+        &self,
+        acc: &gltf::Accessor,
+        what: &str,
+        dims: &[Dimensions],
+        types: &[DataType],
+    ) -> Result<()> {
+        let i = acc.index();
+        if !dims.contains(&acc.dimensions()) || !types.contains(&acc.data_type()) {
+            return Err(self.err(format!(
+                "{what}: accessor {i} has type {:?} {:?}, expected one of {dims:?} with components {types:?}",
+                acc.dimensions(),
+                acc.data_type()
+            )));
+        }
+        if acc.count() == 0 {
+            return Err(self.err(format!("{what}: accessor {i} has count 0")));
+        }
+        let elem = acc.size();
+        if let Some(view) = acc.view() {
+            let stride = view.stride().unwrap_or(elem);
+            let need = acc.offset() + stride * (acc.count() - 1) + elem;
+            self.check_view(&view, need, &format!("{what}: accessor {i}"))?;
+        }
+        if let Some(sp) = acc.sparse() {
+            let n = sp.count();
+            let idx = sp.indices();
+            let isz = match idx.index_type() {
+                gltf::accessor::sparse::IndexType::U8 => 1,
+                gltf::accessor::sparse::IndexType::U16 => 2,
+                gltf::accessor::sparse::IndexType::U32 => 4,
+            };
+            self.check_view(
+                &idx.view(),
+                idx.offset() as usize + n * isz,
+                &format!("{what}: accessor {i} sparse indices"),
+            )?;
+            let vals = sp.values();
+            self.check_view(
+                &vals.view(),
+                vals.offset() as usize + n * elem,
+                &format!("{what}: accessor {i} sparse values"),
+            )?;
+        }
+        Ok(())
+    }
+
+    fn check_view(&self, view: &gltf::buffer::View, need: usize, what: &str) -> Result<()> {
+        if need > view.length() {
+            return Err(self.err(format!(
+                "{what} reads {need} bytes but buffer view {} has {}",
+                view.index(),
+                view.length()
+            )));
+        }
+        let buf = &self.buffers[view.buffer().index()];
+        if view.offset() + view.length() > buf.len() {
+            return Err(self.err(format!(
+                "buffer view {} (bytes {}..{}) lies outside buffer {} ({} bytes)",
+                view.index(),
+                view.offset(),
+                view.offset() + view.length(),
+                view.buffer().index(),
+                buf.len()
+            )));
+        }
+        Ok(())
+    }
+
+    fn mesh(&mut self, mesh: &gltf::Mesh, world: DMat4, name: String) -> Result<()> {
+        let object = self.parts.objects.len() as i32;
+        self.parts.objects.push(name);
+        let flip = world.determinant() < 0.0;
+        for prim in mesh.primitives() {
+            let what = format!("mesh {} primitive {}", mesh.index(), prim.index());
+            match prim.mode() {
+                Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan => {}
+                other => {
+                    self.warn(format!(
+                        "{what}: {other:?} primitives are not triangles and were skipped"
+                    ));
+                    continue;
+                }
+            }
+            let Some(pos_acc) = prim.get(&gltf::Semantic::Positions) else {
+                return Err(self.err(format!("{what} has no POSITION attribute")));
+            };
+            self.check_accessor(
+                &pos_acc,
+                &format!("{what} POSITION"),
+                &[Dimensions::Vec3],
+                &[DataType::F32],
+            )?;
+            let buffers = &self.buffers;
+            let reader = prim.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
+            let positions: Vec<[f32; 3]> = reader
+                .read_positions()
+                .ok_or_else(|| {
+                    self.err(format!(
+                        "{what}: POSITION accessor {} could not be read",
+                        pos_acc.index()
+                    ))
+                })?
+                .collect();
+            if let Some(k) = positions
+                .iter()
+                .position(|p| p.iter().any(|x| !x.is_finite()))
+            {
+                return Err(self.err(format!(
+                    "{what}: POSITION accessor {} has a non-finite vertex at index {k}: {:?}",
+                    pos_acc.index(),
+                    positions[k]
+                )));
+            }
+            let indices: Vec<u32> = match prim.indices() {
+                Some(acc) => {
+                    self.check_accessor(
+                        &acc,
+                        &format!("{what} indices"),
+                        &[Dimensions::Scalar],
+                        &[DataType::U8, DataType::U16, DataType::U32],
+                    )?;
+                    let idx: Vec<u32> = reader
+                        .read_indices()
+                        .ok_or_else(|| {
+                            self.err(format!(
+                                "{what}: index accessor {} could not be read",
+                                acc.index()
+                            ))
+                        })?
+                        .into_u32()
+                        .collect();
+                    if let Some(k) = idx.iter().position(|&i| i as usize >= positions.len()) {
+                        return Err(self.err(format!(
+                            "{what}: index accessor {} has index {} at position {k}, but POSITION has {} vertices",
+                            acc.index(),
+                            idx[k],
+                            positions.len()
+                        )));
+                    }
+                    idx
+                }
+                None => (0..positions.len() as u32).collect(),
+            };
+            let colors: Option<Vec<[f32; 4]>> = match prim.get(&gltf::Semantic::Colors(0)) {
+                Some(acc) => {
+                    self.check_accessor(
+                        &acc,
+                        &format!("{what} COLOR_0"),
+                        &[Dimensions::Vec3, Dimensions::Vec4],
+                        &[DataType::F32, DataType::U8, DataType::U16],
+                    )?;
+                    reader.read_colors(0).map(|c| c.into_rgba_f32().collect())
+                }
+                None => None,
+            };
+            let material = prim.material().index().map_or(-1, |i| i as i32);
+            let base = material_color(&self.parts.materials, material);
+            let offset = self.parts.vertices.len() as u32;
+            for (k, p) in positions.iter().enumerate() {
+                let w = world * DVec4::new(p[0] as f64, p[1] as f64, p[2] as f64, 1.0);
+                self.parts.vertices.push(w.truncate().as_vec3().to_array());
+                let c = colors.as_ref().map_or([1.0; 4], |c| c[k]);
+                self.parts.colors.get_or_insert_with(Vec::new).push([
+                    base[0] * c[0],
+                    base[1] * c[1],
+                    base[2] * c[2],
+                ]);
+            }
+            for mut f in triangles(prim.mode(), &indices) {
+                if flip {
+                    f.swap(1, 2);
+                }
+                self.parts.faces.push(f.map(|i| i + offset));
+                self.parts.material_ids.push(material);
+                self.parts.object_ids.push(object);
+            }
+        }
+        Ok(())
+    }
+
+    fn light(&mut self, light: &gltf::khr_lights_punctual::Light, world: DMat4) {
+        use gltf::khr_lights_punctual::Kind;
+        let (kind, inner, outer) = match light.kind() {
+            Kind::Directional => (LightKind::Directional, None, None),
+            Kind::Point => (LightKind::Point, None, None),
+            Kind::Spot {
+                inner_cone_angle,
+                outer_cone_angle,
+            } => (
+                LightKind::Spot,
+                Some(inner_cone_angle),
+                Some(outer_cone_angle),
+            ),
+        };
+        let dir = (world * DVec4::new(0.0, 0.0, -1.0, 0.0))
+            .truncate()
+            .normalize_or(DVec3::NEG_Z);
+        self.parts.lights.push(Light {
+            name: light.name().unwrap_or("").to_string(),
+            kind,
+            color: light.color(),
+            intensity: light.intensity(),
+            range: light.range(),
+            position: world.w_axis.truncate().to_array(),
+            direction: dir.to_array(),
+            inner_cone_angle: inner,
+            outer_cone_angle: outer,
+        });
+    }
+
+    /// glTF cameras carry no resolution: height `CAMERA_HEIGHT`, width from the aspect ratio
+    /// (perspective `aspectRatio`, else xmag/ymag, else square). Scale is removed from the pose.
+    fn camera(&mut self, cam: &gltf::Camera, world: DMat4, node_name: Option<&str>) -> Result<()> {
+        let pose = rigid_from(world);
+        let h = CAMERA_HEIGHT;
+        let width = |aspect: f64| ((h as f64 * aspect).round().max(1.0)) as u32;
+        let mut c = match cam.projection() {
+            gltf::camera::Projection::Perspective(p) => Camera::new(
+                pose,
+                Projection::Perspective {
+                    yfov: p.yfov() as f64,
+                },
+                width(p.aspect_ratio().map_or(1.0, f64::from)),
+                h,
+                Some(p.znear() as f64),
+                p.zfar().map(f64::from),
+            ),
+            gltf::camera::Projection::Orthographic(o) => Camera::new(
+                pose,
+                Projection::Orthographic {
+                    xmag: o.xmag().abs() as f64,
+                    ymag: o.ymag().abs() as f64,
+                },
+                width((o.xmag() / o.ymag()).abs() as f64),
+                h,
+                Some(o.znear().max(f32::MIN_POSITIVE) as f64),
+                Some(o.zfar() as f64),
+            ),
+        }
+        .map_err(|e| self.err(format!("camera {}: {e}", cam.index())))?;
+        c.name = cam.name().or(node_name).map(str::to_string);
+        self.parts.cameras.push(c);
+        Ok(())
+    }
+}
+
+fn material_color(materials: &[Material], id: i32) -> [f32; 4] {
+    usize::try_from(id)
+        .ok()
+        .and_then(|i| materials.get(i))
+        .map_or([1.0; 4], |m| m.base_color)
+}
+
+/// Triangle lists from glTF primitive modes (glTF 2.0 §3.7.2.1): strips alternate winding,
+/// fans pivot on the first vertex.
+fn triangles(mode: Mode, idx: &[u32]) -> Vec<[u32; 3]> {
+    match mode {
+        Mode::Triangles => idx.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+        Mode::TriangleStrip => (0..idx.len().saturating_sub(2))
+            .map(|i| {
+                if i % 2 == 0 {
+                    [idx[i], idx[i + 1], idx[i + 2]]
+                } else {
+                    [idx[i + 1], idx[i], idx[i + 2]]
+                }
+            })
+            .collect(),
+        Mode::TriangleFan => (1..idx.len().saturating_sub(1))
+            .map(|i| [idx[i], idx[i + 1], idx[0]])
+            .collect(),
+        _ => Vec::new(),
+    }
+}
+
+fn mean_linear_rgba(img: &image::RgbaImage) -> [f32; 4] {
+    let lut: Vec<f64> = (0..256)
+        .map(|i| {
+            let c = i as f64 / 255.0;
+            if c <= 0.04045 {
+                c / 12.92
+            } else {
+                ((c + 0.055) / 1.055).powf(2.4)
+            }
+        })
+        .collect();
+    let mut sum = [0.0f64; 4];
+    for p in img.pixels() {
+        for k in 0..3 {
+            sum[k] += lut[p[k] as usize];
+        }
+        sum[3] += p[3] as f64 / 255.0;
+    }
+    let n = (img.width() as f64 * img.height() as f64).max(1.0);
+    sum.map(|s| (s / n) as f32)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn strips_and_fans_become_triangle_lists() {
+        assert_eq!(
+            triangles(Mode::TriangleStrip, &[0, 1, 2, 3]),
+            vec![[0, 1, 2], [2, 1, 3]]
+        );
+        assert_eq!(
+            triangles(Mode::TriangleFan, &[0, 1, 2, 3]),
+            vec![[1, 2, 0], [2, 3, 0]]
+        );
+    }
+
+    #[test]
+    fn percent_decoding() {
+        assert_eq!(percent_decode("a%20b.bin"), "a b.bin");
+        assert_eq!(percent_decode("100%"), "100%");
+    }
+}

@@ -1,0 +1,366 @@
+//! Scene: triangles with per-vertex base colour, per-triangle material and object ids, materials,
+//! lights and cameras. Built from arrays (`from_arrays`) or glTF 2.0 (`gltf::load`); validated
+//! once at construction so every later stage can trust it.
+
+pub mod gltf;
+
+use std::sync::{Arc, Mutex, OnceLock};
+
+use glam::{DVec3, Vec3};
+
+use crate::camera::Camera;
+use crate::error::Result;
+use crate::scene_err;
+
+/// A glTF metallic-roughness material, reduced to the factors the methods use.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Material {
+    pub name: String,
+    /// Linear RGBA: `base_color_factor` × the mean texel of the base-colour texture (sRGB decoded),
+    /// or the factor alone when there is no texture or it could not be read.
+    pub base_color: [f32; 4],
+    pub base_color_factor: [f32; 4],
+    /// Whether `base_color` includes a texture average.
+    pub base_color_textured: bool,
+    pub metallic: f32,
+    pub roughness: f32,
+    pub emissive: [f32; 3],
+    pub double_sided: bool,
+}
+
+impl Default for Material {
+    /// glTF's default material (spec §3.9.6): white, fully metallic and rough.
+    fn default() -> Self {
+        Self {
+            name: String::new(),
+            base_color: [1.0; 4],
+            base_color_factor: [1.0; 4],
+            base_color_textured: false,
+            metallic: 1.0,
+            roughness: 1.0,
+            emissive: [0.0; 3],
+            double_sided: false,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LightKind {
+    Directional,
+    Point,
+    Spot,
+}
+
+/// A `KHR_lights_punctual` light placed in world space.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Light {
+    pub name: String,
+    pub kind: LightKind,
+    pub color: [f32; 3],
+    pub intensity: f32,
+    pub range: Option<f32>,
+    pub position: [f64; 3],
+    /// Unit world direction the light points along (the node's −Z).
+    pub direction: [f64; 3],
+    pub inner_cone_angle: Option<f32>,
+    pub outer_cone_angle: Option<f32>,
+}
+
+/// Everything that defines a scene's geometry and appearance, before validation.
+#[derive(Clone, Debug, Default)]
+pub struct SceneParts {
+    pub vertices: Vec<[f32; 3]>,
+    pub faces: Vec<[u32; 3]>,
+    pub normals: Option<Vec<[f32; 3]>>,
+    /// Per-vertex linear RGB base colour; white when `None`.
+    pub colors: Option<Vec<[f32; 3]>>,
+    /// Per-triangle material index into `materials`, −1 for glTF's default material.
+    pub material_ids: Vec<i32>,
+    /// Per-triangle object index into `objects`.
+    pub object_ids: Vec<i32>,
+    pub materials: Vec<Material>,
+    pub objects: Vec<String>,
+    pub lights: Vec<Light>,
+    pub cameras: Vec<Camera>,
+    pub warnings: Vec<String>,
+}
+
+/// A validated triangle scene. Immutable: the BVH and GPU buffers are cached on first use.
+#[derive(Debug)]
+pub struct Scene {
+    parts: SceneParts,
+    colors: Vec<[f32; 3]>,
+    bounds: [[f32; 3]; 2],
+    degenerate: Vec<bool>,
+    degenerate_count: usize,
+    /// Built on the first `cast_rays` (see `trace`).
+    pub(crate) bvh: OnceLock<Arc<crate::trace::Bvh>>,
+    /// Uploaded on the first GPU use (see `gpu::SceneBuffers`); a Mutex because upload can fail.
+    pub(crate) gpu: Mutex<Option<Arc<crate::gpu::SceneBuffers>>>,
+}
+
+impl Scene {
+    /// Validate `parts` and build the scene. Faces keep their order, so triangle ids are the
+    /// input's face indices.
+    pub fn new(parts: SceneParts) -> Result<Self> {
+        validate(&parts)?;
+        let n = parts.vertices.len();
+        let colors = parts.colors.clone().unwrap_or_else(|| vec![[1.0; 3]; n]);
+        let bounds = compute_bounds(&parts.vertices, &parts.faces);
+        let degenerate: Vec<bool> = parts
+            .faces
+            .iter()
+            .map(|f| is_degenerate(&parts.vertices, f))
+            .collect();
+        let degenerate_count = degenerate.iter().filter(|d| **d).count();
+        Ok(Self {
+            parts,
+            colors,
+            bounds,
+            degenerate,
+            degenerate_count,
+            bvh: OnceLock::new(),
+            gpu: Mutex::new(None),
+        })
+    }
+
+    /// A scene from plain arrays: no materials (id −1), one object, white unless `colors`.
+    pub fn from_arrays(
+        vertices: Vec<[f32; 3]>,
+        faces: Vec<[u32; 3]>,
+        normals: Option<Vec<[f32; 3]>>,
+        colors: Option<Vec<[f32; 3]>>,
+    ) -> Result<Self> {
+        let m = faces.len();
+        Self::new(SceneParts {
+            vertices,
+            faces,
+            normals,
+            colors,
+            material_ids: vec![-1; m],
+            object_ids: vec![0; m],
+            objects: vec!["mesh".to_string()],
+            ..Default::default()
+        })
+    }
+
+    pub fn vertices(&self) -> &[[f32; 3]] {
+        &self.parts.vertices
+    }
+    pub fn faces(&self) -> &[[u32; 3]] {
+        &self.parts.faces
+    }
+    pub fn normals(&self) -> Option<&[[f32; 3]]> {
+        self.parts.normals.as_deref()
+    }
+    pub fn colors(&self) -> &[[f32; 3]] {
+        &self.colors
+    }
+    pub fn material_ids(&self) -> &[i32] {
+        &self.parts.material_ids
+    }
+    pub fn object_ids(&self) -> &[i32] {
+        &self.parts.object_ids
+    }
+    pub fn materials(&self) -> &[Material] {
+        &self.parts.materials
+    }
+    pub fn objects(&self) -> &[String] {
+        &self.parts.objects
+    }
+    pub fn lights(&self) -> &[Light] {
+        &self.parts.lights
+    }
+    pub fn cameras(&self) -> &[Camera] {
+        &self.parts.cameras
+    }
+    pub fn warnings(&self) -> &[String] {
+        &self.parts.warnings
+    }
+    pub fn triangle_count(&self) -> usize {
+        self.parts.faces.len()
+    }
+    /// Axis-aligned bounds of the vertices that triangles use: `[min, max]`.
+    pub fn bounds(&self) -> [[f32; 3]; 2] {
+        self.bounds
+    }
+    pub fn degenerate_count(&self) -> usize {
+        self.degenerate_count
+    }
+    /// Whether triangle `i` has (numerically) zero area.
+    pub fn is_degenerate(&self, i: usize) -> bool {
+        self.degenerate[i]
+    }
+
+    /// Centre of the bounds in f64: the origin of the camera-relative frame used on the GPU.
+    pub fn center(&self) -> DVec3 {
+        let [lo, hi] = self.bounds;
+        (DVec3::from(Vec3::from(lo).as_dvec3()) + Vec3::from(hi).as_dvec3()) * 0.5
+    }
+
+    /// Length of the bounds' diagonal (at least the smallest positive normal f32, never 0).
+    pub fn diagonal(&self) -> f64 {
+        let [lo, hi] = self.bounds;
+        (Vec3::from(hi).as_dvec3() - Vec3::from(lo).as_dvec3())
+            .length()
+            .max(f32::MIN_POSITIVE as f64)
+    }
+
+    /// Unit geometric normal of triangle `i` from its winding (counter-clockwise front), in f64;
+    /// zero for a degenerate triangle, so nothing downstream divides by its area.
+    pub fn face_normal(&self, i: usize) -> DVec3 {
+        let [a, b, c] = self.triangle(i);
+        let n = (b - a).cross(c - a);
+        let len = n.length();
+        if self.degenerate[i] || len == 0.0 || !len.is_finite() {
+            DVec3::ZERO
+        } else {
+            n / len
+        }
+    }
+
+    /// The three world-space corners of triangle `i`, widened to f64.
+    pub fn triangle(&self, i: usize) -> [DVec3; 3] {
+        let f = self.parts.faces[i];
+        let v = &self.parts.vertices;
+        [0, 1, 2].map(|k| Vec3::from(v[f[k] as usize]).as_dvec3())
+    }
+}
+
+fn validate(p: &SceneParts) -> Result<()> {
+    let n = p.vertices.len();
+    let m = p.faces.len();
+    if m == 0 {
+        return scene_err!("the scene has no triangles ({n} vertices, 0 faces)");
+    }
+    for (i, v) in p.vertices.iter().enumerate() {
+        if let Some(k) = v.iter().position(|x| !x.is_finite()) {
+            return scene_err!(
+                "vertex {i} has a non-finite coordinate ({}={}); vertices must be finite",
+                ["x", "y", "z"][k],
+                v[k]
+            );
+        }
+    }
+    for (i, f) in p.faces.iter().enumerate() {
+        if let Some(k) = f.iter().position(|&x| x as usize >= n) {
+            return scene_err!(
+                "face {i} refers to vertex {} but the scene has {n} vertices (valid: 0..{})",
+                f[k],
+                n.saturating_sub(1)
+            );
+        }
+    }
+    check_len("normals", p.normals.as_ref().map(Vec::len), n, "vertices")?;
+    check_len("colors", p.colors.as_ref().map(Vec::len), n, "vertices")?;
+    check_len("material_ids", Some(p.material_ids.len()), m, "faces")?;
+    check_len("object_ids", Some(p.object_ids.len()), m, "faces")?;
+    if let Some(normals) = &p.normals {
+        if let Some(i) = normals
+            .iter()
+            .position(|v| v.iter().any(|x| !x.is_finite()))
+        {
+            return scene_err!("normal {i} is not finite: {:?}", normals[i]);
+        }
+    }
+    if let Some(colors) = &p.colors {
+        if let Some(i) = colors.iter().position(|v| v.iter().any(|x| !x.is_finite())) {
+            return scene_err!("color {i} is not finite: {:?}", colors[i]);
+        }
+    }
+    let nm = p.materials.len() as i32;
+    if let Some(i) = p.material_ids.iter().position(|&k| k < -1 || k >= nm) {
+        return scene_err!(
+            "face {i} has material id {} but there are {nm} materials",
+            p.material_ids[i]
+        );
+    }
+    let no = p.objects.len() as i32;
+    if let Some(i) = p.object_ids.iter().position(|&k| k < 0 || k >= no) {
+        return scene_err!(
+            "face {i} has object id {} but there are {no} objects",
+            p.object_ids[i]
+        );
+    }
+    Ok(())
+}
+
+fn check_len(name: &str, got: Option<usize>, want: usize, of: &str) -> Result<()> {
+    match got {
+        Some(g) if g != want => scene_err!("{name} has {g} rows but there are {want} {of}"),
+        _ => Ok(()),
+    }
+}
+
+fn compute_bounds(vertices: &[[f32; 3]], faces: &[[u32; 3]]) -> [[f32; 3]; 2] {
+    let mut lo = Vec3::splat(f32::INFINITY);
+    let mut hi = Vec3::splat(f32::NEG_INFINITY);
+    for f in faces {
+        for &k in f {
+            let v = Vec3::from(vertices[k as usize]);
+            lo = lo.min(v);
+            hi = hi.max(v);
+        }
+    }
+    [lo.to_array(), hi.to_array()]
+}
+
+/// Zero area up to f64 rounding of the cross product: |e1 × e2| ≤ 1e-12·|e1|·|e2|, or a
+/// repeated index.
+fn is_degenerate(vertices: &[[f32; 3]], f: &[u32; 3]) -> bool {
+    if f[0] == f[1] || f[1] == f[2] || f[0] == f[2] {
+        return true;
+    }
+    let [a, b, c] = f.map(|k| Vec3::from(vertices[k as usize]).as_dvec3());
+    let (e1, e2) = (b - a, c - a);
+    let cross = e1.cross(e2).length();
+    cross <= 1e-12 * e1.length() * e2.length()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn quad() -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+        let v = vec![[0., 0., 0.], [1., 0., 0.], [1., 1., 0.], [0., 1., 0.]];
+        (v, vec![[0, 1, 2], [0, 2, 3]])
+    }
+
+    #[test]
+    fn keeps_face_order_and_bounds() {
+        let (v, f) = quad();
+        let s = Scene::from_arrays(v, f.clone(), None, None).unwrap();
+        assert_eq!(s.faces(), &f[..]);
+        assert_eq!(s.bounds(), [[0., 0., 0.], [1., 1., 0.]]);
+        assert_eq!(s.face_normal(0), DVec3::Z);
+    }
+
+    #[test]
+    fn rejects_bad_input_with_named_element() {
+        let (mut v, f) = quad();
+        v[2][1] = f32::NAN;
+        let e = Scene::from_arrays(v, f, None, None)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("vertex 2"), "{e}");
+        let (v, mut f) = quad();
+        f[1][2] = 9;
+        let e = Scene::from_arrays(v, f, None, None)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("face 1") && e.contains("vertex 9"), "{e}");
+        let e = Scene::from_arrays(vec![], vec![], None, None)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("no triangles"), "{e}");
+    }
+
+    #[test]
+    fn degenerate_triangles_are_counted_with_zero_normals() {
+        let v = vec![[0., 0., 0.], [1., 0., 0.], [2., 0., 0.], [0., 1., 0.]];
+        let s = Scene::from_arrays(v, vec![[0, 1, 2], [0, 1, 3], [3, 3, 1]], None, None).unwrap();
+        assert_eq!(s.degenerate_count(), 2);
+        assert_eq!(s.face_normal(0), DVec3::ZERO);
+        assert!(s.face_normal(1).is_finite());
+    }
+}

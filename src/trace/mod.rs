@@ -1,0 +1,379 @@
+//! CPU ray casting: an obvhs compressed wide BVH (CWBVH) built once per scene, traversed in
+//! parallel with rayon, with the watertight ray/triangle test of `watertight`.
+
+pub mod watertight;
+
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use glam::{Vec3, Vec3A};
+use obvhs::aabb::Aabb;
+use obvhs::cwbvh::builder::build_cwbvh;
+use obvhs::cwbvh::CwBvh;
+use obvhs::ray::{Ray, RayHit};
+use obvhs::{Boundable, BvhBuildParams};
+use rayon::prelude::*;
+
+use crate::error::Result;
+use crate::input_err;
+use crate::scene::Scene;
+use watertight::{RayShear, Tri};
+
+/// A scene's BVH with its triangles stored in leaf order (cache-friendly traversal).
+#[derive(Debug)]
+pub struct Bvh {
+    cwbvh: CwBvh,
+    /// Triangle corners in `cwbvh.primitive_indices` order.
+    tris: Vec<Tri>,
+    pub build_seconds: f64,
+}
+
+/// A triangle's box padded by a few ulps of its coordinates' magnitude, so that the BVH's f32
+/// slab tests (which obvhs does without rounding compensation) can never reject a ray that
+/// grazes a box exactly at a triangle's vertex or edge: the watertight triangle test then
+/// decides alone.
+struct PaddedBox(Aabb);
+
+impl Boundable for PaddedBox {
+    fn aabb(&self) -> Aabb {
+        self.0
+    }
+}
+
+fn padded_box(t: &Tri) -> PaddedBox {
+    let lo = t.v[0].min(t.v[1]).min(t.v[2]);
+    let hi = t.v[0].max(t.v[1]).max(t.v[2]);
+    let mag = lo.abs().max(hi.abs()).max_element() + (hi - lo).max_element();
+    let pad = Vec3A::splat(8.0 * f32::EPSILON * mag + f32::MIN_POSITIVE);
+    PaddedBox(Aabb::new(lo - pad, hi + pad))
+}
+
+impl Bvh {
+    pub fn build(scene: &Scene) -> Self {
+        let start = Instant::now();
+        let tris: Vec<Tri> = (0..scene.triangle_count())
+            .map(|i| {
+                let f = scene.faces()[i];
+                let v = scene.vertices();
+                Tri {
+                    v: f.map(|k| Vec3A::from(Vec3::from(v[k as usize]))),
+                }
+            })
+            .collect();
+        let boxes: Vec<PaddedBox> = tris.iter().map(padded_box).collect();
+        let cwbvh = build_cwbvh(
+            &boxes,
+            BvhBuildParams::medium_build(),
+            &mut Duration::default(),
+        );
+        let tris = cwbvh
+            .primitive_indices
+            .iter()
+            .map(|&i| tris[i as usize])
+            .collect();
+        Self {
+            cwbvh,
+            tris,
+            build_seconds: start.elapsed().as_secs_f64(),
+        }
+    }
+
+    /// The scene's BVH, built on first use and cached for the scene's lifetime.
+    pub fn of(scene: &Scene) -> Arc<Bvh> {
+        scene
+            .bvh
+            .get_or_init(|| Arc::new(Bvh::build(scene)))
+            .clone()
+    }
+
+    /// Closest hit along one ray with a unit direction, in `[t_min, t_max]`.
+    fn closest(&self, origin: Vec3A, dir: Vec3A, t_min: f32, t_max: f32) -> Option<Hit> {
+        let shear = RayShear::new(dir);
+        let ray = bvh_ray(origin, dir, t_min, t_max);
+        let mut best: Option<Hit> = None;
+        let mut hit = RayHit::none();
+        self.cwbvh.ray_traverse(ray, &mut hit, |r, id| {
+            match watertight::intersect(&self.tris[id], origin, &shear, t_min, r.tmax) {
+                Some((t, b)) => {
+                    best = Some(Hit {
+                        t,
+                        triangle: self.cwbvh.primitive_indices[id],
+                        bary: b,
+                    });
+                    t
+                }
+                None => f32::INFINITY,
+            }
+        });
+        best
+    }
+}
+
+/// obvhs ray for traversal. Its `Ray::new` maps components with |d| ≤ f32::EPSILON to
+/// ±1/EPSILON, which makes the slab test reject boxes a nearly axis-parallel ray really
+/// crosses; we form exact reciprocals instead, clamping only exact (sub-1e-20) zeros.
+fn bvh_ray(origin: Vec3A, dir: Vec3A, t_min: f32, t_max: f32) -> Ray {
+    let inv = |x: f32| {
+        let x = if x.abs() < 1e-20 {
+            1e-20f32.copysign(x)
+        } else {
+            x
+        };
+        1.0 / x
+    };
+    Ray {
+        origin,
+        direction: dir,
+        inv_direction: Vec3A::new(inv(dir.x), inv(dir.y), inv(dir.z)),
+        tmin: t_min,
+        tmax: t_max,
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    pub t: f32,
+    pub triangle: u32,
+    pub bary: [f32; 2],
+}
+
+/// Results of `cast_rays`, one entry per ray.
+#[derive(Debug, Default)]
+pub struct RayHits {
+    /// Distance in units of the direction's length; +inf on a miss.
+    pub t: Vec<f32>,
+    /// Triangle index (the scene's face index); −1 on a miss.
+    pub triangle: Vec<i32>,
+    /// Barycentric (u, v) of the hit: point = (1−u−v)·v0 + u·v1 + v·v2; (0, 0) on a miss.
+    pub barycentric: Vec<[f32; 2]>,
+    pub bvh_build_seconds: f64,
+    pub trace_seconds: f64,
+}
+
+/// Cast rays and return the closest hit of each in `[t_min, t_max]` (units of each
+/// direction's length). Directions need not be unit length but must be finite and non-zero.
+pub fn cast_rays(
+    scene: &Scene,
+    origins: &[[f32; 3]],
+    directions: &[[f32; 3]],
+    t_min: f32,
+    t_max: f32,
+) -> Result<RayHits> {
+    check_rays(origins, directions, t_min, t_max)?;
+    let had_bvh = scene.bvh.get().is_some();
+    let bvh = Bvh::of(scene);
+    let start = Instant::now();
+    let n = origins.len();
+    let mut t = vec![f32::INFINITY; n];
+    let mut triangle = vec![-1i32; n];
+    let mut barycentric = vec![[0.0f32; 2]; n];
+    const CHUNK: usize = 1024;
+    t.par_chunks_mut(CHUNK)
+        .zip(triangle.par_chunks_mut(CHUNK))
+        .zip(barycentric.par_chunks_mut(CHUNK))
+        .enumerate()
+        .for_each(|(c, ((t, tri), bary))| {
+            for k in 0..t.len() {
+                let i = c * CHUNK + k;
+                let d = Vec3A::from(Vec3::from(directions[i]));
+                let len = d.length();
+                // Trace with a unit direction so the BVH's absolute epsilons mean the same at
+                // every direction scale; convert t back to the caller's units.
+                let o = Vec3A::from(Vec3::from(origins[i]));
+                if let Some(h) = bvh.closest(o, d / len, t_min * len, t_max * len) {
+                    t[k] = h.t / len;
+                    tri[k] = h.triangle as i32;
+                    bary[k] = h.bary;
+                }
+            }
+        });
+    Ok(RayHits {
+        t,
+        triangle,
+        barycentric,
+        bvh_build_seconds: if had_bvh { 0.0 } else { bvh.build_seconds },
+        trace_seconds: start.elapsed().as_secs_f64(),
+    })
+}
+
+fn check_rays(o: &[[f32; 3]], d: &[[f32; 3]], t_min: f32, t_max: f32) -> Result<()> {
+    if o.len() != d.len() {
+        return input_err!(
+            "origins has {} rows but directions has {}; they must match",
+            o.len(),
+            d.len()
+        );
+    }
+    if let Some(i) = o.iter().position(|v| v.iter().any(|x| !x.is_finite())) {
+        return input_err!("origins[{i}] is not finite: {:?}", o[i]);
+    }
+    for (i, v) in d.iter().enumerate() {
+        let len = Vec3::from(*v).length();
+        if !(len.is_finite() && len > 0.0) {
+            return input_err!("directions[{i}] must be finite and non-zero, got {v:?}");
+        }
+    }
+    if t_min.is_nan() || t_max.is_nan() || t_min < 0.0 || t_max < t_min {
+        return input_err!("need 0 <= t_min <= t_max, got t_min={t_min}, t_max={t_max}");
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An icosphere subdivided `n` times: a closed mesh with shared edges and vertices.
+    pub(crate) fn icosphere(n: u32) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+        let t = (1.0 + 5f32.sqrt()) / 2.0;
+        let mut v: Vec<Vec3> = [
+            (-1., t, 0.),
+            (1., t, 0.),
+            (-1., -t, 0.),
+            (1., -t, 0.),
+            (0., -1., t),
+            (0., 1., t),
+            (0., -1., -t),
+            (0., 1., -t),
+            (t, 0., -1.),
+            (t, 0., 1.),
+            (-t, 0., -1.),
+            (-t, 0., 1.),
+        ]
+        .iter()
+        .map(|&(x, y, z)| Vec3::new(x, y, z).normalize())
+        .collect();
+        let mut f: Vec<[u32; 3]> = vec![
+            [0, 11, 5],
+            [0, 5, 1],
+            [0, 1, 7],
+            [0, 7, 10],
+            [0, 10, 11],
+            [1, 5, 9],
+            [5, 11, 4],
+            [11, 10, 2],
+            [10, 7, 6],
+            [7, 1, 8],
+            [3, 9, 4],
+            [3, 4, 2],
+            [3, 2, 6],
+            [3, 6, 8],
+            [3, 8, 9],
+            [4, 9, 5],
+            [2, 4, 11],
+            [6, 2, 10],
+            [8, 6, 7],
+            [9, 8, 1],
+        ];
+        for _ in 0..n {
+            let mut mid = std::collections::HashMap::new();
+            let mut next = Vec::new();
+            for tri in &f {
+                let m: Vec<u32> = (0..3)
+                    .map(|k| {
+                        let (a, b) = (tri[k].min(tri[(k + 1) % 3]), tri[k].max(tri[(k + 1) % 3]));
+                        *mid.entry((a, b)).or_insert_with(|| {
+                            v.push(((v[a as usize] + v[b as usize]) * 0.5).normalize());
+                            v.len() as u32 - 1
+                        })
+                    })
+                    .collect();
+                next.push([tri[0], m[0], m[2]]);
+                next.push([tri[1], m[1], m[0]]);
+                next.push([tri[2], m[2], m[1]]);
+                next.push([m[0], m[1], m[2]]);
+            }
+            f = next;
+        }
+        (v.iter().map(|p| p.to_array()).collect(), f)
+    }
+
+    #[test]
+    fn hits_closest_triangle_with_barycentrics() {
+        let v = vec![
+            [0., 0., 0.],
+            [1., 0., 0.],
+            [0., 1., 0.],
+            [0., 0., -1.],
+            [1., 0., -1.],
+            [0., 1., -1.],
+        ];
+        let s = Scene::from_arrays(v, vec![[3, 4, 5], [0, 1, 2]], None, None).unwrap();
+        let h = cast_rays(
+            &s,
+            &[[0.25, 0.5, 1.0]],
+            &[[0.0, 0.0, -2.0]],
+            0.0,
+            f32::INFINITY,
+        )
+        .unwrap();
+        assert_eq!(h.triangle, vec![1]);
+        assert!(
+            (h.t[0] - 0.5).abs() < 1e-6,
+            "t in units of the direction's length"
+        );
+        assert!(
+            (h.barycentric[0][0] - 0.25).abs() < 1e-6 && (h.barycentric[0][1] - 0.5).abs() < 1e-6
+        );
+        let miss = cast_rays(
+            &s,
+            &[[2.0, 2.0, 1.0]],
+            &[[0.0, 0.0, -1.0]],
+            0.0,
+            f32::INFINITY,
+        )
+        .unwrap();
+        assert_eq!((miss.triangle[0], miss.t[0]), (-1, f32::INFINITY));
+    }
+
+    #[test]
+    fn no_ray_through_shared_vertices_or_edges() {
+        let (v, f) = icosphere(3);
+        let s = Scene::from_arrays(v.clone(), f.clone(), None, None).unwrap();
+        let mut targets: Vec<Vec3> = v.iter().map(|p| Vec3::from(*p)).collect();
+        for tri in &f {
+            for k in 0..3 {
+                let (a, b) = (
+                    Vec3::from(v[tri[k] as usize]),
+                    Vec3::from(v[tri[(k + 1) % 3] as usize]),
+                );
+                targets.push((a + b) * 0.5);
+            }
+        }
+        let mut o = Vec::new();
+        let mut d = Vec::new();
+        for (i, p) in targets.iter().enumerate() {
+            // Deterministic directions spread over the sphere (golden-angle spiral).
+            let z = 1.0 - 2.0 * ((i as f32 * 0.618_034) % 1.0);
+            let phi = i as f32 * 2.399_963;
+            let r = (1.0 - z * z).max(0.0).sqrt();
+            let out = Vec3::new(r * phi.cos(), r * phi.sin(), z);
+            // Tilt the outward normal by at most ~40° so each ray enters the mesh at its target
+            // (a ray that only grazes a convex mesh at a vertex may rightly miss).
+            let n = p.normalize();
+            let tangent = (out - n * out.dot(n)).normalize_or_zero();
+            let origin = *p + (n + tangent * 0.8).normalize() * 3.0;
+            o.push(origin.to_array());
+            d.push((*p - origin).to_array());
+        }
+        let h = cast_rays(&s, &o, &d, 0.0, f32::INFINITY).unwrap();
+        let misses = h.triangle.iter().filter(|&&t| t < 0).count();
+        assert_eq!(
+            misses,
+            0,
+            "{misses} of {} rays passed through the closed mesh",
+            o.len()
+        );
+    }
+
+    #[test]
+    fn bad_rays_are_rejected() {
+        let (v, f) = icosphere(0);
+        let s = Scene::from_arrays(v, f, None, None).unwrap();
+        let e = cast_rays(&s, &[[0.0; 3]], &[[0.0; 3]], 0.0, 1.0)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("directions[0]"), "{e}");
+        assert!(cast_rays(&s, &[[0.0; 3]], &[], 0.0, 1.0).is_err());
+    }
+}
