@@ -94,8 +94,8 @@ fn load_parts(path: &Path) -> Result<SceneParts> {
     }
     // gltf's validator rejects required extensions it does not know; we checked them above.
     root.extensions_required.clear();
-    let doc = gltf::Document::from_json(root)
-        .map_err(|e| scene_err(path, format!("invalid glTF: {e}")))?;
+    prevalidate(&mut root).map_err(|m| scene_err(path, m))?;
+    let doc = gltf::Document::from_json(root).map_err(|e| scene_err(path, e))?;
     let base = path.parent().unwrap_or(Path::new("."));
     let buffers = load_buffers(path, &doc, base, blob)?;
     let mut loader = Loader {
@@ -112,6 +112,46 @@ fn load_parts(path: &Path) -> Result<SceneParts> {
     loader.materials();
     loader.nodes()?;
     Ok(loader.parts)
+}
+
+/// Checks gltf's validator needs before it runs (it indexes accessors without bounds checks),
+/// and the one requirement it enforces that we relax: the spec requires `min`/`max` on POSITION
+/// accessors, but exporters omit them and nothing here reads them (bounds come from the data),
+/// so missing ones are filled with placeholders rather than rejecting the file.
+fn prevalidate(root: &mut gltf::json::Root) -> std::result::Result<(), String> {
+    use gltf::json::validation::Checked;
+    let n = root.accessors.len();
+    let mut positions = Vec::new();
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, prim) in mesh.primitives.iter().enumerate() {
+            let refs = prim
+                .attributes
+                .iter()
+                .map(|(k, v)| (format!("attribute {k:?}"), v.value()));
+            let refs = refs.chain(
+                prim.indices
+                    .iter()
+                    .map(|i| ("indices".to_string(), i.value())),
+            );
+            for (what, i) in refs {
+                if i >= n {
+                    return Err(format!("mesh {m} primitive {p} {what} refers to accessor {i}, but the file has {n} accessors"));
+                }
+            }
+            for (k, v) in &prim.attributes {
+                if matches!(k, Checked::Valid(gltf::json::mesh::Semantic::Positions)) {
+                    positions.push(v.value());
+                }
+            }
+        }
+    }
+    for i in positions {
+        let a = &mut root.accessors[i];
+        for bound in [&mut a.min, &mut a.max] {
+            bound.get_or_insert_with(|| serde_json::json!([0.0, 0.0, 0.0]));
+        }
+    }
+    Ok(())
 }
 
 fn load_buffers(
@@ -211,6 +251,15 @@ impl Loader<'_> {
     /// linear, averaged over the whole image), or the factor alone without a readable texture.
     fn materials(&mut self) {
         let doc = self.doc;
+        // Every missing external image is reported, also those no method reads (normal maps...).
+        for img in doc.images() {
+            if let gltf::image::Source::Uri { uri, .. } = img.source() {
+                if !uri.starts_with("data:") && !self.base.join(percent_decode(uri)).is_file() {
+                    self.warn(format!("image {} ('{uri}') is missing", img.index()));
+                    self.image_means.insert(img.index(), None);
+                }
+            }
+        }
         for m in doc.materials() {
             let pbr = m.pbr_metallic_roughness();
             let factor = pbr.base_color_factor();

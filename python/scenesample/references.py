@@ -1,0 +1,143 @@
+"""Adapters to the tools users cross-check against: pyrender (OpenGL raster) and raw Embree
+(through embreex). Tests and ``scenesample.bench`` use these, so each tool's quirks are handled
+in exactly one place. Both tools are optional dependencies (``pip install scenesample[test]``).
+
+Quirks handled here:
+
+- pyrender needs ``np.infty`` (removed in numpy 2) and ``PYOPENGL_PLATFORM=egl`` headless.
+- pyrender returns camera-space z with 0 for background: mapped to ``+inf``.
+- pyrender resolves depth from a 4x multisampled buffer with a NEAREST blit, i.e. from one
+  sub-sample rather than the pixel centre; ``multisample=False`` makes its buffers single-sample
+  so it samples pixel centres like scenesample.
+- pyrender's ``DEPTH_ONLY`` pass culls back faces even with ``SKIP_CULL_FACES``: every triangle
+  is given to it in both windings.
+- pyrender computes ``view @ model @ p`` in float32 on the GPU; for scenes far from the origin it
+  is given vertices and camera relative to ``origin`` (computed in float64), so it renders
+  exactly the same float32 geometry without losing precision to the offset.
+- Embree (via trimesh) rescales rays; the raw ``EmbreeScene.run`` does not.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from collections.abc import Iterator, Sequence
+from typing import Any, Optional
+
+import numpy as np
+
+from ._core import Camera
+from ._scene import Scene
+
+__all__ = ["pyrender_depth", "EmbreeReference"]
+
+
+def _import_pyrender() -> Any:
+    os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+    if not hasattr(np, "infty"):
+        np.infty = np.inf  # type: ignore[attr-defined]
+    import pyrender
+
+    return pyrender
+
+
+@contextlib.contextmanager
+def _single_sample(pyrender: Any) -> Iterator[None]:
+    """Make pyrender's 'multisample' renderbuffers single-sample while it creates them."""
+    from OpenGL import GL
+
+    module = pyrender.renderer
+    original = module.glRenderbufferStorageMultisample
+
+    def storage(target: int, _samples: int, fmt: int, w: int, h: int) -> None:
+        GL.glRenderbufferStorageMultisample(target, 0, fmt, w, h)
+
+    module.glRenderbufferStorageMultisample = storage
+    try:
+        yield
+    finally:
+        module.glRenderbufferStorageMultisample = original
+
+
+def _clip_planes(cam: Camera, bounds: np.ndarray) -> tuple[float, float]:
+    corners = np.array([[bounds[i, 0], bounds[j, 1], bounds[k, 2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)], dtype=np.float64)
+    _, z = cam.project(corners)
+    zfar = float(z.max()) * 1.05
+    znear = max(float(z.min()) * 0.95, zfar * 1e-4)
+    return znear, zfar
+
+
+def pyrender_depth(
+    scene: Scene,
+    cameras: Sequence[Camera],
+    *,
+    multisample: bool = False,
+    origin: Optional[Sequence[float]] = None,
+) -> np.ndarray:
+    """Depth images rendered by pyrender (EGL), in scenesample's convention.
+
+    Parameters
+    ----------
+    scene : Scene
+    cameras : sequence of Camera
+        Perspective cameras of one resolution.
+    multisample : bool
+        Keep pyrender's 4x multisampled buffers (its default) instead of sampling pixel centres.
+    origin : 3 floats, optional
+        Render relative to this point (default: the scene's bounds centre), see module notes.
+
+    Returns
+    -------
+    (n, H, W) float32 camera-space z, ``+inf`` where no surface.
+    """
+    pyrender = _import_pyrender()
+    bounds = scene.bounds.astype(np.float64)
+    o = np.asarray(origin if origin is not None else bounds.mean(axis=0), dtype=np.float64)
+    verts = (scene.vertices.astype(np.float64) - o).astype(np.float32)
+    faces = scene.faces.astype(np.int64)
+    both = np.concatenate([faces, faces[:, ::-1]])
+    prim = pyrender.Primitive(positions=verts, indices=both, mode=4)
+    mesh = pyrender.Mesh([prim])
+    w, h = cameras[0].width, cameras[0].height
+    # pyrender creates its framebuffers lazily in render(), so the patch spans the whole use.
+    single = contextlib.nullcontext() if multisample else _single_sample(pyrender)
+    out = np.zeros((len(cameras), h, w), dtype=np.float32)
+    with single:
+        renderer = pyrender.OffscreenRenderer(w, h)
+        try:
+            flags = pyrender.RenderFlags.DEPTH_ONLY | pyrender.RenderFlags.SKIP_CULL_FACES
+            for i, cam in enumerate(cameras):
+                znear, zfar = _clip_planes(cam, bounds)
+                pr_scene = pyrender.Scene()
+                pr_scene.add(mesh)
+                pose = np.array(cam.pose, dtype=np.float64)
+                pose[:3, 3] -= o
+                pc = pyrender.PerspectiveCamera(yfov=cam.yfov, aspectRatio=w / h, znear=znear, zfar=zfar)
+                pr_scene.add(pc, pose=pose)
+                depth = renderer.render(pr_scene, flags=flags)
+                out[i] = np.where(depth > 0, depth, np.inf)
+        finally:
+            renderer.delete()
+    return out
+
+
+class EmbreeReference:
+    """Raw Embree ray casts (single-threaded, ``EmbreeScene.run``) on a scene's triangles."""
+
+    def __init__(self, scene: Scene) -> None:
+        from embreex import rtcore_scene
+        from embreex.mesh_construction import TriangleMesh
+
+        self._scene = rtcore_scene.EmbreeScene()
+        TriangleMesh(self._scene, scene.vertices.astype(np.float32), scene.faces.astype(np.int32))
+
+    def cast(self, origins: np.ndarray, directions: np.ndarray) -> dict[str, np.ndarray]:
+        """Closest hits: ``t`` (+inf on a miss), ``triangle`` (-1), ``barycentric`` (u, v)."""
+        o = np.ascontiguousarray(origins, dtype=np.float32)
+        d = np.ascontiguousarray(directions, dtype=np.float32)
+        r = self._scene.run(o, d, output=1)
+        tri = np.asarray(r["primID"], dtype=np.int32)
+        hit = tri >= 0
+        t = np.where(hit, np.asarray(r["tfar"], dtype=np.float32), np.float32(np.inf))
+        bary = np.stack([r["u"], r["v"]], -1).astype(np.float32)
+        return {"t": t, "triangle": np.where(hit, tri, -1), "barycentric": np.where(hit[:, None], bary, 0)}
