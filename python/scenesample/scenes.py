@@ -93,7 +93,8 @@ def _torus(r_major: float, r_minor: float, nu: int, nv: int) -> tuple[np.ndarray
 def shapes(seed: int = 0, detail: int = 2, offset=(0.0, 0.0, 0.0), scale: float = 1.0) -> Scene:
     """A multi-object scene: a ground grid, boxes, spheres and tori placed at random (seeded).
 
-    ``detail`` sets the tessellation: about 12K triangles at 1, 45K at 2, 180K at 3.
+    ``detail`` sets the tessellation: 4,544 triangles at 1, 18,176 at 2, 49,856 at 3,
+    134,144 at 4 and 409,280 at 5 (seed 0; other seeds differ slightly).
     ``offset`` and ``scale`` move the whole scene (to test precision far from the origin).
     Each object has its own colour, so colour images show which object a pixel sees.
     """

@@ -99,6 +99,7 @@ impl Bvh {
                         t,
                         triangle: self.cwbvh.primitive_indices[id],
                         bary: b,
+                        slot: id,
                     });
                     t
                 }
@@ -106,6 +107,35 @@ impl Bvh {
             }
         });
         best
+    }
+}
+
+/// Recompute the winning triangle's `t` and barycentrics in f64 (Möller–Trumbore on the same
+/// f32 inputs): the watertight f32 test decides *which* triangle is hit; this makes *where*
+/// precise even for tiny triangles far from the ray origin. Keeps the f32 values when the f64
+/// determinant vanishes (a ray in the triangle's plane) or the result leaves `[t_min, t_max]`.
+fn refine(tri: &Tri, origin: Vec3A, dir: Vec3A, (t_min, t_max): (f32, f32), hit: Hit) -> Hit {
+    // `dir` is the caller's own direction, so `t` comes out in the caller's units.
+    let [v0, v1, v2] = tri.v.map(|v| v.as_dvec3());
+    let (o, d) = (origin.as_dvec3(), dir.as_dvec3());
+    let (e1, e2) = (v1 - v0, v2 - v0);
+    let p = d.cross(e2);
+    let det = e1.dot(p);
+    if det == 0.0 || !det.is_finite() {
+        return hit;
+    }
+    let tv = o - v0;
+    let q = tv.cross(e1);
+    let (u, v, t) = (tv.dot(p) / det, d.dot(q) / det, e2.dot(q) / det);
+    let close = (t - hit.t as f64).abs() <= 1e-3 * (hit.t as f64).abs().max(1e-30);
+    let inside = t >= t_min as f64 && t < t_max as f64;
+    if !(close && inside && u.is_finite() && v.is_finite()) {
+        return hit;
+    }
+    Hit {
+        t: t as f32,
+        bary: [u as f32, v as f32],
+        ..hit
     }
 }
 
@@ -135,6 +165,8 @@ pub struct Hit {
     pub t: f32,
     pub triangle: u32,
     pub bary: [f32; 2],
+    /// Index into the BVH's leaf-ordered triangles.
+    slot: usize,
 }
 
 /// Results of `cast_rays`, one entry per ray.
@@ -181,7 +213,14 @@ pub fn cast_rays(
                 // every direction scale; convert t back to the caller's units.
                 let o = Vec3A::from(Vec3::from(origins[i]));
                 if let Some(h) = bvh.closest(o, d / len, t_min * len, t_max * len) {
-                    t[k] = h.t / len;
+                    let h = refine(
+                        &bvh.tris[h.slot],
+                        o,
+                        d,
+                        (t_min, t_max),
+                        Hit { t: h.t / len, ..h },
+                    );
+                    t[k] = h.t;
                     tri[k] = h.triangle as i32;
                     bary[k] = h.bary;
                 }
