@@ -1,10 +1,12 @@
 // Conventional depth images (non-redundant-rendering.txt §3, the "conventional" baseline):
-// rasterise every triangle once per camera and keep, per pixel, the nearest triangle's index and
-// perspective-correct barycentrics. Depth, world position, normal and colour are resolved from
-// these on the CPU in f64 (src/gpu/depth.rs), never read back from the hardware depth buffer.
+// rasterise every triangle once per camera and keep, per pixel, the index of the nearest
+// triangle at the pixel centre. Depth, world position, normal and colour are resolved from that
+// index on the CPU in f64 by intersecting the pixel-centre ray with the triangle
+// (src/discretize/conventional.rs): nothing is read back from the hardware depth buffer, and no
+// attribute is interpolated in f32.
 //
-// Vertex pulling: a non-indexed draw of 3·M vertices; vertex k belongs to triangle k / 3, so the
-// rasteriser's primitive index is the scene's face index.
+// An indexed draw of the scene's faces: the rasteriser's primitive index is the face index, and
+// shared vertices are transformed once (post-transform vertex cache).
 enable primitive_index;
 
 struct View {
@@ -14,37 +16,14 @@ struct View {
 };
 
 @group(0) @binding(0) var<uniform> view: View;
-// Vertex positions relative to the scene centre, xyz packed.
-@group(0) @binding(1) var<storage, read> positions: array<f32>;
-// Face vertex indices, three per triangle.
-@group(0) @binding(2) var<storage, read> faces: array<u32>;
 
-struct VertexOut {
-    @builtin(position) clip: vec4<f32>,
-    // (b1, b2): weights of the triangle's second and third corners.
-    @location(0) bary: vec2<f32>,
-};
-
+// Vertex positions relative to the scene centre.
 @vertex
-fn vs_main(@builtin(vertex_index) k: u32) -> VertexOut {
-    let corner = k % 3u;
-    let i = faces[k];
-    let p = vec3<f32>(positions[3u * i], positions[3u * i + 1u], positions[3u * i + 2u]);
-    var out: VertexOut;
-    out.clip = view.view_proj * vec4<f32>(p, 1.0);
-    out.bary = vec2<f32>(f32(corner == 1u), f32(corner == 2u));
-    return out;
+fn vs_main(@location(0) p: vec3<f32>) -> @builtin(position) vec4<f32> {
+    return view.view_proj * vec4<f32>(p, 1.0);
 }
 
-struct FragmentOut {
-    @location(0) bary: vec2<f32>,
-    @location(1) triangle: i32,
-};
-
 @fragment
-fn fs_main(in: VertexOut, @builtin(primitive_index) prim: u32) -> FragmentOut {
-    var out: FragmentOut;
-    out.bary = in.bary;
-    out.triangle = i32(prim);
-    return out;
+fn fs_main(@builtin(primitive_index) prim: u32) -> @location(0) i32 {
+    return i32(prim);
 }

@@ -13,7 +13,7 @@ Conventions (shared by every function):
 
 from __future__ import annotations
 
-from . import errors, scenes
+from . import errors, references, scenes
 from ._api import cast_rays, device_info, discretize
 from ._core import Camera
 from ._core import __version__ as __version__
@@ -49,5 +49,6 @@ __all__ = [
     "device_info",
     "discretize",
     "errors",
+    "references",
     "scenes",
 ]

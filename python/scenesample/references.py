@@ -29,7 +29,7 @@ import numpy as np
 from ._core import Camera
 from ._scene import Scene
 
-__all__ = ["pyrender_depth", "EmbreeReference"]
+__all__ = ["PyrenderReference", "pyrender_depth", "EmbreeReference"]
 
 
 def _import_pyrender() -> Any:
@@ -67,58 +67,73 @@ def _clip_planes(cam: Camera, bounds: np.ndarray) -> tuple[float, float]:
     return znear, zfar
 
 
-def pyrender_depth(
-    scene: Scene,
-    cameras: Sequence[Camera],
-    *,
-    multisample: bool = False,
-    origin: Optional[Sequence[float]] = None,
-) -> np.ndarray:
-    """Depth images rendered by pyrender (EGL), in scenesample's convention.
+class PyrenderReference:
+    """A pyrender offscreen renderer set up once for a scene, rendering depth for any cameras of
+    one resolution (perspective only).
 
     Parameters
     ----------
     scene : Scene
-    cameras : sequence of Camera
-        Perspective cameras of one resolution.
+    width, height : int
     multisample : bool
         Keep pyrender's 4x multisampled buffers (its default) instead of sampling pixel centres.
     origin : 3 floats, optional
         Render relative to this point (default: the scene's bounds centre), see module notes.
-
-    Returns
-    -------
-    (n, H, W) float32 camera-space z, ``+inf`` where no surface.
     """
-    pyrender = _import_pyrender()
-    bounds = scene.bounds.astype(np.float64)
-    o = np.asarray(origin if origin is not None else bounds.mean(axis=0), dtype=np.float64)
-    verts = (scene.vertices.astype(np.float64) - o).astype(np.float32)
-    faces = scene.faces.astype(np.int64)
-    both = np.concatenate([faces, faces[:, ::-1]])
-    prim = pyrender.Primitive(positions=verts, indices=both, mode=4)
-    mesh = pyrender.Mesh([prim])
-    w, h = cameras[0].width, cameras[0].height
-    # pyrender creates its framebuffers lazily in render(), so the patch spans the whole use.
-    single = contextlib.nullcontext() if multisample else _single_sample(pyrender)
-    out = np.zeros((len(cameras), h, w), dtype=np.float32)
-    with single:
-        renderer = pyrender.OffscreenRenderer(w, h)
-        try:
-            flags = pyrender.RenderFlags.DEPTH_ONLY | pyrender.RenderFlags.SKIP_CULL_FACES
-            for i, cam in enumerate(cameras):
-                znear, zfar = _clip_planes(cam, bounds)
-                pr_scene = pyrender.Scene()
-                pr_scene.add(mesh)
-                pose = np.array(cam.pose, dtype=np.float64)
-                pose[:3, 3] -= o
-                pc = pyrender.PerspectiveCamera(yfov=cam.yfov, aspectRatio=w / h, znear=znear, zfar=zfar)
-                pr_scene.add(pc, pose=pose)
-                depth = renderer.render(pr_scene, flags=flags)
-                out[i] = np.where(depth > 0, depth, np.inf)
-        finally:
-            renderer.delete()
-    return out
+
+    def __init__(self, scene: Scene, width: int, height: int, *, multisample: bool = False, origin: Optional[Sequence[float]] = None) -> None:
+        self._pr = _import_pyrender()
+        self._bounds = scene.bounds.astype(np.float64)
+        self._origin = np.asarray(origin if origin is not None else self._bounds.mean(axis=0), dtype=np.float64)
+        verts = (scene.vertices.astype(np.float64) - self._origin).astype(np.float32)
+        faces = scene.faces.astype(np.int64)
+        prim = self._pr.Primitive(positions=verts, indices=np.concatenate([faces, faces[:, ::-1]]), mode=4)
+        self._scene = self._pr.Scene()
+        self._scene.add(self._pr.Mesh([prim]))
+        self._camera = self._pr.PerspectiveCamera(yfov=1.0, aspectRatio=width / height, znear=0.1, zfar=1.0)
+        self._node = self._scene.add(self._camera, pose=np.eye(4))
+        self._size = (width, height)
+        self._single = None if multisample else _single_sample(self._pr)
+        if self._single is not None:
+            # pyrender creates its framebuffers lazily in render(): the patch stays on until close.
+            self._single.__enter__()
+        self._renderer = self._pr.OffscreenRenderer(width, height)
+
+    def depth(self, cameras: Sequence[Camera]) -> np.ndarray:
+        """(n, H, W) float32 camera-space z, ``+inf`` where no surface."""
+        w, h = self._size
+        out = np.zeros((len(cameras), h, w), dtype=np.float32)
+        flags = self._pr.RenderFlags.DEPTH_ONLY | self._pr.RenderFlags.SKIP_CULL_FACES
+        for i, cam in enumerate(cameras):
+            if (cam.width, cam.height) != (w, h) or cam.yfov is None:
+                raise ValueError("PyrenderReference renders perspective cameras of its own resolution")
+            self._camera.znear, self._camera.zfar = _clip_planes(cam, self._bounds)
+            self._camera.yfov = cam.yfov
+            pose = np.array(cam.pose, dtype=np.float64)
+            pose[:3, 3] -= self._origin
+            self._scene.set_pose(self._node, pose)
+            depth = self._renderer.render(self._scene, flags=flags)
+            out[i] = np.where(depth > 0, depth, np.inf)
+        return out
+
+    def close(self) -> None:
+        self._renderer.delete()
+        if self._single is not None:
+            self._single.__exit__(None, None, None)
+            self._single = None
+
+    def __enter__(self) -> PyrenderReference:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def pyrender_depth(scene: Scene, cameras: Sequence[Camera], *, multisample: bool = False, origin: Optional[Sequence[float]] = None) -> np.ndarray:
+    """Depth images rendered by pyrender (EGL) in scenesample's convention: (n, H, W) float32
+    camera-space z, ``+inf`` where no surface. See :class:`PyrenderReference`."""
+    with PyrenderReference(scene, cameras[0].width, cameras[0].height, multisample=multisample, origin=origin) as r:
+        return r.depth(cameras)
 
 
 class EmbreeReference:

@@ -1,8 +1,10 @@
 //! Conventional depth images (non-redundant-rendering.txt §3: every camera samples every surface
-//! it sees). The GPU rasterises triangle ids and perspective-correct barycentrics
-//! (`gpu::depth`); this module resolves them into depth, world position, geometric normal and
-//! base colour in f64 from the scene's f32 vertices, so precision does not depend on the
-//! hardware depth buffer or on the scene's distance from the world origin.
+//! it sees). The GPU rasterises the id of the nearest triangle at each pixel centre
+//! (`gpu::depth`); this module resolves each id into depth, world position, geometric normal and
+//! base colour by intersecting the pixel-centre ray with that triangle's plane in f64. That is
+//! the exact point perspective-correct interpolation approximates, so precision depends neither
+//! on the hardware depth buffer, nor on f32 interpolation, nor on the scene's distance from the
+//! world origin.
 
 use std::time::Instant;
 
@@ -64,7 +66,7 @@ pub fn discretize_conventional(
     let ctx = gpu::context()?;
     let raw = gpu::depth::rasterize(&ctx, scene, cameras, cull_backfaces)?;
     let start = Instant::now();
-    let mut img = resolve(scene, cameras, &raw.bary, &raw.triangle);
+    let mut img = resolve(scene, cameras, raw.triangle);
     let resolve_seconds = start.elapsed().as_secs_f64();
     img.timings = vec![
         ("upload".into(), raw.upload_seconds),
@@ -80,33 +82,80 @@ pub fn discretize_conventional(
     Ok(img)
 }
 
-/// Resolve triangle ids + barycentrics into the image fields (parallel over rows).
-pub fn resolve(
-    scene: &Scene,
-    cameras: &[Camera],
-    bary: &[[f32; 2]],
-    triangle: &[i32],
-) -> DepthImages {
+/// Per-camera constants of the pixel-centre rays (see `Camera::ray_z1`): the ray through pixel
+/// (x, y) is `origin(x, y) + t·dir(x, y)` with camera-space z of `dir` equal to −1, so `t` is
+/// the depth.
+struct PixelRays {
+    eye: DVec3,
+    /// World-space steps per pixel along x and y, and the ray at pixel (0, 0)'s corner.
+    dx: DVec3,
+    dy: DVec3,
+    corner: DVec3,
+    orthographic: bool,
+    forward: DVec3,
+}
+
+impl PixelRays {
+    fn new(cam: &Camera) -> Self {
+        let (o00, d00) = cam.ray_z1(glam::DVec2::ZERO);
+        let (o10, d10) = cam.ray_z1(glam::DVec2::X);
+        let (o01, d01) = cam.ray_z1(glam::DVec2::Y);
+        let orthographic = matches!(
+            cam.projection,
+            crate::camera::Projection::Orthographic { .. }
+        );
+        if orthographic {
+            Self {
+                eye: o00,
+                dx: o10 - o00,
+                dy: o01 - o00,
+                corner: o00,
+                orthographic,
+                forward: d00,
+            }
+        } else {
+            Self {
+                eye: o00,
+                dx: d10 - d00,
+                dy: d01 - d00,
+                corner: d00,
+                orthographic,
+                forward: cam.forward(),
+            }
+        }
+    }
+
+    fn ray(&self, x: usize, y: usize) -> (DVec3, DVec3) {
+        let p = self.corner + self.dx * (x as f64 + 0.5) + self.dy * (y as f64 + 0.5);
+        if self.orthographic {
+            (p, self.forward)
+        } else {
+            (self.eye, p)
+        }
+    }
+}
+
+/// Resolve triangle ids into the image fields (parallel over rows).
+pub fn resolve(scene: &Scene, cameras: &[Camera], triangle: Vec<i32>) -> DepthImages {
     let (w, h) = (cameras[0].width as usize, cameras[0].height as usize);
-    let npx = w * h;
-    let total = npx * cameras.len();
+    let total = w * h * cameras.len();
     let mut img = DepthImages {
         n: cameras.len(),
         width: w as u32,
         height: h as u32,
-        depth: vec![f32::INFINITY; total],
-        triangle: triangle.to_vec(),
+        // Zeroed allocations are lazily mapped pages: the parallel pass below is the first and
+        // only writer of every pixel (misses included), so nothing is filled twice.
+        depth: vec![0.0; total],
+        triangle,
         normal: vec![[0.0; 3]; total],
-        position: vec![[f32::NAN; 3]; total],
+        position: vec![[0.0; 3]; total],
         color: vec![[0.0; 3]; total],
         cameras: cameras.to_vec(),
         timings: vec![],
     };
-    let normals: Vec<DVec3> = (0..scene.triangle_count())
-        .into_par_iter()
-        .map(|i| scene.face_normal(i))
-        .collect();
+    let rays: Vec<PixelRays> = cameras.iter().map(PixelRays::new).collect();
     let colors = scene.colors();
+    let ids = &img.triangle;
     img.depth
         .par_chunks_mut(w)
         .zip(img.position.par_chunks_mut(w))
@@ -114,26 +163,69 @@ pub fn resolve(
         .zip(img.color.par_chunks_mut(w))
         .enumerate()
         .for_each(|(row, (((depth, pos), nrm), col))| {
-            let cam = &cameras[row / h];
-            let (eye, fwd) = (cam.eye(), cam.forward());
+            let cam = &rays[row / h];
             for x in 0..w {
-                let k = row * w + x;
-                let Ok(t) = usize::try_from(triangle[k]) else {
+                let Ok(t) = usize::try_from(ids[row * w + x]) else {
+                    depth[x] = f32::INFINITY;
+                    pos[x] = [f32::NAN; 3];
                     continue;
                 };
-                let [b1, b2] = bary[k].map(f64::from);
-                let b0 = 1.0 - b1 - b2;
-                let [a, b, c] = scene.triangle(t);
-                let p = a * b0 + b * b1 + c * b2;
-                depth[x] = (p - eye).dot(fwd) as f32;
-                pos[x] = p.as_vec3().to_array();
-                nrm[x] = normals[t].as_vec3().to_array();
-                let f = scene.faces()[t];
-                let [ca, cb, cc] = f.map(|i| Vec3::from(colors[i as usize]));
-                col[x] = (ca * b0 as f32 + cb * b1 as f32 + cc * b2 as f32).to_array();
+                let (o, d) = cam.ray(x, row % h);
+                let s = surface_point(scene, t, o, d, cam.forward);
+                depth[x] = s.depth as f32;
+                pos[x] = s.point.as_vec3().to_array();
+                nrm[x] = s.normal.as_vec3().to_array();
+                let [ca, cb, cc] = scene.faces()[t].map(|i| Vec3::from(colors[i as usize]));
+                let [b0, b1, b2] = s.bary.map(|b| b as f32);
+                col[x] = (ca * b0 + cb * b1 + cc * b2).to_array();
             }
         });
     img
+}
+
+struct SurfacePoint {
+    depth: f64,
+    point: DVec3,
+    /// Unit geometric normal (zero for a degenerate triangle).
+    normal: DVec3,
+    /// Barycentrics of the point, clamped to the triangle (for attribute interpolation).
+    bary: [f64; 3],
+}
+
+/// Where the ray `o + t·d` (camera-space z of `d` is −1, so `t` is depth) meets triangle `t`'s
+/// plane. The rasteriser said the triangle covers this pixel centre, so the ray meets the plane
+/// unless the triangle is edge-on or degenerate; then the triangle's centroid stands in.
+fn surface_point(scene: &Scene, tri: usize, o: DVec3, d: DVec3, forward: DVec3) -> SurfacePoint {
+    let [a, b, c] = scene.triangle(tri);
+    let (e1, e2) = (b - a, c - a);
+    let n = e1.cross(e2);
+    let nn = n.length_squared();
+    let denom = n.dot(d);
+    let t = n.dot(a - o) / denom;
+    if nn == 0.0 || !t.is_finite() || scene.is_degenerate(tri) {
+        let p = (a + b + c) / 3.0;
+        let normal = scene.face_normal(tri);
+        return SurfacePoint {
+            depth: (p - o).dot(forward),
+            point: p,
+            normal,
+            bary: [1.0 / 3.0; 3],
+        };
+    }
+    let p = o + d * t;
+    let r = p - a;
+    let b1 = r.cross(e2).dot(n) / nn;
+    let b2 = e1.cross(r).dot(n) / nn;
+    let clamp = |v: f64| v.clamp(0.0, 1.0);
+    let (b1, b2) = (clamp(b1), clamp(b2));
+    let s = b1 + b2;
+    let (b1, b2) = if s > 1.0 { (b1 / s, b2 / s) } else { (b1, b2) };
+    SurfacePoint {
+        depth: t,
+        point: p,
+        normal: n / nn.sqrt(),
+        bary: [1.0 - b1 - b2, b1, b2],
+    }
 }
 
 #[cfg(test)]

@@ -1,5 +1,5 @@
-//! Raster pass of `shaders/depth.wgsl`: per camera, the nearest triangle id and its
-//! perspective-correct barycentrics at every pixel centre (no multisampling).
+//! Raster pass of `shaders/depth.wgsl`: per camera, the nearest triangle's id at every pixel
+//! centre (no multisampling).
 
 use std::time::Instant;
 
@@ -11,7 +11,6 @@ use crate::error::{Error, Result};
 use crate::scene::Scene;
 
 const SHADER: &str = include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/shaders/depth.wgsl"));
-const BARY_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rg32Float;
 const TRI_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Sint;
 const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 /// Upper bound on readback memory held at once; larger requests are split into chunks.
@@ -37,33 +36,19 @@ impl DepthPipeline {
             label: Some("depth.wgsl"),
             source: wgpu::ShaderSource::Wgsl(SHADER.into()),
         });
-        let storage = |binding| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::VERTEX,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage { read_only: true },
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        };
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("depth.wgsl bindings"),
-            entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: wgpu::ShaderStages::VERTEX,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
-                        // One camera per dynamic offset into a shared uniform buffer.
-                        has_dynamic_offset: true,
-                        min_binding_size: wgpu::BufferSize::new(64),
-                    },
-                    count: None,
+            entries: &[wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::VERTEX,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    // One camera per dynamic offset into a shared uniform buffer.
+                    has_dynamic_offset: true,
+                    min_binding_size: wgpu::BufferSize::new(64),
                 },
-                storage(1),
-                storage(2),
-            ],
+                count: None,
+            }],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("depth.wgsl layout"),
@@ -78,7 +63,11 @@ impl DepthPipeline {
                     module: &module,
                     entry_point: Some("vs_main"),
                     compilation_options: Default::default(),
-                    buffers: &[],
+                    buffers: &[Some(wgpu::VertexBufferLayout {
+                        array_stride: 12,
+                        step_mode: wgpu::VertexStepMode::Vertex,
+                        attributes: &wgpu::vertex_attr_array![0 => Float32x3],
+                    })],
                 },
                 primitive: wgpu::PrimitiveState {
                     topology: wgpu::PrimitiveTopology::TriangleList,
@@ -99,7 +88,7 @@ impl DepthPipeline {
                     module: &module,
                     entry_point: Some("fs_main"),
                     compilation_options: Default::default(),
-                    targets: &[Some(BARY_FORMAT.into()), Some(TRI_FORMAT.into())],
+                    targets: &[Some(TRI_FORMAT.into())],
                 }),
                 multiview_mask: None,
                 cache: None,
@@ -114,7 +103,6 @@ impl DepthPipeline {
 
 /// What the GPU returns for `n` images of `width`×`height`, row-major, image after image.
 pub struct RasterOutput {
-    pub bary: Vec<[f32; 2]>,
     pub triangle: Vec<i32>,
     /// Scene upload time (0 when the buffers were cached).
     pub upload_seconds: f64,
@@ -152,22 +140,19 @@ pub fn rasterize(
     let buffers = SceneBuffers::of(ctx, scene)?;
     let upload_seconds = if cached { 0.0 } else { buffers.upload_seconds };
 
-    let row_bary = align(w as u64 * 8, wgpu::COPY_BYTES_PER_ROW_ALIGNMENT as u64);
     let row_tri = align(w as u64 * 4, wgpu::COPY_BYTES_PER_ROW_ALIGNMENT as u64);
-    let per_image = (row_bary + row_tri) * h as u64;
+    let per_image = row_tri * h as u64;
     let max_buffer = ctx.limits.max_buffer_size;
-    if row_bary * h as u64 > max_buffer {
+    if per_image > max_buffer {
         return Err(Error::GpuLimit(format!(
-            "one {w}x{h} image needs a {} byte readback buffer, more than this device's \
-             limit of {max_buffer} bytes",
-            row_bary * h as u64
+            "one {w}x{h} image needs a {per_image} byte readback buffer, more than this \
+             device's limit of {max_buffer} bytes"
         )));
     }
     let chunk = ((READBACK_BUDGET.min(max_buffer) / per_image).max(1) as usize).min(cameras.len());
 
     let npx = (w * h) as usize;
     let mut out = RasterOutput {
-        bary: vec![[0.0; 2]; npx * cameras.len()],
         triangle: vec![-1; npx * cameras.len()],
         upload_seconds,
         raster_seconds: 0.0,
@@ -186,7 +171,7 @@ pub fn rasterize(
             &targets,
             cams,
             cull_backfaces,
-            (row_bary, row_tri),
+            row_tri,
             &mut out,
             first,
         )?;
@@ -195,9 +180,7 @@ pub fn rasterize(
 }
 
 struct Targets {
-    bary: wgpu::Texture,
     tri: wgpu::Texture,
-    bary_view: wgpu::TextureView,
     tri_view: wgpu::TextureView,
     depth_view: wgpu::TextureView,
     w: u32,
@@ -223,7 +206,6 @@ impl Targets {
             })
         };
         let color = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC;
-        let bary = tex("barycentrics", BARY_FORMAT, color);
         let tri = tex("triangle ids", TRI_FORMAT, color);
         let depth = tex(
             "depth",
@@ -231,10 +213,8 @@ impl Targets {
             wgpu::TextureUsages::RENDER_ATTACHMENT,
         );
         Self {
-            bary_view: bary.create_view(&Default::default()),
             tri_view: tri.create_view(&Default::default()),
             depth_view: depth.create_view(&Default::default()),
-            bary,
             tri,
             w,
             h,
@@ -251,7 +231,7 @@ fn render_chunk(
     targets: &Targets,
     cameras: &[Camera],
     cull_backfaces: bool,
-    (row_bary, row_tri): (u64, u64),
+    row_tri: u64,
     out: &mut RasterOutput,
     first: usize,
 ) -> Result<()> {
@@ -281,28 +261,18 @@ fn render_chunk(
     let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
         label: Some("depth.wgsl bindings"),
         layout: &pipeline.layout,
-        entries: &[
-            wgpu::BindGroupEntry {
-                binding: 0,
-                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                    buffer: &uniform_buf,
-                    offset: 0,
-                    size: wgpu::BufferSize::new(64),
-                }),
-            },
-            wgpu::BindGroupEntry {
-                binding: 1,
-                resource: buffers.positions.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 2,
-                resource: buffers.faces.as_entire_binding(),
-            },
-        ],
+        entries: &[wgpu::BindGroupEntry {
+            binding: 0,
+            resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                buffer: &uniform_buf,
+                offset: 0,
+                size: wgpu::BufferSize::new(64),
+            }),
+        }],
     });
     let readback = device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("readback"),
-        size: (row_bary + row_tri) * h as u64 * n,
+        size: row_tri * h as u64 * n,
         usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     });
@@ -328,36 +298,25 @@ fn render_chunk(
     });
 
     let mut encoder = device.create_command_encoder(&Default::default());
-    let image_bytes = (row_bary + row_tri) * h as u64;
+    let image_bytes = row_tri * h as u64;
     for i in 0..n {
         {
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("depth.wgsl"),
-                color_attachments: &[
-                    Some(wgpu::RenderPassColorAttachment {
-                        view: &targets.bary_view,
-                        depth_slice: None,
-                        resolve_target: None,
-                        ops: wgpu::Operations {
-                            load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                            store: wgpu::StoreOp::Store,
-                        },
-                    }),
-                    Some(wgpu::RenderPassColorAttachment {
-                        view: &targets.tri_view,
-                        depth_slice: None,
-                        resolve_target: None,
-                        ops: wgpu::Operations {
-                            load: wgpu::LoadOp::Clear(wgpu::Color {
-                                r: -1.0,
-                                g: 0.0,
-                                b: 0.0,
-                                a: 0.0,
-                            }),
-                            store: wgpu::StoreOp::Store,
-                        },
-                    }),
-                ],
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: &targets.tri_view,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color {
+                            r: -1.0,
+                            g: 0.0,
+                            b: 0.0,
+                            a: 0.0,
+                        }),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })],
                 depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                     view: &targets.depth_view,
                     depth_ops: Some(wgpu::Operations {
@@ -378,19 +337,12 @@ fn render_chunk(
             });
             pass.set_pipeline(&pipeline.pipelines[cull_backfaces as usize]);
             pass.set_bind_group(0, &bind, &[(i * stride) as u32]);
-            pass.draw(0..3 * buffers.triangle_count, 0..1);
+            pass.set_vertex_buffer(0, buffers.positions.slice(..));
+            pass.set_index_buffer(buffers.faces.slice(..), wgpu::IndexFormat::Uint32);
+            pass.draw_indexed(0..3 * buffers.triangle_count, 0, 0..1);
         }
         let base = i * image_bytes;
-        copy(&mut encoder, &targets.bary, &readback, base, row_bary, w, h);
-        copy(
-            &mut encoder,
-            &targets.tri,
-            &readback,
-            base + row_bary * h as u64,
-            row_tri,
-            w,
-            h,
-        );
+        copy(&mut encoder, &targets.tri, &readback, base, row_tri, w, h);
     }
     if let Some((set, resolve, read)) = &queries {
         encoder.resolve_query_set(set, 0..2 * n as u32, resolve, 0);
@@ -415,11 +367,7 @@ fn render_chunk(
             let img = &data[i * image_bytes as usize..];
             let k = (first + i) * npx;
             for row in 0..h as usize {
-                let b = &img[row * row_bary as usize..][..w as usize * 8];
-                out.bary[k + row * w as usize..][..w as usize]
-                    .copy_from_slice(bytemuck::cast_slice(b));
-                let t = &img[(row_bary * h as u64) as usize + row * row_tri as usize..]
-                    [..w as usize * 4];
+                let t = &img[row * row_tri as usize..][..w as usize * 4];
                 out.triangle[k + row * w as usize..][..w as usize]
                     .copy_from_slice(bytemuck::cast_slice(t));
             }

@@ -162,7 +162,8 @@ pub fn device_info() -> Result<DeviceInfo> {
     })
 }
 
-/// A scene's geometry on the GPU: vertex positions relative to the scene centre and the faces.
+/// A scene's geometry on the GPU: vertex positions relative to the scene centre (vertex buffer)
+/// and the faces (index buffer).
 #[derive(Debug)]
 pub struct SceneBuffers {
     pub positions: wgpu::Buffer,
@@ -196,32 +197,31 @@ impl SceneBuffers {
             .flat_map(|v| [0, 1, 2].map(|k| (v[k] as f64 - c[k]) as f32))
             .collect();
         let faces: Vec<u32> = scene.faces().iter().flatten().copied().collect();
-        let limit = ctx.limits.max_storage_buffer_binding_size as u64;
+        let limit = ctx.limits.max_buffer_size;
         for (name, bytes) in [
             ("vertex positions", rel.len() * 4),
             ("faces", faces.len() * 4),
         ] {
             if bytes as u64 > limit {
                 return Err(Error::GpuLimit(format!(
-                    "the scene's {name} take {bytes} bytes, more than this device's storage \
-                     binding limit of {limit} bytes; split the scene"
+                    "the scene's {name} take {bytes} bytes, more than this device's buffer \
+                     limit of {limit} bytes; split the scene"
                 )));
             }
         }
-        let usage = wgpu::BufferUsages::STORAGE;
         let positions = ctx
             .device
             .create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("scene positions"),
                 contents: bytemuck::cast_slice(&rel),
-                usage,
+                usage: wgpu::BufferUsages::VERTEX,
             });
         let faces_buf = ctx
             .device
             .create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("scene faces"),
                 contents: bytemuck::cast_slice(&faces),
-                usage,
+                usage: wgpu::BufferUsages::INDEX,
             });
         ctx.check_errors()?;
         Ok(Self {

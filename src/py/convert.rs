@@ -185,3 +185,12 @@ pub fn flat_i32(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<i32>> {
         })
         .collect()
 }
+
+/// Owned rows of K values as a numpy array of `shape`, without copying the data.
+pub fn rows_owned<'py, T: numpy::Element, const K: usize>(
+    py: Python<'py>,
+    v: Vec<[T; K]>,
+    shape: &[usize],
+) -> PyResult<Bound<'py, PyAny>> {
+    array(py, v.into_flattened(), shape)
+}

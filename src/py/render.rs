@@ -7,7 +7,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use super::camera::PyCamera;
-use super::convert::{array, flat_i32, rows_array, rows_f32};
+use super::convert::{array, flat_i32, rows_f32, rows_owned};
 use super::errors::{input, IntoPy};
 use super::scene::PyScene;
 use crate::discretize::DepthImages;
@@ -17,9 +17,9 @@ fn images_dict<'py>(py: Python<'py>, img: DepthImages) -> PyResult<Bound<'py, Py
     let d = PyDict::new(py);
     d.set_item("depth", array(py, img.depth, &[n, h, w])?)?;
     d.set_item("triangle", array(py, img.triangle, &[n, h, w])?)?;
-    d.set_item("normal", rows_array(py, &img.normal, &[n, h, w, 3])?)?;
-    d.set_item("position", rows_array(py, &img.position, &[n, h, w, 3])?)?;
-    d.set_item("color", rows_array(py, &img.color, &[n, h, w, 3])?)?;
+    d.set_item("normal", rows_owned(py, img.normal, &[n, h, w, 3])?)?;
+    d.set_item("position", rows_owned(py, img.position, &[n, h, w, 3])?)?;
+    d.set_item("color", rows_owned(py, img.color, &[n, h, w, 3])?)?;
     let cams: Vec<PyCamera> = img.cameras.into_iter().map(PyCamera::from).collect();
     d.set_item("cameras", cams)?;
     let t = PyDict::new(py);
@@ -66,7 +66,7 @@ pub fn cast_rays<'py>(
     let d = PyDict::new(py);
     d.set_item("t", array(py, hits.t, &[n])?)?;
     d.set_item("triangle", array(py, hits.triangle, &[n])?)?;
-    d.set_item("barycentric", rows_array(py, &hits.barycentric, &[n, 2])?)?;
+    d.set_item("barycentric", rows_owned(py, hits.barycentric, &[n, 2])?)?;
     let t = PyDict::new(py);
     t.set_item("bvh_build", hits.bvh_build_seconds)?;
     t.set_item("trace", hits.trace_seconds)?;
