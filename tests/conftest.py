@@ -8,7 +8,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 import scenesample as ss
 
 SHARED = ss.scenes.shared_scene_files()
@@ -30,7 +29,15 @@ def load_quiet(path: Path) -> ss.Scene:
         return ss.Scene.load(path)
 
 
-def orbit_cameras(scene: ss.Scene, n: int, width: int, height: int, yfov: float = 0.9, seed: int = 0, fill: float = 0.8) -> list[ss.Camera]:
+def orbit_cameras(
+    scene: ss.Scene,
+    n: int,
+    width: int,
+    height: int,
+    yfov: float = 0.9,
+    seed: int = 0,
+    fill: float = 0.8,
+) -> list[ss.Camera]:
     """n cameras on a sphere around the scene's bounds, each framing the whole bounding sphere."""
     rng = np.random.default_rng(seed)
     lo, hi = scene.bounds.astype(np.float64)
@@ -42,7 +49,11 @@ def orbit_cameras(scene: ss.Scene, n: int, width: int, height: int, yfov: float 
         d = rng.normal(size=3)
         d[1] = abs(d[1]) * 0.7 + 0.2
         d /= np.linalg.norm(d)
-        cams.append(ss.Camera.look_at(centre + d * dist, centre, (0, 1, 0), yfov=yfov, width=width, height=height))
+        cams.append(
+            ss.Camera.look_at(
+                centre + d * dist, centre, (0, 1, 0), yfov=yfov, width=width, height=height
+            )
+        )
     return cams
 
 
@@ -50,6 +61,8 @@ def silhouette(mask: np.ndarray) -> np.ndarray:
     """Pixels whose 3x3 neighbourhood holds both covered and empty pixels (per image)."""
     pad = np.pad(mask, ((0, 0), (1, 1), (1, 1)), mode="edge")
     h, w = mask.shape[1:]
-    shifts = [pad[:, 1 + dy : 1 + dy + h, 1 + dx : 1 + dx + w] for dy in (-1, 0, 1) for dx in (-1, 0, 1)]
+    shifts = [
+        pad[:, 1 + dy : 1 + dy + h, 1 + dx : 1 + dx + w] for dy in (-1, 0, 1) for dx in (-1, 0, 1)
+    ]
     stack = np.stack(shifts)
     return stack.any(0) & ~stack.all(0)

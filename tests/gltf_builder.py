@@ -14,7 +14,9 @@ import numpy as np
 TRIANGLES, POINTS, LINES, STRIP, FAN = 4, 0, 1, 5, 6
 
 
-def document(positions: np.ndarray, indices: Optional[np.ndarray] = None, mode: int = TRIANGLES) -> dict[str, Any]:
+def document(
+    positions: np.ndarray, indices: Optional[np.ndarray] = None, mode: int = TRIANGLES
+) -> dict[str, Any]:
     """One mesh, one node, one scene; accessor 0 is POSITION, accessor 1 the indices."""
     pos = np.ascontiguousarray(positions, dtype=np.float32)
     blob = pos.tobytes()
@@ -26,7 +28,9 @@ def document(positions: np.ndarray, indices: Optional[np.ndarray] = None, mode: 
     if indices is not None:
         idx = np.ascontiguousarray(indices, dtype=np.uint32).ravel().tobytes()
         views.append({"buffer": 0, "byteOffset": len(blob), "byteLength": len(idx)})
-        accessors.append({"bufferView": 1, "componentType": 5125, "count": len(idx) // 4, "type": "SCALAR"})
+        accessors.append(
+            {"bufferView": 1, "componentType": 5125, "count": len(idx) // 4, "type": "SCALAR"}
+        )
         prim["indices"] = 1
         blob += idx
     return {
@@ -50,7 +54,14 @@ def add_accessor(doc: dict[str, Any], data: np.ndarray, type_: str) -> int:
     blob = np.ascontiguousarray(data, dtype=np.float32).tobytes()
     doc["buffers"].append({"byteLength": len(blob), "uri": data_uri(blob)})
     doc["bufferViews"].append({"buffer": len(doc["buffers"]) - 1, "byteLength": len(blob)})
-    doc["accessors"].append({"bufferView": len(doc["bufferViews"]) - 1, "componentType": 5126, "count": len(data), "type": type_})
+    doc["accessors"].append(
+        {
+            "bufferView": len(doc["bufferViews"]) - 1,
+            "componentType": 5126,
+            "count": len(data),
+            "type": type_,
+        }
+    )
     return len(doc["accessors"]) - 1
 
 
@@ -67,7 +78,12 @@ def to_glb(doc: dict[str, Any]) -> bytes:
     js = json.dumps(doc).encode()
     js += b" " * (-len(js) % 4)
     binary += b"\0" * (-len(binary) % 4)
-    chunks = struct.pack("<I4s", len(js), b"JSON") + js + struct.pack("<I4s", len(binary), b"BIN\0") + binary
+    chunks = (
+        struct.pack("<I4s", len(js), b"JSON")
+        + js
+        + struct.pack("<I4s", len(binary), b"BIN\0")
+        + binary
+    )
     return struct.pack("<4sII", b"glTF", 2, 12 + len(chunks)) + chunks
 
 

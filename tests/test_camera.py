@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 import scenesample as ss
 
 
@@ -50,7 +49,9 @@ def test_pose_is_row_major_camera_to_world() -> None:
 
 
 def test_orthographic_projection() -> None:
-    cam = ss.Camera.orthographic(np.eye(4), xmag=2.0, ymag=1.0, width=40, height=20, znear=0.1, zfar=10)
+    cam = ss.Camera.orthographic(
+        np.eye(4), xmag=2.0, ymag=1.0, width=40, height=20, znear=0.1, zfar=10
+    )
     px, depth = cam.project(np.array([[2.0, 1.0, -3.0]]))
     np.testing.assert_allclose(px, [[40.0, 0.0]])
     assert depth[0] == pytest.approx(3.0)
@@ -62,7 +63,11 @@ def test_orthographic_projection() -> None:
 def test_cube_faces_in_gl_order_cover_every_direction() -> None:
     faces = ss.Camera.cube([1.0, 2.0, 3.0], 16)
     assert len(faces) == 6
-    np.testing.assert_allclose([f.forward for f in faces], [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], atol=1e-12)
+    np.testing.assert_allclose(
+        [f.forward for f in faces],
+        [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]],
+        atol=1e-12,
+    )
     dirs = np.random.default_rng(1).normal(size=(2000, 3))
     inside = np.zeros(len(dirs), dtype=int)
     for f in faces:
@@ -84,12 +89,23 @@ def test_with_resolution_and_repr() -> None:
     "make, match",
     [
         (lambda: ss.Camera.look_at([0, 0, 1], [0, 0, 1], yfov=1, width=4, height=4), "same point"),
-        (lambda: ss.Camera.look_at([0, 1, 0], [0, 0, 0], [0, 1, 0], yfov=1, width=4, height=4), "parallel"),
+        (
+            lambda: ss.Camera.look_at([0, 1, 0], [0, 0, 0], [0, 1, 0], yfov=1, width=4, height=4),
+            "parallel",
+        ),
         (lambda: ss.Camera.look_at([0, 0, 1], [0, 0, 0], yfov=4.0, width=4, height=4), "yfov"),
         (lambda: ss.Camera.look_at([0, 0, 1], [0, 0, 0], yfov=1, width=0, height=4), "resolution"),
         (lambda: ss.Camera.look_at([np.nan, 0, 1], [0, 0, 0], yfov=1, width=4, height=4), "finite"),
-        (lambda: ss.Camera.look_at([0, 0, 1], [0, 0, 0], yfov=1, width=4, height=4, znear=1, zfar=0.5), "zfar"),
-        (lambda: ss.Camera.from_pose(np.diag([2.0, 2, 2, 1]), yfov=1, width=4, height=4), "orthonormal"),
+        (
+            lambda: ss.Camera.look_at(
+                [0, 0, 1], [0, 0, 0], yfov=1, width=4, height=4, znear=1, zfar=0.5
+            ),
+            "zfar",
+        ),
+        (
+            lambda: ss.Camera.from_pose(np.diag([2.0, 2, 2, 1]), yfov=1, width=4, height=4),
+            "orthonormal",
+        ),
         (lambda: ss.Camera.from_pose(np.eye(3), yfov=1, width=4, height=4), r"\(4, 4\)|\(n, 4\)"),
         (lambda: ss.Camera.orthographic(np.eye(4), xmag=0, ymag=1, width=4, height=4), "xmag"),
         (lambda: ss.Camera.look_at("abc", [0, 0, 0], yfov=1, width=4, height=4), "eye"),

@@ -8,9 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import SHARED, load_quiet, orbit_cameras, silhouette
-
 import scenesample as ss
+from conftest import SHARED, load_quiet, orbit_cameras, silhouette
 from scenesample.references import pyrender_depth
 
 RTOL = 1e-3  # relative depth agreement required on >= 99.5% of pixels covered by both
@@ -29,7 +28,9 @@ def assert_matches_pyrender(scene: ss.Scene, cams: list, label: str) -> dict:
     differ = mine != theirs
     # Coverage may differ only on silhouettes (of either image: thin features can vanish in one).
     outside = differ & ~(silhouette(mine) | silhouette(theirs))
-    assert outside.sum() == 0, f"{label}: {outside.sum()} coverage differences away from silhouettes"
+    assert outside.sum() == 0, (
+        f"{label}: {outside.sum()} coverage differences away from silhouettes"
+    )
     return {"agree": agree, "coverage_diff": int(differ.sum())}
 
 
@@ -79,7 +80,9 @@ def test_triangle_ids_match_embree_through_trimesh(gpu) -> None:
     embree = RayMeshIntersector(mesh)
     for i, cam in enumerate(cams):
         origins, dirs = cam.pixel_rays()
-        ref = embree.intersects_first(origins.reshape(-1, 3), dirs.reshape(-1, 3)).reshape(img.height, img.width)
+        ref = embree.intersects_first(origins.reshape(-1, 3), dirs.reshape(-1, 3)).reshape(
+            img.height, img.width
+        )
         covered = img.triangle[i] >= 0
         same = img.triangle[i] == ref
         assert same[covered].mean() >= 0.995
@@ -119,7 +122,9 @@ def test_fields_are_consistent_with_the_bvh_and_the_camera(gpu) -> None:
     np.testing.assert_allclose(img.depth[0][same], t[same], rtol=1e-5)
     # Position is the unprojected depth; normal is the unit face normal; colour the vertex colour.
     ys, xs = np.nonzero(m)
-    world = cam.unproject(np.stack([xs + 0.5, ys + 0.5], -1), img.depth[0][ys, xs].astype(np.float64))
+    world = cam.unproject(
+        np.stack([xs + 0.5, ys + 0.5], -1), img.depth[0][ys, xs].astype(np.float64)
+    )
     np.testing.assert_allclose(img.position[0][ys, xs], world, atol=1e-4)
     tri = img.triangle[0][ys, xs]
     v = s.vertices[s.faces[tri].astype(int)].astype(np.float64)
@@ -134,7 +139,9 @@ def test_far_from_origin_with_near_far_ratio_1e6(gpu) -> None:
     offset = np.array([1e5, 1e5, -1e5])
     s = ss.scenes.shapes(seed=5, offset=offset)
     base = orbit_cameras(s, 1, 160, 120, seed=5)[0]
-    cam = ss.Camera.from_pose(base.pose, yfov=base.yfov, width=160, height=120, znear=1e-3, zfar=1e3)
+    cam = ss.Camera.from_pose(
+        base.pose, yfov=base.yfov, width=160, height=120, znear=1e-3, zfar=1e3
+    )
     img = ss.discretize(s, cam)
     origins, dirs = cam.pixel_rays(normalize=False)
     hits = ss.cast_rays(s, origins.reshape(-1, 3), dirs.reshape(-1, 3))
@@ -168,14 +175,18 @@ def test_backface_culling_is_off_by_default(gpu) -> None:
 def test_degenerate_triangles_never_produce_nan(gpu) -> None:
     v = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0], [1, 1, 0]], dtype=np.float32)
     s = ss.Scene.from_arrays(v, [[0, 1, 2], [0, 1, 3], [1, 4, 3], [3, 3, 3]])
-    img = ss.discretize(s, ss.Camera.look_at([0.5, 0.5, 2], [0.5, 0.5, 0], yfov=1.0, width=64, height=64))
+    img = ss.discretize(
+        s, ss.Camera.look_at([0.5, 0.5, 2], [0.5, 0.5, 0], yfov=1.0, width=64, height=64)
+    )
     m = img.mask
     assert m.any() and np.isfinite(img.depth[m]).all() and np.isfinite(img.normal[m]).all()
     assert np.isfinite(img.position[m]).all() and not np.isin(img.triangle[m], [0, 3]).any()
 
 
 def test_orthographic_camera(gpu) -> None:
-    s = ss.Scene.from_arrays([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], [[0, 1, 2], [0, 2, 3]])
+    s = ss.Scene.from_arrays(
+        [[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], [[0, 1, 2], [0, 2, 3]]
+    )
     pose = np.eye(4)
     pose[2, 3] = 5
     cam = ss.Camera.orthographic(pose, xmag=2, ymag=2, width=40, height=40, znear=0.1, zfar=10)
@@ -192,7 +203,15 @@ def test_timings_are_reported(gpu) -> None:
     assert img.timings["total"] > 0
     if gpu["timestamps"]:
         assert img.timings["raster_gpu"] > 0
-    assert set(img.as_dict()) == {"depth", "triangle", "normal", "position", "color", "cameras", "timings"}
+    assert set(img.as_dict()) == {
+        "depth",
+        "triangle",
+        "normal",
+        "position",
+        "color",
+        "cameras",
+        "timings",
+    }
 
 
 def test_exr_round_trip_is_bit_exact(gpu, tmp_path) -> None:

@@ -7,9 +7,8 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import pytest
-from conftest import SHARED, load_quiet, orbit_cameras
-
 import scenesample as ss
+from conftest import SHARED, load_quiet, orbit_cameras
 from scenesample.references import EmbreeReference
 
 
@@ -78,7 +77,9 @@ def test_watertight_on_a_million_rays_at_vertices_and_edges() -> None:
     s = ss.scenes.icosphere(5)
     v = s.vertices.astype(np.float64)
     f = s.faces.astype(np.int64)
-    edges = np.unique(np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1), axis=0)
+    edges = np.unique(
+        np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1), axis=0
+    )
     targets = np.concatenate([v, (v[edges[:, 0]] + v[edges[:, 1]]) / 2]).astype(np.float32)
     per_target = int(np.ceil(1_000_000 / len(targets)))
     rng = np.random.default_rng(0)

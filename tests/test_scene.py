@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 import scenesample as ss
 
 QUAD_V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=np.float64)
@@ -25,7 +24,9 @@ def test_properties_dtypes_and_shapes() -> None:
     assert "2 triangles" in repr(s)
 
 
-@pytest.mark.parametrize("dtype", [np.int8, np.uint8, np.int16, np.uint16, np.int32, np.uint32, np.int64, np.uint64])
+@pytest.mark.parametrize(
+    "dtype", [np.int8, np.uint8, np.int16, np.uint16, np.int32, np.uint32, np.int64, np.uint64]
+)
 def test_faces_accept_any_integer_dtype_and_keep_order(dtype) -> None:
     f = np.array([[0, 2, 3], [0, 1, 2], [3, 2, 1]], dtype=dtype)
     s = ss.Scene.from_arrays(QUAD_V.astype(np.float32), f)
@@ -74,18 +75,66 @@ def test_load_obj_through_trimesh(tmp_path) -> None:
 @pytest.mark.parametrize(
     "vertices, faces, kwargs, exc, match",
     [
-        (np.array([[0, 0, 0], [1, np.nan, 0], [0, 1, 0]]), [[0, 1, 2]], {}, ss.SceneError, "vertex 1"),
-        (np.array([[0, 0, 0], [1, 0, np.inf], [0, 1, 0]]), [[0, 1, 2]], {}, ss.SceneError, "vertex 1"),
+        (
+            np.array([[0, 0, 0], [1, np.nan, 0], [0, 1, 0]]),
+            [[0, 1, 2]],
+            {},
+            ss.SceneError,
+            "vertex 1",
+        ),
+        (
+            np.array([[0, 0, 0], [1, 0, np.inf], [0, 1, 0]]),
+            [[0, 1, 2]],
+            {},
+            ss.SceneError,
+            "vertex 1",
+        ),
         (QUAD_V, [[0, 1, 4]], {}, ss.SceneError, r"faces\[0\].*vertex 4"),
         (QUAD_V, [[0, 1, 2], [0, -1, 2]], {}, ss.SceneError, r"faces\[1\].*vertex -1"),
-        (QUAD_V[:, :2], QUAD_F, {}, ss.InputError, r"vertices must have shape \(n, 3\), got \(4, 2\)"),
-        (QUAD_V, [[0, 1, 2, 3]], {}, ss.InputError, r"faces must have shape \(m, 3\), got \(1, 4\)"),
-        (QUAD_V, QUAD_F.astype(float), {}, ss.InputError, "faces must be an array of integers, got dtype float64"),
-        (np.array([["a", "b", "c"]] * 3), [[0, 1, 2]], {}, ss.InputError, "vertices must be an array of real numbers"),
+        (
+            QUAD_V[:, :2],
+            QUAD_F,
+            {},
+            ss.InputError,
+            r"vertices must have shape \(n, 3\), got \(4, 2\)",
+        ),
+        (
+            QUAD_V,
+            [[0, 1, 2, 3]],
+            {},
+            ss.InputError,
+            r"faces must have shape \(m, 3\), got \(1, 4\)",
+        ),
+        (
+            QUAD_V,
+            QUAD_F.astype(float),
+            {},
+            ss.InputError,
+            "faces must be an array of integers, got dtype float64",
+        ),
+        (
+            np.array([["a", "b", "c"]] * 3),
+            [[0, 1, 2]],
+            {},
+            ss.InputError,
+            "vertices must be an array of real numbers",
+        ),
         (np.zeros((0, 3)), np.zeros((0, 3), dtype=int), {}, ss.SceneError, "no triangles"),
-        (QUAD_V, QUAD_F, {"normals": np.zeros((3, 3))}, ss.SceneError, "normals has 3 rows but there are 4 vertices"),
+        (
+            QUAD_V,
+            QUAD_F,
+            {"normals": np.zeros((3, 3))},
+            ss.SceneError,
+            "normals has 3 rows but there are 4 vertices",
+        ),
         (QUAD_V, QUAD_F, {"colors": np.full((4, 3), np.nan)}, ss.SceneError, "color 0"),
-        (QUAD_V, QUAD_F, {"colors": np.ones((4, 4))}, ss.InputError, r"colors must have shape \(n, 3\)"),
+        (
+            QUAD_V,
+            QUAD_F,
+            {"colors": np.ones((4, 4))},
+            ss.InputError,
+            r"colors must have shape \(n, 3\)",
+        ),
     ],
 )
 def test_bad_arrays_raise_typed_errors(vertices, faces, kwargs, exc, match) -> None:

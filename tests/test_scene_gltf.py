@@ -9,10 +9,21 @@ import warnings
 
 import numpy as np
 import pytest
-from conftest import SHARED, load_quiet
-from gltf_builder import FAN, LINES, POINTS, QUAD, STRIP, TRI, add_accessor, data_uri, document, to_glb, write
-
 import scenesample as ss
+from conftest import SHARED, load_quiet
+from gltf_builder import (
+    FAN,
+    LINES,
+    POINTS,
+    QUAD,
+    STRIP,
+    TRI,
+    add_accessor,
+    data_uri,
+    document,
+    to_glb,
+    write,
+)
 
 
 def test_indexed_and_non_indexed_triangles(tmp_path) -> None:
@@ -35,7 +46,10 @@ def test_strips_and_fans_are_converted_with_consistent_winding(tmp_path) -> None
 
 def test_points_and_lines_are_skipped_with_a_warning(tmp_path) -> None:
     doc = document(QUAD, [[0, 1, 2], [0, 2, 3]])
-    doc["meshes"][0]["primitives"] += [{"attributes": {"POSITION": 0}, "mode": POINTS}, {"attributes": {"POSITION": 0}, "mode": LINES}]
+    doc["meshes"][0]["primitives"] += [
+        {"attributes": {"POSITION": 0}, "mode": POINTS},
+        {"attributes": {"POSITION": 0}, "mode": LINES},
+    ]
     with pytest.warns(ss.SceneWarning, match="(Points|Lines) primitives are not triangles") as rec:
         s = ss.Scene.load(write(doc, tmp_path / "p.gltf"))
     assert sorted(str(w.message).split(": ")[2].split()[0] for w in rec) == ["Lines", "Points"]
@@ -83,7 +97,12 @@ def test_materials_with_texture_average(tmp_path) -> None:
     doc["materials"] = [
         {
             "name": "tex",
-            "pbrMetallicRoughness": {"baseColorFactor": [1, 0.5, 1, 1], "baseColorTexture": {"index": 0}, "metallicFactor": 0.25, "roughnessFactor": 0.75},
+            "pbrMetallicRoughness": {
+                "baseColorFactor": [1, 0.5, 1, 1],
+                "baseColorTexture": {"index": 0},
+                "metallicFactor": 0.25,
+                "roughnessFactor": 0.75,
+            },
             "emissiveFactor": [1, 0.5, 0],
             "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": 4.0}},
         }
@@ -104,7 +123,14 @@ def test_missing_image_is_tolerated_with_a_warning(tmp_path) -> None:
     doc = document(TRI)
     doc["images"] = [{"uri": "nowhere.png"}]
     doc["textures"] = [{"source": 0}]
-    doc["materials"] = [{"pbrMetallicRoughness": {"baseColorFactor": [0.2, 0.4, 0.6, 1], "baseColorTexture": {"index": 0}}}]
+    doc["materials"] = [
+        {
+            "pbrMetallicRoughness": {
+                "baseColorFactor": [0.2, 0.4, 0.6, 1],
+                "baseColorTexture": {"index": 0},
+            }
+        }
+    ]
     doc["meshes"][0]["primitives"][0]["material"] = 0
     with pytest.warns(ss.SceneWarning, match="nowhere.png"):
         s = ss.Scene.load(write(doc, tmp_path / "mi.gltf"))
@@ -115,12 +141,26 @@ def test_missing_image_is_tolerated_with_a_warning(tmp_path) -> None:
 def test_lights_and_cameras_in_world_space(tmp_path) -> None:
     doc = document(TRI)
     doc["extensionsUsed"] = ["KHR_lights_punctual"]
-    doc["extensions"] = {"KHR_lights_punctual": {"lights": [{"type": "point", "intensity": 3}, {"type": "spot", "spot": {"outerConeAngle": 0.5}}]}}
+    doc["extensions"] = {
+        "KHR_lights_punctual": {
+            "lights": [
+                {"type": "point", "intensity": 3},
+                {"type": "spot", "spot": {"outerConeAngle": 0.5}},
+            ]
+        }
+    }
     down = [-np.sin(np.pi / 4), 0, 0, np.cos(np.pi / 4)]  # -90 degrees about x: -Z becomes -Y
-    doc["cameras"] = [{"type": "perspective", "perspective": {"yfov": 0.7, "aspectRatio": 1.5, "znear": 0.1}}, {"type": "orthographic", "orthographic": {"xmag": 2, "ymag": 1, "znear": 0.1, "zfar": 50}}]
+    doc["cameras"] = [
+        {"type": "perspective", "perspective": {"yfov": 0.7, "aspectRatio": 1.5, "znear": 0.1}},
+        {"type": "orthographic", "orthographic": {"xmag": 2, "ymag": 1, "znear": 0.1, "zfar": 50}},
+    ]
     doc["nodes"] += [
         {"translation": [1, 2, 3], "extensions": {"KHR_lights_punctual": {"light": 0}}},
-        {"translation": [0, 5, 0], "rotation": down, "extensions": {"KHR_lights_punctual": {"light": 1}}},
+        {
+            "translation": [0, 5, 0],
+            "rotation": down,
+            "extensions": {"KHR_lights_punctual": {"light": 1}},
+        },
         {"translation": [0, 0, 9], "camera": 0, "scale": [3, 3, 3]},
         {"camera": 1},
     ]
@@ -131,9 +171,19 @@ def test_lights_and_cameras_in_world_space(tmp_path) -> None:
     assert spot["type"] == "spot" and spot["outer_cone_angle"] == 0.5
     np.testing.assert_allclose(spot["direction"], [0, -1, 0], atol=1e-6)  # f32 quaternion
     persp, ortho = s.cameras
-    assert (persp.width, persp.height, persp.yfov, persp.znear, persp.zfar) == (768, 512, pytest.approx(0.7), pytest.approx(0.1), None)
+    assert (persp.width, persp.height, persp.yfov, persp.znear, persp.zfar) == (
+        768,
+        512,
+        pytest.approx(0.7),
+        pytest.approx(0.1),
+        None,
+    )
     np.testing.assert_allclose(persp.pose[:3, :3], np.eye(3), atol=1e-12)  # scale removed
-    assert ortho.projection == "orthographic" and (ortho.xmag, ortho.ymag, ortho.width) == (2, 1, 1024)
+    assert ortho.projection == "orthographic" and (ortho.xmag, ortho.ymag, ortho.width) == (
+        2,
+        1,
+        1024,
+    )
 
 
 def test_unknown_extension_warns_and_required_codec_is_an_error(tmp_path) -> None:
@@ -167,7 +217,11 @@ BAD_DOCUMENTS = [
     (("accessors", 0, "type"), "VEC2", r"accessor 0 has type Vec2"),
     (("accessors", 0, "count"), 40, r"accessor 0 reads 480 bytes but buffer view 0 has 48"),
     (("bufferViews", 0, "byteLength"), 4000, r"buffer view 0 .* lies outside buffer 0"),
-    (("meshes", 0, "primitives", 0, "attributes", "POSITION"), 99, r"attribute .*Positions.* refers to accessor 99, but the file has 2"),
+    (
+        ("meshes", 0, "primitives", 0, "attributes", "POSITION"),
+        99,
+        r"attribute .*Positions.* refers to accessor 99, but the file has 2",
+    ),
     (("nodes",), [{"mesh": 0, "children": [1]}, {"children": [0]}], r"node cycle|own ancestor"),
     (("meshes", 0, "primitives", 0, "attributes"), {}, r"POSITION"),
 ]
@@ -182,11 +236,15 @@ def test_malformed_documents_raise_scene_error(tmp_path, keys, value, match) -> 
 
 
 def test_out_of_range_index_and_nan_vertex(tmp_path) -> None:
-    with pytest.raises(ss.SceneError, match=r"mesh 0 primitive 0: index accessor 1 has index 7 at position 5"):
+    with pytest.raises(
+        ss.SceneError, match=r"mesh 0 primitive 0: index accessor 1 has index 7 at position 5"
+    ):
         ss.Scene.load(write(document(QUAD, [[0, 1, 2], [0, 2, 7]]), tmp_path / "i.gltf"))
     bad = QUAD.copy()
     bad[2, 1] = np.nan
-    with pytest.raises(ss.SceneError, match=r"POSITION accessor 0 has a non-finite vertex at index 2"):
+    with pytest.raises(
+        ss.SceneError, match=r"POSITION accessor 0 has a non-finite vertex at index 2"
+    ):
         ss.Scene.load(write(document(bad, [[0, 1, 2]]), tmp_path / "n.gltf"))
 
 

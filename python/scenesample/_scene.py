@@ -123,7 +123,9 @@ class Scene:
                 if isinstance(mesh, trimesh.Trimesh):
                     meshes.append((mesh, transform))
         else:
-            raise TypeError(f"from_trimesh takes a trimesh.Trimesh or trimesh.Scene, got {type(obj)}")
+            raise TypeError(
+                f"from_trimesh takes a trimesh.Trimesh or trimesh.Scene, got {type(obj)}"
+            )
         if not meshes:
             return cls.from_arrays(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
         verts, faces, colors = [], [], []
@@ -139,7 +141,9 @@ class Scene:
             faces.append(f + offset)
             colors.append(_vertex_colors(mesh))
             offset += len(v)
-        return cls.from_arrays(np.concatenate(verts), np.concatenate(faces), colors=np.concatenate(colors))
+        return cls.from_arrays(
+            np.concatenate(verts), np.concatenate(faces), colors=np.concatenate(colors)
+        )
 
     # -- data ----------------------------------------------------------------------------------
 

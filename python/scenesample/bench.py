@@ -82,7 +82,9 @@ def bench_rays(scene: ss.Scene, size: int, repeats: int) -> dict[str, float]:
     # (built before timing); the time includes sending rays to the workers.
     cores = os.cpu_count() or 1
     chunks = list(zip(np.array_split(o, cores), np.array_split(d, cores)))
-    with ProcessPoolExecutor(cores, initializer=_embree_init, initargs=(scene.vertices, scene.faces.astype(np.int32))) as pool:
+    with ProcessPoolExecutor(
+        cores, initializer=_embree_init, initargs=(scene.vertices, scene.faces.astype(np.int32))
+    ) as pool:
         list(pool.map(_embree_run, chunks))
         embree_all = best_of(lambda: list(pool.map(_embree_run, chunks)), repeats)
     return {
@@ -107,36 +109,47 @@ def bench_depth(scene: ss.Scene, size: int, images: int, repeats: int) -> dict[s
     return out
 
 
+def _verdict(ratio: float, target: float) -> str:
+    return f"{ratio:.2f}x (target >= {target}x): {'met' if ratio >= target else 'NOT met'}"
+
+
 def report(rays: Optional[dict], depth: Optional[dict], device: str) -> str:
     lines = [f"device: {device}", ""]
     if rays:
-        per_core = rays["ours_rays_per_s"] / rays["cores"] / rays["embree_1thread_rays_per_s"]
+        ours = rays["ours_rays_per_s"]
+        one, all_cores = rays["embree_1thread_rays_per_s"], rays["embree_all_cores_rays_per_s"]
+        per_core = ours / rays["cores"] / one
         lines += [
-            f"cast_rays: {rays['rays']:,} primary rays, {rays['triangles']:,} triangles, {rays['cores']} cores",
+            f"cast_rays: {rays['rays']:,} primary rays, {rays['triangles']:,} triangles, "
+            f"{rays['cores']} cores",
             "| method | Mrays/s | ratio (ours / peer) |",
             "|---|---:|---:|",
-            f"| scenesample cast_rays (all cores) | {rays['ours_rays_per_s'] / 1e6:.2f} | |",
-            f"| Embree, 1 thread | {rays['embree_1thread_rays_per_s'] / 1e6:.2f} | {rays['ours_rays_per_s'] / rays['embree_1thread_rays_per_s']:.2f}x |",
-            f"| Embree, all cores (processes) | {rays['embree_all_cores_rays_per_s'] / 1e6:.2f} | {rays['ours_rays_per_s'] / rays['embree_all_cores_rays_per_s']:.2f}x |",
-            f"per core vs Embree 1 thread: {per_core:.2f}x (target >= {RAY_TARGET_PER_CORE}x): {'met' if per_core >= RAY_TARGET_PER_CORE else 'NOT met'}",
+            f"| scenesample cast_rays (all cores) | {ours / 1e6:.2f} | |",
+            f"| Embree, 1 thread | {one / 1e6:.2f} | {ours / one:.2f}x |",
+            f"| Embree, all cores (processes) | {all_cores / 1e6:.2f} | {ours / all_cores:.2f}x |",
+            f"per core vs Embree 1 thread: {_verdict(per_core, RAY_TARGET_PER_CORE)}",
             "",
         ]
     if depth:
-        ratio = depth["ours_images_per_s"] / depth["pyrender_images_per_s"]
+        ours = depth["ours_images_per_s"]
+        msaa, single = depth["pyrender_images_per_s"], depth["pyrender_single_sample_images_per_s"]
         lines += [
-            f"depth images: {depth['images']} views at {depth['size']}x{depth['size']}, read back to numpy",
+            f"depth images: {depth['images']} views at {depth['size']}x{depth['size']}, "
+            "read back to numpy",
             "| method | images/s | ratio (ours / peer) |",
             "|---|---:|---:|",
-            f"| scenesample discretize (conventional) | {depth['ours_images_per_s']:.1f} | |",
-            f"| pyrender DEPTH_ONLY (default 4x MSAA) | {depth['pyrender_images_per_s']:.1f} | {ratio:.2f}x |",
-            f"| pyrender DEPTH_ONLY (single sample) | {depth['pyrender_single_sample_images_per_s']:.1f} | {depth['ours_images_per_s'] / depth['pyrender_single_sample_images_per_s']:.2f}x |",
-            f"vs pyrender default: {ratio:.2f}x (target >= {DEPTH_TARGET}x): {'met' if ratio >= DEPTH_TARGET else 'NOT met'}",
+            f"| scenesample discretize (conventional) | {ours:.1f} | |",
+            f"| pyrender DEPTH_ONLY (default 4x MSAA) | {msaa:.1f} | {ours / msaa:.2f}x |",
+            f"| pyrender DEPTH_ONLY (single sample) | {single:.1f} | {ours / single:.2f}x |",
+            f"vs pyrender default: {_verdict(ours / msaa, DEPTH_TARGET)}",
         ]
     return "\n".join(lines)
 
 
 def main(argv: Optional[list[str]] = None) -> None:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     p.add_argument("--quick", action="store_true", help="small scene and images (smoke test)")
     p.add_argument("--only", choices=["rays", "depth"], help="run one benchmark")
     p.add_argument("--repeats", type=int, default=5)

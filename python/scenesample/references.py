@@ -35,7 +35,7 @@ __all__ = ["PyrenderReference", "pyrender_depth", "EmbreeReference"]
 def _import_pyrender() -> Any:
     os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
     if not hasattr(np, "infty"):
-        np.infty = np.inf  # type: ignore[attr-defined]
+        np.inf = np.inf  # type: ignore[attr-defined]
     import pyrender
 
     return pyrender
@@ -60,7 +60,15 @@ def _single_sample(pyrender: Any) -> Iterator[None]:
 
 
 def _clip_planes(cam: Camera, bounds: np.ndarray) -> tuple[float, float]:
-    corners = np.array([[bounds[i, 0], bounds[j, 1], bounds[k, 2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)], dtype=np.float64)
+    corners = np.array(
+        [
+            [bounds[i, 0], bounds[j, 1], bounds[k, 2]]
+            for i in (0, 1)
+            for j in (0, 1)
+            for k in (0, 1)
+        ],
+        dtype=np.float64,
+    )
     _, z = cam.project(corners)
     zfar = float(z.max()) * 1.05
     znear = max(float(z.min()) * 0.95, zfar * 1e-4)
@@ -81,16 +89,30 @@ class PyrenderReference:
         Render relative to this point (default: the scene's bounds centre), see module notes.
     """
 
-    def __init__(self, scene: Scene, width: int, height: int, *, multisample: bool = False, origin: Optional[Sequence[float]] = None) -> None:
+    def __init__(
+        self,
+        scene: Scene,
+        width: int,
+        height: int,
+        *,
+        multisample: bool = False,
+        origin: Optional[Sequence[float]] = None,
+    ) -> None:
         self._pr = _import_pyrender()
         self._bounds = scene.bounds.astype(np.float64)
-        self._origin = np.asarray(origin if origin is not None else self._bounds.mean(axis=0), dtype=np.float64)
+        self._origin = np.asarray(
+            origin if origin is not None else self._bounds.mean(axis=0), dtype=np.float64
+        )
         verts = (scene.vertices.astype(np.float64) - self._origin).astype(np.float32)
         faces = scene.faces.astype(np.int64)
-        prim = self._pr.Primitive(positions=verts, indices=np.concatenate([faces, faces[:, ::-1]]), mode=4)
+        prim = self._pr.Primitive(
+            positions=verts, indices=np.concatenate([faces, faces[:, ::-1]]), mode=4
+        )
         self._scene = self._pr.Scene()
         self._scene.add(self._pr.Mesh([prim]))
-        self._camera = self._pr.PerspectiveCamera(yfov=1.0, aspectRatio=width / height, znear=0.1, zfar=1.0)
+        self._camera = self._pr.PerspectiveCamera(
+            yfov=1.0, aspectRatio=width / height, znear=0.1, zfar=1.0
+        )
         self._node = self._scene.add(self._camera, pose=np.eye(4))
         self._size = (width, height)
         self._single = None if multisample else _single_sample(self._pr)
@@ -106,7 +128,9 @@ class PyrenderReference:
         flags = self._pr.RenderFlags.DEPTH_ONLY | self._pr.RenderFlags.SKIP_CULL_FACES
         for i, cam in enumerate(cameras):
             if (cam.width, cam.height) != (w, h) or cam.yfov is None:
-                raise ValueError("PyrenderReference renders perspective cameras of its own resolution")
+                raise ValueError(
+                    "PyrenderReference renders perspective cameras of its own resolution"
+                )
             self._camera.znear, self._camera.zfar = _clip_planes(cam, self._bounds)
             self._camera.yfov = cam.yfov
             pose = np.array(cam.pose, dtype=np.float64)
@@ -129,10 +153,18 @@ class PyrenderReference:
         self.close()
 
 
-def pyrender_depth(scene: Scene, cameras: Sequence[Camera], *, multisample: bool = False, origin: Optional[Sequence[float]] = None) -> np.ndarray:
+def pyrender_depth(
+    scene: Scene,
+    cameras: Sequence[Camera],
+    *,
+    multisample: bool = False,
+    origin: Optional[Sequence[float]] = None,
+) -> np.ndarray:
     """Depth images rendered by pyrender (EGL) in scenesample's convention: (n, H, W) float32
     camera-space z, ``+inf`` where no surface. See :class:`PyrenderReference`."""
-    with PyrenderReference(scene, cameras[0].width, cameras[0].height, multisample=multisample, origin=origin) as r:
+    with PyrenderReference(
+        scene, cameras[0].width, cameras[0].height, multisample=multisample, origin=origin
+    ) as r:
         return r.depth(cameras)
 
 
@@ -155,4 +187,8 @@ class EmbreeReference:
         hit = tri >= 0
         t = np.where(hit, np.asarray(r["tfar"], dtype=np.float32), np.float32(np.inf))
         bary = np.stack([r["u"], r["v"]], -1).astype(np.float32)
-        return {"t": t, "triangle": np.where(hit, tri, -1), "barycentric": np.where(hit[:, None], bary, 0)}
+        return {
+            "t": t,
+            "triangle": np.where(hit, tri, -1),
+            "barycentric": np.where(hit[:, None], bary, 0),
+        }

@@ -86,7 +86,12 @@ class DepthImages:
         :meth:`load_exr` returns every array bit for bit.
         """
         n, h, w = self.depth.shape
-        shapes = {"triangle": (n, h, w), "normal": (n, h, w, 3), "position": (n, h, w, 3), "color": (n, h, w, 3)}
+        shapes = {
+            "triangle": (n, h, w),
+            "normal": (n, h, w, 3),
+            "position": (n, h, w, 3),
+            "color": (n, h, w, 3),
+        }
         for name, shape in shapes.items():
             if getattr(self, name).shape != shape:
                 raise InputError(f"{name} has shape {getattr(self, name).shape}, expected {shape}")
@@ -113,7 +118,9 @@ class DepthImages:
 
     def __repr__(self) -> str:
         covered = float(self.mask.mean()) if self.depth.size else 0.0
-        return f"DepthImages(n={self.n}, {self.width}x{self.height}, covered={covered:.1%}, total={self.timings.get('total', float('nan')):.4f}s)"
+        total = self.timings.get("total", float("nan"))
+        size = f"{self.width}x{self.height}"
+        return f"DepthImages(n={self.n}, {size}, covered={covered:.1%}, total={total:.4f}s)"
 
 
 @dataclass(eq=False, repr=False)
@@ -149,4 +156,5 @@ class RayHits:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
     def __repr__(self) -> str:
-        return f"RayHits(n={len(self)}, hit={int(self.hit.sum())}, trace={self.timings.get('trace', float('nan')):.4f}s)"
+        trace = self.timings.get("trace", float("nan"))
+        return f"RayHits(n={len(self)}, hit={int(self.hit.sum())}, trace={trace:.4f}s)"

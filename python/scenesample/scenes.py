@@ -27,21 +27,22 @@ def _icosphere_arrays(subdivisions: int) -> tuple[np.ndarray, np.ndarray]:
              (3, 8, 9), (4, 9, 5), (2, 4, 11), (6, 2, 10), (8, 6, 7), (9, 8, 1)]  # fmt: skip
     for _ in range(subdivisions):
         cache: dict[tuple[int, int], int] = {}
-
-        def mid(a: int, b: int) -> int:
-            key = (min(a, b), max(a, b))
-            if key not in cache:
-                m = verts[a] + verts[b]
-                verts.append(m / np.linalg.norm(m))
-                cache[key] = len(verts) - 1
-            return cache[key]
-
         nxt = []
         for a, b, c in faces:
-            ab, bc, ca = mid(a, b), mid(b, c), mid(c, a)
+            ab, bc, ca = (_midpoint(verts, cache, x, y) for x, y in ((a, b), (b, c), (c, a)))
             nxt += [(a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca)]
         faces = nxt
     return np.array(verts), np.array(faces, dtype=np.int64)
+
+
+def _midpoint(verts: list, cache: dict[tuple[int, int], int], a: int, b: int) -> int:
+    """Index of the unit-sphere midpoint of edge (a, b), created once per edge."""
+    key = (min(a, b), max(a, b))
+    if key not in cache:
+        m = verts[a] + verts[b]
+        verts.append(m / np.linalg.norm(m))
+        cache[key] = len(verts) - 1
+    return cache[key]
 
 
 def icosphere(subdivisions: int = 3, radius: float = 1.0, center=(0.0, 0.0, 0.0)) -> Scene:
@@ -64,7 +65,9 @@ def _box(lo: np.ndarray, hi: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray
             p[:, b] = lo[b] + vv.ravel() * (hi[b] - lo[b])
             base = sum(len(x) for x in verts)
             idx = np.arange((n + 1) ** 2).reshape(n + 1, n + 1) + base
-            q = np.stack([idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]], -1).reshape(-1, 4)
+            q = np.stack([idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]], -1).reshape(
+                -1, 4
+            )
             tri = np.concatenate([q[:, [0, 1, 2]], q[:, [0, 2, 3]]])
             if side == 0:
                 tri = tri[:, ::-1]
@@ -86,7 +89,9 @@ def _torus(r_major: float, r_minor: float, nu: int, nv: int) -> tuple[np.ndarray
     b = ((i + 1) % nu) * nv + j
     c = ((i + 1) % nu) * nv + (j + 1) % nv
     d = i * nv + (j + 1) % nv
-    faces = np.concatenate([np.stack([a, d, c], -1).reshape(-1, 3), np.stack([a, c, b], -1).reshape(-1, 3)])
+    faces = np.concatenate(
+        [np.stack([a, d, c], -1).reshape(-1, 3), np.stack([a, c, b], -1).reshape(-1, 3)]
+    )
     return verts, faces
 
 
@@ -134,7 +139,10 @@ def shared_scenes_dir() -> Optional[Path]:
     beside the current directory or beside this source checkout; None when absent."""
     env = os.environ.get("SCENESAMPLE_SCENES")
     candidates = [Path(env)] if env else []
-    candidates += [Path.cwd() / ".." / "shared" / "scenes", Path(__file__).resolve().parents[3] / "shared" / "scenes"]
+    candidates += [
+        Path.cwd() / ".." / "shared" / "scenes",
+        Path(__file__).resolve().parents[3] / "shared" / "scenes",
+    ]
     for c in candidates:
         if c.is_dir():
             return c.resolve()

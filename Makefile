@@ -1,0 +1,35 @@
+# scenesample dev loop. `make help` lists the targets.
+PY ?= python3
+export PYOPENGL_PLATFORM ?= egl
+
+.PHONY: help setup demo test test-rust test-python bench lint fmt
+
+help: ## list the targets
+	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-12s %s\n", $$1, $$2}'
+
+setup: ## install system packages (Mesa Vulkan, EGL) and build scenesample with its test extras
+	@bash scripts/setup.sh
+
+demo: setup ## the main job: discretize a scene, write EXR/PNG to out/, print a timing table
+	$(PY) -m scenesample.demo
+
+test: setup test-rust test-python ## every test: cargo (Rust internals, shaders) and pytest
+
+test-rust: ## cargo tests of the Rust core (release: shares the build with the extension)
+	cargo test --release
+
+test-python: ## pytest: cross-validation against pyrender and Embree, bad input, stubs, notebooks
+	$(PY) -m pytest
+
+bench: setup ## side-by-side benchmarks against Embree and pyrender
+	$(PY) -m scenesample.bench
+
+lint: ## formatting and lints, Rust and Python
+	cargo fmt --check
+	cargo clippy --release --all-targets --features python -- -D warnings
+	$(PY) -m ruff check python tests
+	$(PY) -m ruff format --check python tests
+
+fmt: ## format Rust and Python
+	cargo fmt
+	$(PY) -m ruff format python tests

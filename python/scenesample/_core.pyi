@@ -1,0 +1,159 @@
+# Hand-written stubs for the native module (src/py/); checked against it by tests/test_api.py
+# with mypy.stubtest.
+from os import PathLike
+from typing import Any, Optional, Union, final
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+__all__ = [
+    "Camera",
+    "Scene",
+    "cast_rays",
+    "device_info",
+    "discretize_conventional",
+    "read_exr",
+    "write_exr",
+    "__version__",
+]
+__version__: str
+
+_Path = Union[str, PathLike[str]]
+
+@final
+class Scene:
+    @staticmethod
+    def load_gltf(path: _Path) -> Scene: ...
+    @staticmethod
+    def from_arrays(
+        vertices: ArrayLike,
+        faces: ArrayLike,
+        normals: Optional[ArrayLike] = None,
+        colors: Optional[ArrayLike] = None,
+    ) -> Scene: ...
+    @property
+    def vertices(self) -> np.ndarray: ...
+    @property
+    def faces(self) -> np.ndarray: ...
+    @property
+    def normals(self) -> Optional[np.ndarray]: ...
+    @property
+    def colors(self) -> np.ndarray: ...
+    @property
+    def material_ids(self) -> np.ndarray: ...
+    @property
+    def object_ids(self) -> np.ndarray: ...
+    @property
+    def objects(self) -> list[str]: ...
+    @property
+    def triangle_count(self) -> int: ...
+    @property
+    def degenerate_count(self) -> int: ...
+    @property
+    def bounds(self) -> np.ndarray: ...
+    @property
+    def warnings(self) -> list[str]: ...
+    @property
+    def materials(self) -> list[dict[str, Any]]: ...
+    @property
+    def lights(self) -> list[dict[str, Any]]: ...
+    @property
+    def cameras(self) -> list[Camera]: ...
+
+@final
+class Camera:
+    @staticmethod
+    def look_at(
+        eye: ArrayLike,
+        target: ArrayLike,
+        up: Optional[ArrayLike] = None,
+        *,
+        yfov: float,
+        width: int,
+        height: int,
+        znear: Optional[float] = None,
+        zfar: Optional[float] = None,
+    ) -> Camera: ...
+    @staticmethod
+    def from_pose(
+        pose: ArrayLike,
+        *,
+        yfov: float,
+        width: int,
+        height: int,
+        znear: Optional[float] = None,
+        zfar: Optional[float] = None,
+    ) -> Camera: ...
+    @staticmethod
+    def orthographic(
+        pose: ArrayLike,
+        *,
+        xmag: float,
+        ymag: float,
+        width: int,
+        height: int,
+        znear: Optional[float] = None,
+        zfar: Optional[float] = None,
+    ) -> Camera: ...
+    @staticmethod
+    def cube(
+        center: ArrayLike,
+        resolution: int,
+        *,
+        znear: Optional[float] = None,
+        zfar: Optional[float] = None,
+    ) -> list[Camera]: ...
+    def with_resolution(self, width: int, height: int) -> Camera: ...
+    @property
+    def pose(self) -> np.ndarray: ...
+    @property
+    def projection(self) -> str: ...
+    @property
+    def yfov(self) -> Optional[float]: ...
+    @property
+    def xmag(self) -> Optional[float]: ...
+    @property
+    def ymag(self) -> Optional[float]: ...
+    @property
+    def width(self) -> int: ...
+    @property
+    def height(self) -> int: ...
+    @property
+    def znear(self) -> Optional[float]: ...
+    @property
+    def zfar(self) -> Optional[float]: ...
+    @property
+    def name(self) -> Optional[str]: ...
+    @property
+    def eye(self) -> list[float]: ...
+    @property
+    def forward(self) -> list[float]: ...
+    def project(self, points: ArrayLike) -> tuple[np.ndarray, np.ndarray]: ...
+    def unproject(self, pixels: ArrayLike, depth: ArrayLike) -> np.ndarray: ...
+    def pixel_rays(self, *, normalize: bool = True) -> tuple[np.ndarray, np.ndarray]: ...
+    def __eq__(self, value: object, /) -> bool: ...
+    def __ne__(self, value: object, /) -> bool: ...
+
+def discretize_conventional(
+    scene: Scene, cameras: list[Camera], cull_backfaces: bool = False
+) -> dict[str, Any]: ...
+def cast_rays(
+    scene: Scene,
+    origins: ArrayLike,
+    directions: ArrayLike,
+    t_min: float = 0.0,
+    t_max: float = ...,
+) -> dict[str, Any]: ...
+def device_info() -> dict[str, Any]: ...
+def write_exr(
+    path: _Path,
+    width: int,
+    height: int,
+    depth: ArrayLike,
+    triangle: ArrayLike,
+    normal: ArrayLike,
+    position: ArrayLike,
+    color: ArrayLike,
+    cameras: list[Camera],
+) -> None: ...
+def read_exr(path: _Path) -> dict[str, Any]: ...

@@ -1,0 +1,67 @@
+"""Turning result arrays into viewable 8-bit images, and PNG output without extra dependencies."""
+
+from __future__ import annotations
+
+import os
+import struct
+import zlib
+
+import numpy as np
+
+__all__ = ["write_png", "depth_to_rgb", "normal_to_rgb", "linear_to_srgb", "ids_to_rgb"]
+
+
+def write_png(path: str | os.PathLike[str], rgb: np.ndarray) -> None:
+    """Write an (H, W, 3) uint8 image as an 8-bit RGB PNG."""
+    img = np.ascontiguousarray(rgb, dtype=np.uint8)
+    if img.ndim != 3 or img.shape[2] != 3:
+        raise ValueError(f"write_png needs an (H, W, 3) image, got {img.shape}")
+    h, w, _ = img.shape
+    raw = np.concatenate([np.zeros((h, 1), np.uint8), img.reshape(h, w * 3)], axis=1).tobytes()
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        crc = zlib.crc32(kind + data) & 0xFFFFFFFF
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", crc)
+
+    header = struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0)
+    png = b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", zlib.compress(raw, 6))
+    with open(path, "wb") as f:
+        f.write(png + chunk(b"IEND", b""))
+
+
+def _u8(x: np.ndarray) -> np.ndarray:
+    return (np.clip(x, 0.0, 1.0) * 255 + 0.5).astype(np.uint8)
+
+
+def linear_to_srgb(rgb: np.ndarray) -> np.ndarray:
+    """(..., 3) linear colour -> (..., 3) uint8 sRGB."""
+    c = np.clip(np.nan_to_num(rgb), 0.0, 1.0)
+    return _u8(np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055))
+
+
+def depth_to_rgb(depth: np.ndarray) -> np.ndarray:
+    """(H, W) depth -> (H, W, 3) uint8: near bright, far dark, empty black."""
+    finite = np.isfinite(depth)
+    out = np.zeros(depth.shape + (3,), np.uint8)
+    if finite.any():
+        lo, hi = np.quantile(depth[finite], [0.01, 0.99])
+        t = 1.0 - (np.clip(depth, lo, hi) - lo) / max(hi - lo, 1e-12)
+        ramp = np.stack([0.15 + 0.85 * t, 0.1 + 0.8 * t**1.5, 0.35 + 0.3 * t**3], -1)
+        out[finite] = _u8(ramp[finite])
+    return out
+
+
+def normal_to_rgb(normal: np.ndarray) -> np.ndarray:
+    """(H, W, 3) unit normals -> (H, W, 3) uint8 (n * 0.5 + 0.5; empty black)."""
+    zero = ~np.any(normal != 0, axis=-1)
+    out = _u8(normal * 0.5 + 0.5)
+    out[zero] = 0
+    return out
+
+
+def ids_to_rgb(ids: np.ndarray) -> np.ndarray:
+    """(H, W) int ids -> (H, W, 3) uint8, a stable pseudo-random colour per id; -1 black."""
+    h = (ids.astype(np.uint64) * np.uint64(2654435761)) & np.uint64(0xFFFFFF)
+    rgb = np.stack([(h >> np.uint64(s)) & np.uint64(255) for s in (16, 8, 0)], -1).astype(np.uint8)
+    rgb[ids < 0] = 0
+    return rgb

@@ -1,0 +1,71 @@
+"""The public surface: exports, stubs checked against the native module, docstrings, typing
+marker, and the package's Python code style."""
+
+from __future__ import annotations
+
+import inspect
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import scenesample as ss
+
+PACKAGE = Path(ss.__file__).parent
+
+
+def test_all_exports_exist() -> None:
+    for name in ss.__all__:
+        assert hasattr(ss, name), name
+
+
+def test_stub_matches_native_module() -> None:
+    pytest.importorskip("mypy")
+    r = subprocess.run(
+        [sys.executable, "-m", "mypy.stubtest", "scenesample._core"], capture_output=True, text=True
+    )
+    assert r.returncode == 0, r.stdout + r.stderr
+
+
+def test_typed_marker_and_stub_are_shipped() -> None:
+    assert (PACKAGE / "py.typed").exists() and (PACKAGE / "_core.pyi").exists()
+
+
+@pytest.mark.parametrize(
+    "obj",
+    [
+        ss.discretize,
+        ss.cast_rays,
+        ss.device_info,
+        ss.Scene.load,
+        ss.Scene.from_arrays,
+        ss.Scene.from_trimesh,
+        ss.DepthImages,
+        ss.RayHits,
+        ss.DepthImages.save_exr,
+        ss.scenes.shapes,
+    ],
+)
+def test_public_functions_document_themselves(obj) -> None:
+    doc = inspect.getdoc(obj) or ""
+    assert len(doc) > 40, obj
+
+
+def test_errors_form_one_hierarchy() -> None:
+    for name in ss.errors.__all__:
+        cls = getattr(ss.errors, name)
+        assert issubclass(cls, ss.ScenesampleError) or name == "SceneWarning"
+    assert issubclass(ss.SceneFileError, OSError) and issubclass(ss.SceneFileError, ValueError)
+    assert issubclass(ss.GpuUnavailableError, RuntimeError)
+
+
+def test_ruff_is_clean() -> None:
+    pytest.importorskip("ruff")
+    root = PACKAGE.parent.parent
+    r = subprocess.run(
+        [sys.executable, "-m", "ruff", "check", str(root / "python"), str(root / "tests")],
+        capture_output=True,
+        text=True,
+        cwd=root,
+    )
+    assert r.returncode == 0, r.stdout + r.stderr
