@@ -154,7 +154,7 @@ pub fn resolve(scene: &Scene, cameras: &[Camera], triangle: Vec<i32>) -> DepthIm
         timings: vec![],
     };
     let rays: Vec<PixelRays> = cameras.iter().map(PixelRays::new).collect();
-    let colors = scene.colors();
+    let planes = SurfacePlane::of(scene);
     let ids = &img.triangle;
     img.depth
         .par_chunks_mut(w)
@@ -171,61 +171,105 @@ pub fn resolve(scene: &Scene, cameras: &[Camera], triangle: Vec<i32>) -> DepthIm
                     continue;
                 };
                 let (o, d) = cam.ray(x, row % h);
-                let s = surface_point(scene, t, o, d, cam.forward);
+                let s = planes[t].intersect(o, d, cam.forward);
                 depth[x] = s.depth as f32;
                 pos[x] = s.point.as_vec3().to_array();
-                nrm[x] = s.normal.as_vec3().to_array();
-                let [ca, cb, cc] = scene.faces()[t].map(|i| Vec3::from(colors[i as usize]));
-                let [b0, b1, b2] = s.bary.map(|b| b as f32);
-                col[x] = (ca * b0 + cb * b1 + cc * b2).to_array();
+                nrm[x] = planes[t].normal.as_vec3().to_array();
+                col[x] = s.color;
             }
         });
     img
 }
 
+/// Per-triangle data for resolving pixels, in f64: a corner, the unit normal, the gradients of
+/// the barycentrics over the plane, and the corner colours. Computed once per scene (cached on
+/// it), so a pixel costs a few dot products on one contiguous record.
+#[derive(Debug, Clone)]
+pub(crate) struct SurfacePlane {
+    a: DVec3,
+    normal: DVec3,
+    /// b1 = (p − a)·g1 and b2 = (p − a)·g2 for a point p on the plane.
+    g1: DVec3,
+    g2: DVec3,
+    colors: [Vec3; 3],
+    /// Degenerate triangles have no plane: their centroid stands in.
+    centroid: Option<DVec3>,
+}
+
+impl SurfacePlane {
+    fn new(scene: &Scene, i: usize) -> Self {
+        let [a, b, c] = scene.triangle(i);
+        let (e1, e2) = (b - a, c - a);
+        let n = e1.cross(e2);
+        let nn = n.length_squared();
+        let colors = scene.faces()[i].map(|k| Vec3::from(scene.colors()[k as usize]));
+        let degenerate = scene.is_degenerate(i) || nn == 0.0 || !nn.is_finite();
+        Self {
+            a,
+            normal: if degenerate {
+                DVec3::ZERO
+            } else {
+                n / nn.sqrt()
+            },
+            g1: if degenerate {
+                DVec3::ZERO
+            } else {
+                e2.cross(n) / nn
+            },
+            g2: if degenerate {
+                DVec3::ZERO
+            } else {
+                n.cross(e1) / nn
+            },
+            colors,
+            centroid: degenerate.then(|| (a + b + c) / 3.0),
+        }
+    }
+
+    /// The scene's planes, built in parallel on first use.
+    pub(crate) fn of(scene: &Scene) -> &[SurfacePlane] {
+        scene.planes.get_or_init(|| {
+            (0..scene.triangle_count())
+                .into_par_iter()
+                .map(|i| Self::new(scene, i))
+                .collect()
+        })
+    }
+
+    /// Where the ray `o + t·d` (camera-space z of `d` is −1, so `t` is depth) meets the plane.
+    /// The rasteriser said the triangle covers this pixel centre, so the ray meets the plane
+    /// unless the triangle is edge-on or degenerate; then the centroid stands in.
+    fn intersect(&self, o: DVec3, d: DVec3, forward: DVec3) -> SurfacePoint {
+        let t = self.normal.dot(self.a - o) / self.normal.dot(d);
+        let (point, depth, b1, b2) = match self.centroid {
+            Some(c) => (c, (c - o).dot(forward), 1.0 / 3.0, 1.0 / 3.0),
+            None if t.is_finite() => {
+                let p = o + d * t;
+                let r = p - self.a;
+                (p, t, r.dot(self.g1), r.dot(self.g2))
+            }
+            None => {
+                let c = self.a;
+                (c, (c - o).dot(forward), 0.0, 0.0)
+            }
+        };
+        // Clamped to the triangle: only colour interpolation uses them.
+        let (b1, b2) = (b1.clamp(0.0, 1.0) as f32, b2.clamp(0.0, 1.0) as f32);
+        let s = (b1 + b2).max(1.0);
+        let (b1, b2) = (b1 / s, b2 / s);
+        let [ca, cb, cc] = self.colors;
+        SurfacePoint {
+            depth,
+            point,
+            color: (ca * (1.0 - b1 - b2) + cb * b1 + cc * b2).to_array(),
+        }
+    }
+}
+
 struct SurfacePoint {
     depth: f64,
     point: DVec3,
-    /// Unit geometric normal (zero for a degenerate triangle).
-    normal: DVec3,
-    /// Barycentrics of the point, clamped to the triangle (for attribute interpolation).
-    bary: [f64; 3],
-}
-
-/// Where the ray `o + t·d` (camera-space z of `d` is −1, so `t` is depth) meets triangle `t`'s
-/// plane. The rasteriser said the triangle covers this pixel centre, so the ray meets the plane
-/// unless the triangle is edge-on or degenerate; then the triangle's centroid stands in.
-fn surface_point(scene: &Scene, tri: usize, o: DVec3, d: DVec3, forward: DVec3) -> SurfacePoint {
-    let [a, b, c] = scene.triangle(tri);
-    let (e1, e2) = (b - a, c - a);
-    let n = e1.cross(e2);
-    let nn = n.length_squared();
-    let denom = n.dot(d);
-    let t = n.dot(a - o) / denom;
-    if nn == 0.0 || !t.is_finite() || scene.is_degenerate(tri) {
-        let p = (a + b + c) / 3.0;
-        let normal = scene.face_normal(tri);
-        return SurfacePoint {
-            depth: (p - o).dot(forward),
-            point: p,
-            normal,
-            bary: [1.0 / 3.0; 3],
-        };
-    }
-    let p = o + d * t;
-    let r = p - a;
-    let b1 = r.cross(e2).dot(n) / nn;
-    let b2 = e1.cross(r).dot(n) / nn;
-    let clamp = |v: f64| v.clamp(0.0, 1.0);
-    let (b1, b2) = (clamp(b1), clamp(b2));
-    let s = b1 + b2;
-    let (b1, b2) = if s > 1.0 { (b1 / s, b2 / s) } else { (b1, b2) };
-    SurfacePoint {
-        depth: t,
-        point: p,
-        normal: n / nn.sqrt(),
-        bary: [1.0 - b1 - b2, b1, b2],
-    }
+    color: [f32; 3],
 }
 
 #[cfg(test)]

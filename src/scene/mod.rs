@@ -95,6 +95,8 @@ pub struct Scene {
     degenerate_count: usize,
     /// Built on the first `cast_rays` (see `trace`).
     pub(crate) bvh: OnceLock<Arc<crate::trace::Bvh>>,
+    /// Per-triangle resolve data, built on the first depth image (see `discretize`).
+    pub(crate) planes: OnceLock<Vec<crate::discretize::conventional::SurfacePlane>>,
     /// Uploaded on the first GPU use (see `gpu::SceneBuffers`); a Mutex because upload can fail.
     pub(crate) gpu: Mutex<Option<Arc<crate::gpu::SceneBuffers>>>,
 }
@@ -120,6 +122,7 @@ impl Scene {
             degenerate,
             degenerate_count,
             bvh: OnceLock::new(),
+            planes: OnceLock::new(),
             gpu: Mutex::new(None),
         })
     }
