@@ -64,10 +64,16 @@ pub fn discretize_conventional(
         );
     }
     let ctx = gpu::context()?;
-    let raw = gpu::depth::rasterize(&ctx, scene, cameras, cull_backfaces)?;
-    let start = Instant::now();
-    let mut img = resolve(scene, cameras, raw.triangle);
-    let resolve_seconds = start.elapsed().as_secs_f64();
+    let mut img = DepthImages::allocate(cameras);
+    let rays: Vec<PixelRays> = cameras.iter().map(PixelRays::new).collect();
+    let planes = SurfacePlane::of(scene);
+    let npx = first.width as usize * first.height as usize;
+    // Each chunk of ids is resolved as it arrives, while the GPU renders the next chunk.
+    let raw = gpu::depth::rasterize(&ctx, scene, cameras, cull_backfaces, |at, ids| {
+        let range = at * npx..at * npx + ids.len();
+        img.triangle[range.clone()].copy_from_slice(ids);
+        resolve_into(&mut img, range, &rays, planes);
+    })?;
     img.timings = vec![
         ("upload".into(), raw.upload_seconds),
         ("raster".into(), raw.raster_seconds),
@@ -76,7 +82,7 @@ pub fn discretize_conventional(
         img.timings.push(("raster_gpu".into(), g));
     }
     img.timings.push(("readback".into(), raw.readback_seconds));
-    img.timings.push(("resolve".into(), resolve_seconds));
+    img.timings.push(("resolve".into(), raw.consumer_seconds));
     img.timings
         .push(("total".into(), total.elapsed().as_secs_f64()));
     Ok(img)
@@ -135,37 +141,48 @@ impl PixelRays {
     }
 }
 
-/// Resolve triangle ids into the image fields (parallel over rows).
-pub fn resolve(scene: &Scene, cameras: &[Camera], triangle: Vec<i32>) -> DepthImages {
-    let (w, h) = (cameras[0].width as usize, cameras[0].height as usize);
-    let total = w * h * cameras.len();
-    let mut img = DepthImages {
-        n: cameras.len(),
-        width: w as u32,
-        height: h as u32,
-        // Zeroed allocations are lazily mapped pages: the parallel pass below is the first and
-        // only writer of every pixel (misses included), so nothing is filled twice.
-        depth: vec![0.0; total],
-        triangle,
-        normal: vec![[0.0; 3]; total],
-        position: vec![[0.0; 3]; total],
-        color: vec![[0.0; 3]; total],
-        cameras: cameras.to_vec(),
-        timings: vec![],
-    };
-    let rays: Vec<PixelRays> = cameras.iter().map(PixelRays::new).collect();
-    let planes = SurfacePlane::of(scene);
-    let ids = &img.triangle;
-    img.depth
+impl DepthImages {
+    /// Output buffers for one image per camera. Zeroed allocations are lazily mapped pages: the
+    /// resolve pass is the first and only writer of every pixel (misses included).
+    fn allocate(cameras: &[Camera]) -> Self {
+        let (w, h) = (cameras[0].width, cameras[0].height);
+        let total = w as usize * h as usize * cameras.len();
+        Self {
+            n: cameras.len(),
+            width: w,
+            height: h,
+            depth: vec![0.0; total],
+            triangle: vec![0; total],
+            normal: vec![[0.0; 3]; total],
+            position: vec![[0.0; 3]; total],
+            color: vec![[0.0; 3]; total],
+            cameras: cameras.to_vec(),
+            timings: vec![],
+        }
+    }
+}
+
+/// Resolve the pixels `range` (whole rows) of `img` from their triangle ids, parallel over rows.
+fn resolve_into(
+    img: &mut DepthImages,
+    range: std::ops::Range<usize>,
+    rays: &[PixelRays],
+    planes: &[SurfacePlane],
+) {
+    let (w, h) = (img.width as usize, img.height as usize);
+    let first_row = range.start / w;
+    let ids = &img.triangle[range.clone()];
+    img.depth[range.clone()]
         .par_chunks_mut(w)
-        .zip(img.position.par_chunks_mut(w))
-        .zip(img.normal.par_chunks_mut(w))
-        .zip(img.color.par_chunks_mut(w))
+        .zip(img.position[range.clone()].par_chunks_mut(w))
+        .zip(img.normal[range.clone()].par_chunks_mut(w))
+        .zip(img.color[range].par_chunks_mut(w))
         .enumerate()
-        .for_each(|(row, (((depth, pos), nrm), col))| {
+        .for_each(|(r, (((depth, pos), nrm), col))| {
+            let row = first_row + r;
             let cam = &rays[row / h];
             for x in 0..w {
-                let Ok(t) = usize::try_from(ids[row * w + x]) else {
+                let Ok(t) = usize::try_from(ids[r * w + x]) else {
                     depth[x] = f32::INFINITY;
                     pos[x] = [f32::NAN; 3];
                     continue;
@@ -178,7 +195,6 @@ pub fn resolve(scene: &Scene, cameras: &[Camera], triangle: Vec<i32>) -> DepthIm
                 col[x] = s.color;
             }
         });
-    img
 }
 
 /// Per-triangle data for resolving pixels, in f64: a corner, the unit normal, the gradients of

@@ -101,29 +101,38 @@ impl DepthPipeline {
     }
 }
 
-/// What the GPU returns for `n` images of `width`×`height`, row-major, image after image.
-pub struct RasterOutput {
-    pub triangle: Vec<i32>,
+/// What rasterising cost. The ids themselves go to the caller's `on_chunk` as they arrive.
+#[derive(Debug, Default)]
+pub struct RasterStats {
     /// Scene upload time (0 when the buffers were cached).
     pub upload_seconds: f64,
-    /// Wall time of encoding, submitting and waiting for the raster passes.
+    /// CPU time spent encoding, submitting and waiting for the raster passes.
     pub raster_seconds: f64,
     /// GPU time of the raster passes from timestamp queries, when the adapter has them.
     pub gpu_seconds: Option<f64>,
     pub readback_seconds: f64,
+    /// Time inside the caller's `on_chunk` (it overlaps the GPU's work on the next chunk).
+    pub consumer_seconds: f64,
 }
+
+/// Images per submission: about a million pixels each, so that the caller's processing of one
+/// chunk overlaps the GPU's work on the next, and never more than the readback budget.
+const PIXELS_PER_CHUNK: u64 = 1 << 20;
 
 fn align(x: u64, a: u64) -> u64 {
     x.div_ceil(a) * a
 }
 
-/// Rasterise `scene` from every camera (all of one resolution).
+/// Rasterise `scene` from every camera (all of one resolution). Images are rendered in chunks;
+/// `on_chunk(first, ids)` receives the triangle ids of images `first..first + k` (row-major,
+/// −1 where empty) while the GPU already renders the next chunk.
 pub fn rasterize(
     ctx: &GpuContext,
     scene: &Scene,
     cameras: &[Camera],
     cull_backfaces: bool,
-) -> Result<RasterOutput> {
+    mut on_chunk: impl FnMut(usize, &[i32]),
+) -> Result<RasterStats> {
     let (w, h) = (cameras[0].width, cameras[0].height);
     let max_dim = ctx.limits.max_texture_dimension_2d;
     if w > max_dim || h > max_dim {
@@ -138,7 +147,6 @@ pub fn rasterize(
         .map_err(|_| Error::Gpu("GPU lock poisoned".into()))?;
     let cached = scene.gpu.lock().map(|s| s.is_some()).unwrap_or(false);
     let buffers = SceneBuffers::of(ctx, scene)?;
-    let upload_seconds = if cached { 0.0 } else { buffers.upload_seconds };
 
     let row_tri = align(w as u64 * 4, wgpu::COPY_BYTES_PER_ROW_ALIGNMENT as u64);
     let per_image = row_tri * h as u64;
@@ -149,21 +157,21 @@ pub fn rasterize(
              device's limit of {max_buffer} bytes"
         )));
     }
-    let chunk = ((READBACK_BUDGET.min(max_buffer) / per_image).max(1) as usize).min(cameras.len());
+    let by_budget = READBACK_BUDGET.min(max_buffer) / per_image;
+    let by_pixels = PIXELS_PER_CHUNK / (w as u64 * h as u64);
+    let chunk = (by_budget.min(by_pixels).max(1) as usize).min(cameras.len());
 
-    let npx = (w * h) as usize;
-    let mut out = RasterOutput {
-        triangle: vec![-1; npx * cameras.len()],
-        upload_seconds,
-        raster_seconds: 0.0,
+    let mut stats = RasterStats {
+        upload_seconds: if cached { 0.0 } else { buffers.upload_seconds },
         gpu_seconds: ctx.timestamps.then_some(0.0),
-        readback_seconds: 0.0,
+        ..Default::default()
     };
     let targets = Targets::new(&ctx.device, w, h);
     let pipeline = ctx.depth_pipeline();
+    let mut in_flight: Option<Pending> = None;
     for (c, cams) in cameras.chunks(chunk).enumerate() {
-        let first = c * chunk;
-        render_chunk(
+        let start = Instant::now();
+        let next = submit_chunk(
             ctx,
             scene,
             &buffers,
@@ -172,11 +180,30 @@ pub fn rasterize(
             cams,
             cull_backfaces,
             row_tri,
-            &mut out,
-            first,
-        )?;
+            c * chunk,
+        );
+        stats.raster_seconds += start.elapsed().as_secs_f64();
+        // Finish the previous chunk while the GPU works on this one.
+        if let Some(done) = in_flight.replace(next) {
+            finish_chunk(ctx, done, &mut stats, &mut on_chunk)?;
+        }
     }
-    Ok(out)
+    if let Some(done) = in_flight {
+        finish_chunk(ctx, done, &mut stats, &mut on_chunk)?;
+    }
+    Ok(stats)
+}
+
+/// A submitted chunk whose readback is not yet consumed.
+struct Pending {
+    readback: wgpu::Buffer,
+    queries: Option<(wgpu::QuerySet, wgpu::Buffer, wgpu::Buffer)>,
+    submission: wgpu::SubmissionIndex,
+    first: usize,
+    n: usize,
+    w: u32,
+    h: u32,
+    row_tri: u64,
 }
 
 struct Targets {
@@ -223,7 +250,7 @@ impl Targets {
 }
 
 #[allow(clippy::too_many_arguments)]
-fn render_chunk(
+fn submit_chunk(
     ctx: &GpuContext,
     scene: &Scene,
     buffers: &SceneBuffers,
@@ -232,12 +259,10 @@ fn render_chunk(
     cameras: &[Camera],
     cull_backfaces: bool,
     row_tri: u64,
-    out: &mut RasterOutput,
     first: usize,
-) -> Result<()> {
+) -> Pending {
     use wgpu::util::DeviceExt;
     let device = &ctx.device;
-    let start = Instant::now();
     let (w, h) = (targets.w, targets.h);
     let n = cameras.len() as u64;
     let stride = align(64, ctx.limits.min_uniform_buffer_offset_alignment as u64);
@@ -348,33 +373,56 @@ fn render_chunk(
         encoder.resolve_query_set(set, 0..2 * n as u32, resolve, 0);
         encoder.copy_buffer_to_buffer(resolve, 0, read, 0, 16 * n);
     }
-    ctx.queue.submit([encoder.finish()]);
-    let slice = readback.slice(..);
-    slice.map_async(wgpu::MapMode::Read, |_| {});
+    let submission = ctx.queue.submit([encoder.finish()]);
+    readback.slice(..).map_async(wgpu::MapMode::Read, |_| {});
     if let Some((_, _, read)) = &queries {
         read.slice(..).map_async(wgpu::MapMode::Read, |_| {});
     }
-    ctx.wait()?;
-    out.raster_seconds += start.elapsed().as_secs_f64();
+    Pending {
+        readback,
+        queries,
+        submission,
+        first,
+        n: n as usize,
+        w,
+        h,
+        row_tri,
+    }
+}
+
+/// Wait for a chunk, hand its ids to `on_chunk`, and add its GPU time.
+fn finish_chunk(
+    ctx: &GpuContext,
+    p: Pending,
+    stats: &mut RasterStats,
+    on_chunk: &mut impl FnMut(usize, &[i32]),
+) -> Result<()> {
+    let start = Instant::now();
+    ctx.device
+        .poll(wgpu::PollType::Wait {
+            submission_index: Some(p.submission),
+            timeout: None,
+        })
+        .map_err(|e| Error::Gpu(format!("waiting for the GPU failed: {e}")))?;
+    ctx.check_errors()?;
+    stats.raster_seconds += start.elapsed().as_secs_f64();
 
     let start = Instant::now();
+    let (w, h) = (p.w as usize, p.h as usize);
+    let mut ids = vec![0i32; p.n * w * h];
     {
-        let data = slice
+        let data = p
+            .readback
+            .slice(..)
             .get_mapped_range()
             .map_err(|e| Error::Gpu(format!("mapping the readback buffer failed: {e}")))?;
-        let npx = (w * h) as usize;
-        for i in 0..n as usize {
-            let img = &data[i * image_bytes as usize..];
-            let k = (first + i) * npx;
-            for row in 0..h as usize {
-                let t = &img[row * row_tri as usize..][..w as usize * 4];
-                out.triangle[k + row * w as usize..][..w as usize]
-                    .copy_from_slice(bytemuck::cast_slice(t));
-            }
+        for (row, dst) in ids.chunks_exact_mut(w).enumerate() {
+            let src = &data[row * p.row_tri as usize..][..w * 4];
+            dst.copy_from_slice(bytemuck::cast_slice(src));
         }
     }
-    readback.unmap();
-    if let Some((_, _, read)) = &queries {
+    p.readback.unmap();
+    if let Some((_, _, read)) = &p.queries {
         let period = ctx.queue.get_timestamp_period() as f64 * 1e-9;
         let data = read
             .slice(..)
@@ -383,14 +431,17 @@ fn render_chunk(
         let ts: &[u64] = bytemuck::cast_slice(&data);
         let gpu: f64 = ts
             .chunks(2)
-            .map(|p| p[1].saturating_sub(p[0]) as f64 * period)
+            .map(|t| t[1].saturating_sub(t[0]) as f64 * period)
             .sum();
-        if let Some(total) = out.gpu_seconds.as_mut() {
+        if let Some(total) = stats.gpu_seconds.as_mut() {
             *total += gpu;
         }
     }
-    out.readback_seconds += start.elapsed().as_secs_f64();
-    ctx.check_errors()
+    stats.readback_seconds += start.elapsed().as_secs_f64();
+    let start = Instant::now();
+    on_chunk(p.first, &ids);
+    stats.consumer_seconds += start.elapsed().as_secs_f64();
+    Ok(())
 }
 
 fn copy(
