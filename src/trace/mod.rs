@@ -1,16 +1,15 @@
-//! CPU ray casting: an obvhs compressed wide BVH (CWBVH) built once per scene, traversed in
-//! parallel with rayon, with the watertight ray/triangle test of `watertight`.
+//! CPU ray casting: a 4-wide BVH (`bvh4`, built from obvhs's binary PLOC tree) built once per
+//! scene, traversed in parallel with rayon, with the watertight ray/triangle test of `watertight`
+//! and a float64 refinement of each hit.
 
+pub mod bvh4;
 pub mod watertight;
 
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use glam::{Vec3, Vec3A};
 use obvhs::aabb::Aabb;
-use obvhs::cwbvh::builder::build_cwbvh;
-use obvhs::cwbvh::CwBvh;
-use obvhs::ray::{Ray, RayHit};
 use obvhs::{Boundable, BvhBuildParams};
 use rayon::prelude::*;
 
@@ -22,16 +21,13 @@ use watertight::{RayShear, Tri};
 /// A scene's BVH with its triangles stored in leaf order (cache-friendly traversal).
 #[derive(Debug)]
 pub struct Bvh {
-    cwbvh: CwBvh,
-    /// Triangle corners in `cwbvh.primitive_indices` order.
-    tris: Vec<Tri>,
+    tree: bvh4::Bvh4,
     pub build_seconds: f64,
 }
 
-/// A triangle's box padded by a few ulps of its coordinates' magnitude, so that the BVH's f32
-/// slab tests (which obvhs does without rounding compensation) can never reject a ray that
-/// grazes a box exactly at a triangle's vertex or edge: the watertight triangle test then
-/// decides alone.
+/// A triangle's box padded by a few ulps of its coordinates' magnitude, so that the f32 slab
+/// tests can never reject a ray that grazes a box exactly at a triangle's vertex or edge: the
+/// watertight triangle test then decides alone.
 struct PaddedBox(Aabb);
 
 impl Boundable for PaddedBox {
@@ -51,29 +47,18 @@ fn padded_box(t: &Tri) -> PaddedBox {
 impl Bvh {
     pub fn build(scene: &Scene) -> Self {
         let start = Instant::now();
-        let tris: Vec<Tri> = (0..scene.triangle_count())
-            .map(|i| {
-                let f = scene.faces()[i];
-                let v = scene.vertices();
-                Tri {
-                    v: f.map(|k| Vec3A::from(Vec3::from(v[k as usize]))),
-                }
+        let v = scene.vertices();
+        let tris: Vec<Tri> = scene
+            .faces()
+            .iter()
+            .map(|f| Tri {
+                v: f.map(|k| Vec3A::from(Vec3::from(v[k as usize]))),
             })
             .collect();
         let boxes: Vec<PaddedBox> = tris.iter().map(padded_box).collect();
-        let cwbvh = build_cwbvh(
-            &boxes,
-            BvhBuildParams::medium_build(),
-            &mut Duration::default(),
-        );
-        let tris = cwbvh
-            .primitive_indices
-            .iter()
-            .map(|&i| tris[i as usize])
-            .collect();
+        let tree = bvh4::Bvh4::build(&tris, &boxes, BvhBuildParams::medium_build());
         Self {
-            cwbvh,
-            tris,
+            tree,
             build_seconds: start.elapsed().as_secs_f64(),
         }
     }
@@ -89,24 +74,13 @@ impl Bvh {
     /// Closest hit along one ray with a unit direction, in `[t_min, t_max]`.
     fn closest(&self, origin: Vec3A, dir: Vec3A, t_min: f32, t_max: f32) -> Option<Hit> {
         let shear = RayShear::new(dir);
-        let ray = bvh_ray(origin, dir, t_min, t_max);
-        let mut best: Option<Hit> = None;
-        let mut hit = RayHit::none();
-        self.cwbvh.ray_traverse(ray, &mut hit, |r, id| {
-            match watertight::intersect(&self.tris[id], origin, &shear, t_min, r.tmax) {
-                Some((t, b)) => {
-                    best = Some(Hit {
-                        t,
-                        triangle: self.cwbvh.primitive_indices[id],
-                        bary: b,
-                        slot: id,
-                    });
-                    t
-                }
-                None => f32::INFINITY,
-            }
-        });
-        best
+        let h = self.tree.closest(origin, dir, &shear, t_min, t_max)?;
+        Some(Hit {
+            t: h.t,
+            triangle: self.tree.ids[h.slot as usize],
+            bary: h.bary,
+            slot: h.slot as usize,
+        })
     }
 }
 
@@ -136,27 +110,6 @@ fn refine(tri: &Tri, origin: Vec3A, dir: Vec3A, (t_min, t_max): (f32, f32), hit:
         t: t as f32,
         bary: [u as f32, v as f32],
         ..hit
-    }
-}
-
-/// obvhs ray for traversal. Its `Ray::new` maps components with |d| ≤ f32::EPSILON to
-/// ±1/EPSILON, which makes the slab test reject boxes a nearly axis-parallel ray really
-/// crosses; we form exact reciprocals instead, clamping only exact (sub-1e-20) zeros.
-fn bvh_ray(origin: Vec3A, dir: Vec3A, t_min: f32, t_max: f32) -> Ray {
-    let inv = |x: f32| {
-        let x = if x.abs() < 1e-20 {
-            1e-20f32.copysign(x)
-        } else {
-            x
-        };
-        1.0 / x
-    };
-    Ray {
-        origin,
-        direction: dir,
-        inv_direction: Vec3A::new(inv(dir.x), inv(dir.y), inv(dir.z)),
-        tmin: t_min,
-        tmax: t_max,
     }
 }
 
@@ -192,6 +145,13 @@ pub fn cast_rays(
     t_max: f32,
 ) -> Result<RayHits> {
     check_rays(origins, directions, t_min, t_max)?;
+    if scene.triangle_count() >= bvh4::MAX_TRIANGLES as usize {
+        return input_err!(
+            "cast_rays handles scenes of fewer than {} triangles; this one has {}",
+            bvh4::MAX_TRIANGLES,
+            scene.triangle_count()
+        );
+    }
     let had_bvh = scene.bvh.get().is_some();
     let bvh = Bvh::of(scene);
     let start = Instant::now();
@@ -214,7 +174,7 @@ pub fn cast_rays(
                 let o = Vec3A::from(Vec3::from(origins[i]));
                 if let Some(h) = bvh.closest(o, d / len, t_min * len, t_max * len) {
                     let h = refine(
-                        &bvh.tris[h.slot],
+                        &bvh.tree.tris[h.slot],
                         o,
                         d,
                         (t_min, t_max),
@@ -259,7 +219,7 @@ fn check_rays(o: &[[f32; 3]], d: &[[f32; 3]], t_min: f32, t_max: f32) -> Result<
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     /// An icosphere subdivided `n` times: a closed mesh with shared edges and vertices.
