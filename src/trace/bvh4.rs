@@ -16,8 +16,9 @@ use super::watertight::{self, RayShear, Tri};
 
 /// The most triangles a tree can index (27 bits of a leaf entry).
 pub const MAX_TRIANGLES: u32 = 1 << 27;
-/// Subtrees with at most this many triangles become one leaf.
-const LEAF_MAX: u32 = 4;
+/// Subtrees with at most this many triangles become one leaf (2 measured fastest on primary
+/// rays of a 134K-triangle scene: 1: 0.122 s, 2: 0.117 s, 3: 0.122 s, 4: 0.145 s, 8: 0.165 s).
+const LEAF_MAX: u32 = 2;
 const LEAF_FLAG: u32 = 1 << 31;
 /// Children with no content get a box at +inf, which every slab test rejects.
 const EMPTY: u32 = u32::MAX;
