@@ -109,7 +109,7 @@ pub fn read_depth_images(path: &Path) -> CoreResult<DepthImages> {
                 .channel_data
                 .list
                 .iter()
-                .find(|c| c.name == Text::from(name))
+                .find(|c| c.name == *name)
                 .map(|c| &c.sample_data)
                 .ok_or_else(|| {
                     exr_err(

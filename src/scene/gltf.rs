@@ -491,13 +491,13 @@ impl Loader<'_> {
             };
             self.check_view(
                 &idx.view(),
-                idx.offset() as usize + n * isz,
+                idx.offset() + n * isz,
                 &format!("{what}: accessor {i} sparse indices"),
             )?;
             let vals = sp.values();
             self.check_view(
                 &vals.view(),
-                vals.offset() as usize + n * elem,
+                vals.offset() + n * elem,
                 &format!("{what}: accessor {i} sparse values"),
             )?;
         }

@@ -198,7 +198,7 @@ impl Scene {
     /// Centre of the bounds in f64: the origin of the camera-relative frame used on the GPU.
     pub fn center(&self) -> DVec3 {
         let [lo, hi] = self.bounds;
-        (DVec3::from(Vec3::from(lo).as_dvec3()) + Vec3::from(hi).as_dvec3()) * 0.5
+        (Vec3::from(lo).as_dvec3() + Vec3::from(hi).as_dvec3()) * 0.5
     }
 
     /// Length of the bounds' diagonal (at least the smallest positive normal f32, never 0).
