@@ -23,11 +23,11 @@ from scenesample.imageio import depth_to_rgb, ids_to_rgb, linear_to_srgb, normal
 PREFERRED = ("khr_toy_car", "stanford_bunny", "cornell_box")
 
 
-def pick_scene(path: Optional[str]) -> tuple[ss.Scene, str, float]:
+def pick_scene(path: Optional[str], procedural: bool) -> tuple[ss.Scene, str, float]:
     start = time.perf_counter()
     if path:
         return ss.Scene.load(path), path, time.perf_counter() - start
-    shared = ss.scenes.shared_scene_files()
+    shared = {} if procedural else ss.scenes.shared_scene_files()
     for name in PREFERRED:
         if name in shared:
             with warnings.catch_warnings(record=True) as caught:
@@ -59,6 +59,7 @@ def main(argv: Optional[list[str]] = None) -> None:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     p.add_argument("--scene", help="a glTF/GLB (or any trimesh-readable) file")
+    p.add_argument("--procedural", action="store_true", help="use the procedural scene")
     p.add_argument("--out", default="out", help="output folder (default: out)")
     p.add_argument("--views", type=int, default=4)
     p.add_argument("--size", type=int, nargs=2, default=(640, 480), metavar=("W", "H"))
@@ -68,7 +69,7 @@ def main(argv: Optional[list[str]] = None) -> None:
 
     info = ss.device_info()
     print(f"scenesample {ss.__version__} on {info['name']} ({info['backend']})")
-    scene, label, load_s = pick_scene(a.scene)
+    scene, label, load_s = pick_scene(a.scene, a.procedural)
     print(f"scene: {label}\n  {scene.triangle_count:,} triangles, {len(scene.materials)} materials")
 
     cams = orbit(scene, a.views, *a.size)
