@@ -86,10 +86,12 @@ def cast_rays(
     t_min: float = 0.0,
     t_max: float = float("inf"),
 ) -> RayHits:
-    """Closest hit of each ray, on the CPU (obvhs BVH, cached per scene; all cores; GIL released).
+    """Closest hit of each ray, on the CPU (a 4-wide BVH built once per scene and cached; all cores;
+    GIL released).
 
     The triangle test is watertight (Woop, Benthin and Wald 2013): a ray through a shared edge
-    or vertex of a closed mesh never slips through. Both faces of a triangle count.
+    or vertex of a closed mesh never slips through. Both faces of a triangle count. The hit's
+    ``t`` and barycentrics are then recomputed in float64 from the given direction.
 
     Parameters
     ----------

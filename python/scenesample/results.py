@@ -34,10 +34,12 @@ class DepthImages:
     cameras : list of Camera
         The camera of each image.
     timings : dict of str to float
-        Seconds per stage: ``upload`` (scene to GPU, 0 when cached), ``raster`` (wall time of
-        the GPU passes), ``raster_gpu`` (GPU timestamps, when the adapter has them),
-        ``readback``, ``resolve`` (depth, position, normal and colour from the GPU's triangle
-        ids and barycentrics, in float64 on the CPU) and ``total``.
+        Seconds per stage: ``upload`` (scene to GPU, 0 when cached), ``raster`` (CPU time spent
+        submitting and waiting for the GPU), ``raster_gpu`` (GPU timestamps, when the adapter has
+        them), ``readback``, ``resolve`` (depth, position, normal and colour from each pixel's
+        triangle id, by intersecting the pixel-centre ray with that triangle in float64) and
+        ``total``. Images are processed in chunks and one chunk's resolve overlaps the next
+        chunk's raster, so the stages can add up to more than ``total``.
     """
 
     depth: np.ndarray

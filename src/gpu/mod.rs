@@ -123,14 +123,6 @@ impl GpuContext {
         Err(Error::Gpu(format!("the GPU reported: {msg}")))
     }
 
-    /// Block until the queue is idle.
-    pub fn wait(&self) -> Result<()> {
-        self.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| Error::Gpu(format!("waiting for the GPU failed: {e}")))?;
-        self.check_errors()
-    }
-
     pub fn depth_pipeline(&self) -> &depth::DepthPipeline {
         self.depth_pipeline
             .get_or_init(|| depth::DepthPipeline::new(&self.device))

@@ -169,8 +169,8 @@ pub fn cast_rays(
                 let i = c * CHUNK + k;
                 let d = Vec3A::from(Vec3::from(directions[i]));
                 let len = d.length();
-                // Trace with a unit direction so the BVH's absolute epsilons mean the same at
-                // every direction scale; convert t back to the caller's units.
+                // Trace with a unit direction, so the shear and slab arithmetic see the same
+                // magnitudes at every direction scale; refine then yields t in the caller's units.
                 let o = Vec3A::from(Vec3::from(origins[i]));
                 if let Some(h) = bvh.closest(o, d / len, t_min * len, t_max * len) {
                     let h = refine(
