@@ -46,10 +46,15 @@ fn shape_str(shape: &[usize]) -> String {
     )
 }
 
-/// An (n, K) array of real numbers as rows of f64 (kinds f, i, u, b accepted).
-pub fn rows_f64<const K: usize>(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<[f64; K]>> {
-    let arr = as_array(obj, name, "fiub", "float64", "real numbers")?;
-    let arr: PyReadonlyArrayDyn<f64> = arr.extract()?;
+/// An (n, K) array of real numbers (kinds f, i, u, b accepted) as rows of `T`, converted by
+/// numpy to `dtype` first.
+fn rows<T: numpy::Element + Copy, const K: usize>(
+    obj: &Bound<'_, PyAny>,
+    name: &str,
+    dtype: &str,
+) -> PyResult<Vec<[T; K]>> {
+    let arr = as_array(obj, name, "fiub", dtype, "real numbers")?;
+    let arr: PyReadonlyArrayDyn<T> = arr.extract()?;
     let shape = arr.shape().to_vec();
     if shape.len() != 2 || shape[1] != K {
         return Err(input(
@@ -66,24 +71,14 @@ pub fn rows_f64<const K: usize>(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<
         .collect())
 }
 
+/// An (n, K) array of real numbers as rows of f64.
+pub fn rows_f64<const K: usize>(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<[f64; K]>> {
+    rows(obj, name, "float64")
+}
+
 /// An (n, K) array of real numbers as rows of f32.
 pub fn rows_f32<const K: usize>(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<[f32; K]>> {
-    let arr = as_array(obj, name, "fiub", "float32", "real numbers")?;
-    let arr: PyReadonlyArrayDyn<f32> = arr.extract()?;
-    let shape = arr.shape().to_vec();
-    if shape.len() != 2 || shape[1] != K {
-        return Err(input(
-            obj.py(),
-            format!("{name} must have shape (n, {K}), got {}", shape_str(&shape)),
-        ));
-    }
-    let flat = arr
-        .as_slice()
-        .map_err(|e| input(obj.py(), format!("{name}: {e}")))?;
-    Ok(flat
-        .chunks_exact(K)
-        .map(|c| std::array::from_fn(|k| c[k]))
-        .collect())
+    rows(obj, name, "float32")
 }
 
 /// An (m, 3) integer array of vertex indices (any integer dtype), checked to lie in
