@@ -198,7 +198,7 @@ def test_orthographic_camera(gpu) -> None:
 def test_timings_are_reported(gpu) -> None:
     s = ss.scenes.shapes(seed=7, detail=1)
     img = ss.discretize(s, orbit_cameras(s, 2, 64, 48))
-    for key in ("upload", "raster", "readback", "resolve", "total"):
+    for key in ("device", "upload", "prepare", "raster", "readback", "resolve", "total"):
         assert img.timings[key] >= 0
     assert img.timings["total"] > 0
     if gpu["timestamps"]:

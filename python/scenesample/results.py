@@ -34,7 +34,9 @@ class DepthImages:
     cameras : list of Camera
         The camera of each image.
     timings : dict of str to float
-        Seconds per stage: ``upload`` (scene to GPU, 0 when cached), ``raster`` (CPU time spent
+        Seconds per stage: ``device`` (creating the GPU device, first call only), ``upload``
+        (scene to GPU, 0 when cached), ``prepare`` (per-triangle resolve data, 0 when cached on
+        the scene), ``raster`` (CPU time spent
         submitting and waiting for the GPU), ``raster_gpu`` (GPU timestamps, when the adapter has
         them), ``readback``, ``resolve`` (depth, position, normal and colour from each pixel's
         triangle id, by intersecting the pixel-centre ray with that triangle in float64) and

@@ -63,10 +63,14 @@ pub fn discretize_conventional(
             c.height
         );
     }
+    let start = Instant::now();
     let ctx = gpu::context()?;
+    let device_seconds = start.elapsed().as_secs_f64();
+    let start = Instant::now();
+    let planes = SurfacePlane::of(scene);
+    let prepare_seconds = start.elapsed().as_secs_f64();
     let mut img = DepthImages::allocate(cameras);
     let rays: Vec<PixelRays> = cameras.iter().map(PixelRays::new).collect();
-    let planes = SurfacePlane::of(scene);
     let npx = first.width as usize * first.height as usize;
     // Each chunk of ids is resolved as it arrives, while the GPU renders the next chunk.
     let raw = gpu::depth::rasterize(&ctx, scene, cameras, cull_backfaces, |at, ids| {
@@ -75,7 +79,9 @@ pub fn discretize_conventional(
         resolve_into(&mut img, range, &rays, planes);
     })?;
     img.timings = vec![
+        ("device".into(), device_seconds),
         ("upload".into(), raw.upload_seconds),
+        ("prepare".into(), prepare_seconds),
         ("raster".into(), raw.raster_seconds),
     ];
     if let Some(g) = raw.gpu_seconds {
