@@ -104,10 +104,11 @@ pub struct Scene {
 impl Scene {
     /// Validate `parts` and build the scene. Faces keep their order, so triangle ids are the
     /// input's face indices.
-    pub fn new(parts: SceneParts) -> Result<Self> {
+    pub fn new(mut parts: SceneParts) -> Result<Self> {
         validate(&parts)?;
         let n = parts.vertices.len();
-        let colors = parts.colors.clone().unwrap_or_else(|| vec![[1.0; 3]; n]);
+        // The one copy of the colours lives here; `parts.colors` is only the input.
+        let colors = parts.colors.take().unwrap_or_else(|| vec![[1.0; 3]; n]);
         let bounds = compute_bounds(&parts.vertices, &parts.faces);
         let degenerate: Vec<bool> = parts
             .faces
