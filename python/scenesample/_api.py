@@ -87,7 +87,12 @@ def cast_rays(
     t_max: float = float("inf"),
 ) -> RayHits:
     """Closest hit of each ray, on the CPU (a 4-wide BVH built once per scene and cached; all cores;
-    GIL released).
+    GIL released; float32 C-contiguous inputs are read in place, without a copy).
+
+    Consecutive rays that are coherent (e.g. neighbouring pixels of ``Camera.pixel_rays``) are
+    traced together as packets of 32 (1M primary rays in image order took 80 ms here, the same
+    rays shuffled 198 ms); incoherent runs of rays are traced one by one. The hits are the same
+    either way, so passing rays in image order is only a matter of speed.
 
     The triangle test is watertight (Woop, Benthin and Wald 2013): a ray through a shared edge
     or vertex of a closed mesh never slips through. Both faces of a triangle count. The hit's

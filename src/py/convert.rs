@@ -46,13 +46,14 @@ fn shape_str(shape: &[usize]) -> String {
     )
 }
 
-/// An (n, K) array of real numbers (kinds f, i, u, b accepted) as rows of `T`, converted by
-/// numpy to `dtype` first.
-fn rows<T: numpy::Element + Copy, const K: usize>(
-    obj: &Bound<'_, PyAny>,
+/// An (n, K) array of real numbers (kinds f, i, u, b accepted), converted by numpy to `dtype`
+/// (no copy when it already is a C-contiguous array of that dtype) and checked for shape; read
+/// its rows with [`borrow_rows`].
+pub fn rows_array_of<'py, T: numpy::Element, const K: usize>(
+    obj: &Bound<'py, PyAny>,
     name: &str,
     dtype: &str,
-) -> PyResult<Vec<[T; K]>> {
+) -> PyResult<PyReadonlyArrayDyn<'py, T>> {
     let arr = as_array(obj, name, "fiub", dtype, "real numbers")?;
     let arr: PyReadonlyArrayDyn<T> = arr.extract()?;
     let shape = arr.shape().to_vec();
@@ -62,13 +63,28 @@ fn rows<T: numpy::Element + Copy, const K: usize>(
             format!("{name} must have shape (n, {K}), got {}", shape_str(&shape)),
         ));
     }
+    Ok(arr)
+}
+
+/// The rows of an array from [`rows_array_of`], borrowed without copying.
+pub fn borrow_rows<'a, T: numpy::Element + bytemuck::Pod, const K: usize>(
+    arr: &'a PyReadonlyArrayDyn<'_, T>,
+    name: &str,
+) -> PyResult<&'a [[T; K]]> {
     let flat = arr
         .as_slice()
-        .map_err(|e| input(obj.py(), format!("{name}: {e}")))?;
-    Ok(flat
-        .chunks_exact(K)
-        .map(|c| std::array::from_fn(|k| c[k]))
-        .collect())
+        .map_err(|e| input(arr.py(), format!("{name}: {e}")))?;
+    Ok(bytemuck::cast_slice(flat))
+}
+
+/// An (n, K) array of real numbers as rows of `T`, converted by numpy to `dtype` first.
+fn rows<T: numpy::Element + bytemuck::Pod, const K: usize>(
+    obj: &Bound<'_, PyAny>,
+    name: &str,
+    dtype: &str,
+) -> PyResult<Vec<[T; K]>> {
+    let arr = rows_array_of::<T, K>(obj, name, dtype)?;
+    Ok(borrow_rows::<T, K>(&arr, name)?.to_vec())
 }
 
 /// An (n, K) array of real numbers as rows of f64.

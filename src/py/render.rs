@@ -7,7 +7,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use super::camera::PyCamera;
-use super::convert::{array, flat_i32, rows_f32, rows_owned};
+use super::convert::{array, borrow_rows, flat_i32, rows_array_of, rows_f32, rows_owned};
 use super::errors::{input, IntoPy};
 use super::scene::PyScene;
 use crate::discretize::DepthImages;
@@ -56,11 +56,16 @@ pub fn cast_rays<'py>(
     t_min: f32,
     t_max: f32,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let o = rows_f32::<3>(origins, "origins")?;
-    let dirs = rows_f32::<3>(directions, "directions")?;
+    // Borrowed, not copied: numpy's float32 rows are read in place while the GIL is released.
+    let o = rows_array_of::<f32, 3>(origins, "origins", "float32")?;
+    let dirs = rows_array_of::<f32, 3>(directions, "directions", "float32")?;
+    let (o, dirs) = (
+        borrow_rows::<f32, 3>(&o, "origins")?,
+        borrow_rows::<f32, 3>(&dirs, "directions")?,
+    );
     let s = scene.inner.clone();
     let hits = py
-        .detach(|| crate::trace::cast_rays(&s, &o, &dirs, t_min, t_max))
+        .detach(|| crate::trace::cast_rays(&s, o, dirs, t_min, t_max))
         .py_err(py)?;
     let n = hits.t.len();
     let d = PyDict::new(py);

@@ -65,6 +65,7 @@ impl Bvh4 {
     }
 
     /// Closest hit with `t_min <= t < t_max` along `o + t·d`.
+    #[inline(always)]
     pub fn closest(
         &self,
         o: Vec3A,
@@ -73,20 +74,7 @@ impl Bvh4 {
         t_min: f32,
         t_max: f32,
     ) -> Option<SlotHit> {
-        let inv = |x: f32| {
-            1.0 / if x.abs() < 1e-20 {
-                1e-20f32.copysign(x)
-            } else {
-                x
-            }
-        };
-        let (ox, oy, oz) = (Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z));
-        let (ix, iy, iz) = (
-            Vec4::splat(inv(d.x)),
-            Vec4::splat(inv(d.y)),
-            Vec4::splat(inv(d.z)),
-        );
-        let lo_t = Vec4::splat(t_min);
+        let ray = SlabRay::new(o, d, t_min);
         let mut t_far = t_max;
         let mut best: Option<SlotHit> = None;
         // Inline for any realistic depth; spills to the heap rather than overflowing.
@@ -97,8 +85,7 @@ impl Bvh4 {
                 continue;
             }
             if entry & LEAF_FLAG != 0 {
-                let first = ((entry & !LEAF_FLAG) >> 4) as usize;
-                for slot in first..first + (entry & 15) as usize {
+                for slot in leaf_slots(entry) {
                     if let Some((t, bary)) =
                         watertight::intersect(&self.tris[slot], o, shear, t_min, t_far)
                     {
@@ -113,18 +100,7 @@ impl Bvh4 {
                 continue;
             }
             let node = &self.nodes[entry as usize];
-            let (x0, x1) = ((node.lo[0] - ox) * ix, (node.hi[0] - ox) * ix);
-            let (y0, y1) = ((node.lo[1] - oy) * iy, (node.hi[1] - oy) * iy);
-            let (z0, z1) = ((node.lo[2] - oz) * iz, (node.hi[2] - oz) * iz);
-            let t_in = x0.min(x1).max(y0.min(y1)).max(z0.min(z1)).max(lo_t);
-            // Widened by a few ulps (PBRT's 1 + 2γ₃) so rounding never rejects a grazed box.
-            let t_out = x0
-                .max(x1)
-                .min(y0.max(y1))
-                .min(z0.max(z1))
-                .min(Vec4::splat(t_far))
-                * (1.0 + 4.0 * f32::EPSILON);
-            let mut mask = t_in.cmple(t_out).bitmask() & node.valid;
+            let (t_in, mut mask) = ray.slab(node, t_far);
             // Push hit children farthest first, so the nearest is popped next.
             let t_in = t_in.to_array();
             let mut order = [(0f32, 0u32); 4];
@@ -140,9 +116,270 @@ impl Bvh4 {
                 order[j] = (t_in[i], node.child[i]);
                 k += 1;
             }
-            stack.extend(order[..k].iter().map(|&(t, child)| (child, t)));
+            for &(t, child) in &order[..k] {
+                stack.push((child, t));
+            }
         }
         best
+    }
+
+    /// Closest hits of a packet of coherent rays (ranged traversal, Overbeck, Ramamoorthi and
+    /// Mark, "Large Ray Packets for Real-time Whitted Ray Tracing", 2008): each visited node
+    /// carries the first and last ray of the packet that hit its box, so an upper node's box is
+    /// tested once for the whole packet rather than once per ray, and interval arithmetic over
+    /// the packet's origins and inverse directions culls boxes that every ray misses without
+    /// testing any ray. Gives exactly the hits of [`Bvh4::closest`] ray by ray (a ray that misses
+    /// a box misses every box inside it, since the slab test is monotone in the box's bounds).
+    ///
+    /// `t_far[i]` is ray i's `t_max` on entry and its closest hit's `t` on return. Returns
+    /// `false`, touching nothing, when the rays' directions differ in sign on some axis (no
+    /// interval bound then); the caller traces such a packet ray by ray.
+    #[inline(always)]
+    pub fn closest_packet(
+        &self,
+        rays: &[PacketRay],
+        t_far: &mut [f32],
+        best: &mut [Option<SlotHit>],
+    ) -> bool {
+        let n = rays.len();
+        assert!(n > 0 && n <= PACKET && t_far.len() == n && best.len() == n);
+        let Some(bounds) = PacketBounds::new(rays) else {
+            return false;
+        };
+        let mut t_packet = t_far.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
+        // (entry, first ray, last ray, interval lower bound of the entry distance).
+        let mut stack: SmallVec<[(u32, u8, u8, f32); 96]> = SmallVec::new();
+        stack.push((0, 0, (n - 1) as u8, bounds.t_min));
+        while let Some((entry, first, last, near)) = stack.pop() {
+            if near > t_packet {
+                continue;
+            }
+            let (first, last) = (first as usize, last as usize);
+            if entry & LEAF_FLAG != 0 {
+                let mut hit = false;
+                for r in first..=last {
+                    let ray = &rays[r];
+                    for slot in leaf_slots(entry) {
+                        if let Some((t, bary)) = watertight::intersect(
+                            &self.tris[slot],
+                            ray.slab.org,
+                            &ray.shear,
+                            ray.slab.t_min,
+                            t_far[r],
+                        ) {
+                            t_far[r] = t;
+                            best[r] = Some(SlotHit {
+                                t,
+                                slot: slot as u32,
+                                bary,
+                            });
+                            hit = true;
+                        }
+                    }
+                }
+                if hit {
+                    t_packet = t_far.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
+                }
+                continue;
+            }
+            let node = &self.nodes[entry as usize];
+            let (near4, possible) = bounds.cull(node, t_packet);
+            if possible == 0 {
+                continue;
+            }
+            // First ray hitting each child, then last, scanning from both ends of the range.
+            let mut lo = [0u8; 4];
+            let mut hi = [0u8; 4];
+            let mut need = possible;
+            for (r, ray) in rays.iter().enumerate().take(last + 1).skip(first) {
+                let m = ray.slab.slab(node, t_far[r]).1 & need;
+                for_bits(m, |k| lo[k] = r as u8);
+                need &= !m;
+                if need == 0 {
+                    break;
+                }
+            }
+            let found = possible & !need;
+            let mut need = found;
+            for r in (first..=last).rev() {
+                if need == 0 {
+                    break;
+                }
+                let m = rays[r].slab.slab(node, t_far[r]).1 & need;
+                for_bits(m, |k| hi[k] = r as u8);
+                need &= !m;
+            }
+            // Push farthest first (by the interval bound), so the nearest is popped next.
+            let near4 = near4.to_array();
+            let mut order = [(0f32, 0usize); 4];
+            let mut k = 0;
+            for_bits(found, |i| {
+                let mut j = k;
+                while j > 0 && order[j - 1].0 < near4[i] {
+                    order[j] = order[j - 1];
+                    j -= 1;
+                }
+                order[j] = (near4[i], i);
+                k += 1;
+            });
+            for &(t, i) in &order[..k] {
+                stack.push((node.child[i], lo[i], hi[i], t));
+            }
+        }
+        true
+    }
+}
+
+/// The most rays in one packet of [`Bvh4::closest_packet`].
+pub const PACKET: usize = 32;
+
+#[inline(always)]
+fn leaf_slots(entry: u32) -> std::ops::Range<usize> {
+    let first = ((entry & !LEAF_FLAG) >> 4) as usize;
+    first..first + (entry & 15) as usize
+}
+
+#[inline(always)]
+fn for_bits(mut mask: u32, mut f: impl FnMut(usize)) {
+    while mask != 0 {
+        f(mask.trailing_zeros() as usize);
+        mask &= mask - 1;
+    }
+}
+
+/// A ray's constants for the 4-wide slab test, splatted once.
+#[derive(Clone, Copy, Debug)]
+pub struct SlabRay {
+    org: Vec3A,
+    o: [Vec4; 3],
+    inv: [Vec4; 3],
+    t_min: f32,
+}
+
+impl SlabRay {
+    #[inline(always)]
+    fn new(o: Vec3A, d: Vec3A, t_min: f32) -> Self {
+        // Components this close to zero get a huge but finite inverse of the same sign.
+        let tiny = Vec3A::splat(1e-20);
+        let d = Vec3A::select(d.abs().cmplt(tiny), tiny.copysign(d), d);
+        let inv = Vec3A::ONE / d;
+        Self {
+            org: o,
+            o: [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)],
+            inv: [Vec4::splat(inv.x), Vec4::splat(inv.y), Vec4::splat(inv.z)],
+            t_min,
+        }
+    }
+
+    /// Entry distances of the four children and the mask of those the ray hits before `t_far`.
+    #[inline(always)]
+    fn slab(&self, node: &Node4, t_far: f32) -> (Vec4, u32) {
+        let [ox, oy, oz] = self.o;
+        let [ix, iy, iz] = self.inv;
+        let (x0, x1) = ((node.lo[0] - ox) * ix, (node.hi[0] - ox) * ix);
+        let (y0, y1) = ((node.lo[1] - oy) * iy, (node.hi[1] - oy) * iy);
+        let (z0, z1) = ((node.lo[2] - oz) * iz, (node.hi[2] - oz) * iz);
+        let t_in = x0
+            .min(x1)
+            .max(y0.min(y1))
+            .max(z0.min(z1))
+            .max(Vec4::splat(self.t_min));
+        // Widened by a few ulps (PBRT's 1 + 2γ₃) so rounding never rejects a grazed box.
+        let t_out = x0
+            .max(x1)
+            .min(y0.max(y1))
+            .min(z0.max(z1))
+            .min(Vec4::splat(t_far))
+            * (1.0 + 4.0 * f32::EPSILON);
+        (t_in, t_in.cmple(t_out).bitmask() & node.valid)
+    }
+}
+
+/// One ray of a packet: its slab constants and its watertight shear.
+pub struct PacketRay {
+    slab: SlabRay,
+    shear: RayShear,
+}
+
+impl PacketRay {
+    /// `d` should be unit length, as for [`Bvh4::closest`].
+    #[inline(always)]
+    pub fn new(o: Vec3A, d: Vec3A, t_min: f32) -> Self {
+        Self {
+            slab: SlabRay::new(o, d, t_min),
+            shear: RayShear::new(d),
+        }
+    }
+}
+
+/// Interval bounds of a packet's origins and inverse directions, per axis, for culling a box
+/// that no ray of the packet can hit (Wald, Boulos and Shirley, "Ray Tracing Deformable Scenes
+/// Using Dynamic Bounding Volume Hierarchies", 2007, §4.2).
+struct PacketBounds {
+    /// Per axis: whether the directions are positive (the near plane is then the box's low one).
+    positive: [bool; 3],
+    o_lo: [Vec4; 3],
+    o_hi: [Vec4; 3],
+    inv_lo: [Vec4; 3],
+    inv_hi: [Vec4; 3],
+    t_min: f32,
+}
+
+impl PacketBounds {
+    #[inline(always)]
+    fn new(rays: &[PacketRay]) -> Option<Self> {
+        let mut b = Self {
+            positive: [false; 3],
+            o_lo: [Vec4::ZERO; 3],
+            o_hi: [Vec4::ZERO; 3],
+            inv_lo: [Vec4::ZERO; 3],
+            inv_hi: [Vec4::ZERO; 3],
+            t_min: rays.iter().fold(f32::INFINITY, |a, r| a.min(r.slab.t_min)),
+        };
+        for a in 0..3 {
+            let (mut olo, mut ohi) = (f32::INFINITY, f32::NEG_INFINITY);
+            let (mut ilo, mut ihi) = (f32::INFINITY, f32::NEG_INFINITY);
+            for r in rays {
+                let (o, i) = (r.slab.org[a], r.slab.inv[a].x);
+                (olo, ohi) = (olo.min(o), ohi.max(o));
+                (ilo, ihi) = (ilo.min(i), ihi.max(i));
+            }
+            if ilo < 0.0 && ihi > 0.0 {
+                return None;
+            }
+            b.positive[a] = ilo > 0.0;
+            b.o_lo[a] = Vec4::splat(olo);
+            b.o_hi[a] = Vec4::splat(ohi);
+            b.inv_lo[a] = Vec4::splat(ilo);
+            b.inv_hi[a] = Vec4::splat(ihi);
+        }
+        Some(b)
+    }
+
+    /// A lower bound on every ray's entry distance into each child, and the mask of children
+    /// some ray of the packet may hit before `t_far` (the largest of the rays' `t_far`).
+    #[inline(always)]
+    fn cull(&self, node: &Node4, t_far: f32) -> (Vec4, u32) {
+        let mut t_in = Vec4::splat(self.t_min);
+        let mut t_out = Vec4::splat(t_far);
+        for a in 0..3 {
+            let (near, far) = if self.positive[a] {
+                (node.lo[a], node.hi[a])
+            } else {
+                (node.hi[a], node.lo[a])
+            };
+            let (il, ih) = (self.inv_lo[a], self.inv_hi[a]);
+            // (plane − o)·inv over o ∈ [o_lo, o_hi], inv ∈ [inv_lo, inv_hi]: the extremes lie
+            // at the interval's corners.
+            let (n0, n1) = (near - self.o_hi[a], near - self.o_lo[a]);
+            let entry = (n0 * il).min(n0 * ih).min(n1 * il).min(n1 * ih);
+            let (f0, f1) = (far - self.o_hi[a], far - self.o_lo[a]);
+            let exit = (f0 * il).max(f0 * ih).max(f1 * il).max(f1 * ih);
+            t_in = t_in.max(entry);
+            t_out = t_out.min(exit);
+        }
+        let t_out = t_out * (1.0 + 4.0 * f32::EPSILON);
+        (t_in, t_in.cmple(t_out).bitmask() & node.valid)
     }
 }
 

@@ -19,6 +19,7 @@ pub struct RayShear {
 }
 
 impl RayShear {
+    #[inline(always)]
     pub fn new(d: Vec3A) -> Self {
         let a = d.abs();
         let kz = if a.x > a.y && a.x > a.z {
@@ -34,15 +35,18 @@ impl RayShear {
         if d[kz] < 0.0 {
             std::mem::swap(&mut kx, &mut ky);
         }
+        // One division: the shear constants need not be correctly rounded quotients, only the
+        // same for every triangle the ray meets.
+        let sz = 1.0 / d[kz];
         Self {
             k: [kx, ky, kz],
-            s: [d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]],
+            s: [d[kx] * sz, d[ky] * sz, sz],
         }
     }
 }
 
 /// Intersect; returns `(t, [u, v])` for a hit with `t_min <= t < t_max`, both faces counting.
-#[inline]
+#[inline(always)]
 pub fn intersect(
     tri: &Tri,
     o: Vec3A,
