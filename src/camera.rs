@@ -288,6 +288,47 @@ impl Camera {
         )
     }
 
+    /// A camera between `cameras`: the weighted mean of their viewpoints, and their orientations
+    /// averaged as unit quaternions (signs aligned to the first, weighted sum normalised: exact
+    /// for two cameras up to the slerp/nlerp difference, a good mean for nearby orientations).
+    /// Projection, resolution and clip planes come from the first camera. Weights must be
+    /// non-negative with a positive sum; they are normalised.
+    pub fn blend(cameras: &[Camera], weights: &[f64]) -> Result<Camera> {
+        let total: f64 = weights.iter().sum();
+        if cameras.is_empty()
+            || cameras.len() != weights.len()
+            || weights.iter().any(|w| !(*w >= 0.0))
+            || !(total > 0.0 && total.is_finite())
+        {
+            return input_err!(
+                "blend needs one non-negative weight per camera with a positive sum, got {} \
+                 cameras and weights {weights:?}",
+                cameras.len()
+            );
+        }
+        let q0 = glam::DQuat::from_mat3(&DMat3::from_mat4(cameras[0].pose));
+        let mut q = glam::DQuat::from_xyzw(0.0, 0.0, 0.0, 0.0);
+        let mut eye = DVec3::ZERO;
+        for (c, &w) in cameras.iter().zip(weights) {
+            let w = w / total;
+            let qi = glam::DQuat::from_mat3(&DMat3::from_mat4(c.pose));
+            let qi = if qi.dot(q0) < 0.0 { -qi } else { qi };
+            q = q + qi * w;
+            eye += c.eye() * w;
+        }
+        let q = q.normalize();
+        let pose = DMat4::from_rotation_translation(q, eye);
+        let first = &cameras[0];
+        Self::new(
+            pose,
+            first.projection,
+            first.width,
+            first.height,
+            first.znear,
+            first.zfar,
+        )
+    }
+
     /// A copy with another resolution.
     pub fn with_resolution(&self, width: u32, height: u32) -> Result<Self> {
         let mut c = Self::new(

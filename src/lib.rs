@@ -5,6 +5,7 @@
 
 pub mod camera;
 pub mod discretize;
+pub mod evaluate;
 pub mod error;
 pub mod gpu;
 pub mod io;

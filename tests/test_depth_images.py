@@ -212,6 +212,9 @@ def test_timings_are_reported(gpu) -> None:
         "color",
         "cameras",
         "timings",
+        "method",
+        "reference",
+        "cull_backfaces",
     }
 
 

@@ -17,6 +17,7 @@ from . import errors, references, scenes
 from ._api import cast_rays, device_info, discretize
 from ._core import Camera
 from ._core import __version__ as __version__
+from ._evaluate import evaluate, intermediate_cameras
 from ._scene import Scene
 from .errors import (
     ExrError,
@@ -49,6 +50,8 @@ __all__ = [
     "device_info",
     "discretize",
     "errors",
+    "evaluate",
+    "intermediate_cameras",
     "references",
     "scenes",
 ]

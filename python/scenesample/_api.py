@@ -4,7 +4,7 @@ with the capabilities that define them)."""
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any, Union
+from typing import Any, Optional, Union
 
 import numpy as np
 
@@ -16,7 +16,7 @@ from .results import DepthImages, RayHits
 __all__ = ["discretize", "cast_rays", "device_info"]
 
 Camera = _core.Camera
-DISCRETIZE_METHODS = ("conventional",)
+DISCRETIZE_METHODS = ("conventional", "nonredundant", "peeling")
 
 
 def _scene_core(scene: Any) -> _core.Scene:
@@ -40,18 +40,42 @@ def discretize(
     cameras: Union[Camera, Sequence[Camera]],
     method: str = "conventional",
     *,
+    redundancy: str = "pixel",
+    layers: Optional[int] = None,
+    camera: Optional[Camera] = None,
     cull_backfaces: bool = False,
 ) -> DepthImages:
-    """Sample a scene with depth images on the GPU.
+    """Sample a scene with depth images (non-redundant-rendering.txt §3, §6.1).
 
     Parameters
     ----------
     scene : Scene
     cameras : Camera or sequence of Camera
-        One image per camera; poses and projections may differ, resolutions must match.
-    method : {"conventional"}
-        ``"conventional"``: every camera samples every surface it sees (one raster pass per
-        image, nearest surface at each pixel centre, no multisampling).
+        The reference views; poses and projections may differ, resolutions must match.
+    method : {"conventional", "nonredundant", "peeling"}
+        ``"conventional"``: one image per camera, each sampling every surface it sees (one GPU
+        raster pass per image, nearest surface at each pixel centre, no multisampling).
+
+        ``"nonredundant"``: one image per camera, rendered in order; image i keeps at each
+        pixel the nearest sample that is not redundant with images 0..i-1 (Algorithm 1), so a
+        redundant sample never hides a new one behind it. Image 0 is conventional.
+
+        ``"peeling"``: ``layers`` depth-peeling layers from one viewpoint (``camera``, by
+        default the centroid of ``cameras`` with their mean orientation, as in §6.1.3); layer
+        i keeps the nearest sample strictly beyond layer i-1's depth at each pixel.
+    redundancy : {"pixel", "visibility"}
+        For ``nonredundant``. ``"pixel"`` (Algorithm 3, on the GPU in the same pass): a sample
+        is redundant when an earlier image holds its triangle at the pixel it reprojects to.
+        ``"visibility"`` (Algorithm 2, exact, on the CPU): a sample is redundant when an
+        earlier image's viewpoint sees it (inside that image's view volume, unoccluded). Each
+        pixel ray of image i is walked front to back through the surfaces it crosses with BVH
+        ray casts, each candidate tested with one visibility ray per earlier viewpoint; the
+        first candidate no earlier viewpoint sees is kept. Surfaces within ``1e-5`` of the
+        scene diagonal (plus ``1e-5`` of the distance) count as the same point.
+    layers : int
+        For ``peeling`` (required there): number of layers, >= 1.
+    camera : Camera, optional
+        For ``peeling``: the viewpoint (its resolution must match ``cameras``).
     cull_backfaces : bool
         Drop triangles whose counter-clockwise front faces away (off by default).
 
@@ -60,7 +84,8 @@ def discretize(
     DepthImages
         ``depth`` (n, H, W) float32 camera-space z (+inf empty), ``triangle`` (n, H, W) int32
         (-1 empty), ``normal``/``position``/``color`` (n, H, W, 3) float32, ``cameras``,
-        ``timings``.
+        ``method``, ``reference`` (= ``cameras``), ``timings``. n is ``len(cameras)``, or
+        ``layers`` for peeling.
 
     Raises
     ------
@@ -69,13 +94,40 @@ def discretize(
     GpuLimitError
         The images exceed the device's texture or buffer limits.
     InputError
-        Cameras of different resolutions, or no camera.
+        Unknown method or redundancy, cameras of different resolutions, no camera, or missing
+        or invalid ``layers``.
     """
     if method not in DISCRETIZE_METHODS:
         raise InputError(f"method must be one of {list(DISCRETIZE_METHODS)}, got {method!r}")
     cams = _camera_list(cameras)
-    d = _core.discretize_conventional(_scene_core(scene), cams, bool(cull_backfaces))
-    return DepthImages._from_core(d)
+    core = _scene_core(scene)
+    cull = bool(cull_backfaces)
+    if method != "peeling" and (layers is not None or camera is not None):
+        raise InputError(f"layers and camera apply to method='peeling', not {method!r}")
+    if method != "nonredundant" and redundancy != "pixel":
+        raise InputError(f"redundancy applies to method='nonredundant', not {method!r}")
+    if method == "conventional":
+        d = _core.discretize_conventional(core, cams, cull)
+    elif method == "nonredundant":
+        if redundancy not in ("pixel", "visibility"):
+            raise InputError(f"redundancy must be 'pixel' or 'visibility', got {redundancy!r}")
+        d = _core.discretize_nonredundant(core, cams, redundancy, cull)
+    else:
+        if layers is None:
+            raise InputError("method='peeling' needs layers=k (the number of layers)")
+        if isinstance(layers, bool) or not isinstance(layers, (int, np.integer)) or layers < 1:
+            raise InputError(f"layers must be a positive integer, got {layers!r}")
+        if camera is None:
+            camera = Camera.blend(cams)
+        elif not isinstance(camera, Camera):
+            raise InputError(f"camera must be a scenesample.Camera, got {type(camera).__name__}")
+        if (camera.width, camera.height) != (cams[0].width, cams[0].height):
+            raise InputError(
+                f"the peeling camera is {camera.width}x{camera.height}, the cameras are "
+                f"{cams[0].width}x{cams[0].height}; they must match"
+            )
+        d = _core.discretize_peeling(core, camera, int(layers), cull)
+    return DepthImages._from_core(d, cams, cull)
 
 
 def cast_rays(

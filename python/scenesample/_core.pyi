@@ -12,7 +12,10 @@ __all__ = [
     "cast_rays",
     "device_info",
     "discretize_conventional",
+    "discretize_nonredundant",
+    "discretize_peeling",
     "read_exr",
+    "sampling_metrics",
     "write_exr",
     "__version__",
 ]
@@ -103,6 +106,8 @@ class Camera:
         znear: Optional[float] = None,
         zfar: Optional[float] = None,
     ) -> list[Camera]: ...
+    @staticmethod
+    def blend(cameras: list[Camera], weights: Optional[list[float]] = None) -> Camera: ...
     def with_resolution(self, width: int, height: int) -> Camera: ...
     @property
     def pose(self) -> np.ndarray: ...
@@ -137,6 +142,26 @@ class Camera:
 def discretize_conventional(
     scene: Scene, cameras: list[Camera], cull_backfaces: bool = False
 ) -> dict[str, Any]: ...
+def discretize_nonredundant(
+    scene: Scene,
+    cameras: list[Camera],
+    redundancy: str = "pixel",
+    cull_backfaces: bool = False,
+) -> dict[str, Any]: ...
+def discretize_peeling(
+    scene: Scene, camera: Camera, layers: int, cull_backfaces: bool = False
+) -> dict[str, Any]: ...
+def sampling_metrics(
+    scene: Scene,
+    triangle: ArrayLike,
+    position: ArrayLike,
+    cameras: list[Camera],
+    method: str,
+    reference: list[Camera],
+    frames: list[Camera],
+    redundancy: str,
+    cull_backfaces: bool,
+) -> dict[str, Any]: ...
 def cast_rays(
     scene: Scene,
     origins: ArrayLike,
@@ -155,5 +180,6 @@ def write_exr(
     position: ArrayLike,
     color: ArrayLike,
     cameras: list[Camera],
+    method: str,
 ) -> None: ...
 def read_exr(path: _Path) -> dict[str, Any]: ...

@@ -32,7 +32,15 @@ class DepthImages:
     color : (n, H, W, 3) float32
         Linear base colour interpolated from the vertices; zero where no surface.
     cameras : list of Camera
-        The camera of each image.
+        The camera of each image (for ``peeling``, the peeling camera, once per layer).
+    method : str
+        How the images were made: ``"conventional"``, ``"nonredundant"`` or ``"peeling"``.
+    reference : list of Camera
+        The reference viewpoints the set was made for (the cameras given to ``discretize``);
+        ``evaluate`` interpolates its intermediate frames between them. Empty after
+        :meth:`load_exr` for peeling layers (set it before evaluating).
+    cull_backfaces : bool
+        Whether back faces were culled (``evaluate`` renders its references the same way).
     timings : dict of str to float
         Seconds per stage: ``device`` (creating the GPU device, first call only), ``upload``
         (scene to GPU, 0 when cached), ``prepare`` (per-triangle resolve data, 0 when cached on
@@ -51,10 +59,13 @@ class DepthImages:
     color: np.ndarray
     cameras: list[Any]
     timings: dict[str, float] = field(default_factory=dict)
+    method: str = "conventional"
+    reference: list[Any] = field(default_factory=list)
+    cull_backfaces: bool = False
 
     @classmethod
-    def _from_core(cls, d: dict[str, Any]) -> DepthImages:
-        return cls(**d)
+    def _from_core(cls, d: dict[str, Any], reference: list[Any], cull: bool) -> DepthImages:
+        return cls(**d, reference=list(reference), cull_backfaces=cull)
 
     @property
     def n(self) -> int:
@@ -111,6 +122,7 @@ class DepthImages:
             np.ascontiguousarray(self.position, dtype=np.float32).reshape(-1, 3),
             np.ascontiguousarray(self.color, dtype=np.float32).reshape(-1, 3),
             list(self.cameras),
+            str(self.method),
         )
 
     @classmethod
@@ -118,13 +130,17 @@ class DepthImages:
         """Read a file written by :meth:`save_exr` (timings are empty)."""
         d = _core.read_exr(os.fspath(path))
         d["timings"] = {}
-        return cls(**d)
+        reference = [] if d["method"] == "peeling" else list(d["cameras"])
+        return cls(**d, reference=reference)
 
     def __repr__(self) -> str:
         covered = float(self.mask.mean()) if self.depth.size else 0.0
         total = self.timings.get("total", float("nan"))
         size = f"{self.width}x{self.height}"
-        return f"DepthImages(n={self.n}, {size}, covered={covered:.1%}, total={total:.4f}s)"
+        return (
+            f"DepthImages({self.method}, n={self.n}, {size}, covered={covered:.1%}, "
+            f"total={total:.4f}s)"
+        )
 
 
 @dataclass(eq=False, repr=False)

@@ -12,9 +12,22 @@ from typing import Optional
 
 import numpy as np
 
+from ._paper_scenes import PAPER_SCENES, bird_nest, grass, reference_cameras, tree, turtles, urban
 from ._scene import Scene
 
-__all__ = ["icosphere", "shapes", "shared_scenes_dir", "shared_scene_files"]
+__all__ = [
+    "PAPER_SCENES",
+    "bird_nest",
+    "grass",
+    "icosphere",
+    "reference_cameras",
+    "shapes",
+    "shared_scene_files",
+    "shared_scenes_dir",
+    "tree",
+    "turtles",
+    "urban",
+]
 
 
 def _icosphere_arrays(subdivisions: int) -> tuple[np.ndarray, np.ndarray]:

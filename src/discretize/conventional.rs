@@ -35,6 +35,8 @@ pub struct DepthImages {
     /// Linear base colour interpolated from the vertices; zero where no surface.
     pub color: Vec<[f32; 3]>,
     pub cameras: Vec<Camera>,
+    /// How the images were made: "conventional", "nonredundant" or "peeling".
+    pub method: String,
     /// (stage, seconds), in the order the stages ran.
     pub timings: Vec<(String, f64)>,
 }
@@ -47,22 +49,8 @@ pub fn discretize_conventional(
     cull_backfaces: bool,
 ) -> Result<DepthImages> {
     let total = Instant::now();
-    let Some(first) = cameras.first() else {
-        return input_err!("discretize needs at least one camera");
-    };
-    if let Some((i, c)) = cameras
-        .iter()
-        .enumerate()
-        .find(|(_, c)| (c.width, c.height) != (first.width, first.height))
-    {
-        return input_err!(
-            "cameras of one call must share a resolution: camera 0 is {}x{}, camera {i} is {}x{}",
-            first.width,
-            first.height,
-            c.width,
-            c.height
-        );
-    }
+    check_cameras(cameras)?;
+    let first = &cameras[0];
     let start = Instant::now();
     let ctx = gpu::context()?;
     let device_seconds = start.elapsed().as_secs_f64();
@@ -94,10 +82,45 @@ pub fn discretize_conventional(
     Ok(img)
 }
 
+/// At least one camera, all of one resolution.
+pub(crate) fn check_cameras(cameras: &[Camera]) -> Result<()> {
+    let Some(first) = cameras.first() else {
+        return input_err!("discretize needs at least one camera");
+    };
+    if let Some((i, c)) = cameras
+        .iter()
+        .enumerate()
+        .find(|(_, c)| (c.width, c.height) != (first.width, first.height))
+    {
+        return input_err!(
+            "cameras of one call must share a resolution: camera 0 is {}x{}, camera {i} is {}x{}",
+            first.width,
+            first.height,
+            c.width,
+            c.height
+        );
+    }
+    Ok(())
+}
+
+/// Depth images from per-pixel triangle ids (row-major, image after image, −1 where empty):
+/// every field resolved in f64 from the pixel-centre ray and the triangle, as for conventional
+/// images. Returns the images and the resolve time.
+pub(crate) fn resolve_ids(scene: &Scene, cameras: &[Camera], ids: Vec<i32>) -> (DepthImages, f64) {
+    let start = Instant::now();
+    let planes = SurfacePlane::of(scene);
+    let mut img = DepthImages::allocate(cameras);
+    let rays: Vec<PixelRays> = cameras.iter().map(PixelRays::new).collect();
+    let n = ids.len();
+    img.triangle = ids;
+    resolve_into(&mut img, 0..n, &rays, planes);
+    (img, start.elapsed().as_secs_f64())
+}
+
 /// Per-camera constants of the pixel-centre rays (see `Camera::ray_z1`): the ray through pixel
 /// (x, y) is `origin(x, y) + t·dir(x, y)` with camera-space z of `dir` equal to −1, so `t` is
 /// the depth.
-struct PixelRays {
+pub(crate) struct PixelRays {
     eye: DVec3,
     /// World-space steps per pixel along x and y, and the ray at pixel (0, 0)'s corner.
     dx: DVec3,
@@ -108,7 +131,7 @@ struct PixelRays {
 }
 
 impl PixelRays {
-    fn new(cam: &Camera) -> Self {
+    pub(crate) fn new(cam: &Camera) -> Self {
         let (o00, d00) = cam.ray_z1(glam::DVec2::ZERO);
         let (o10, d10) = cam.ray_z1(glam::DVec2::X);
         let (o01, d01) = cam.ray_z1(glam::DVec2::Y);
@@ -137,7 +160,7 @@ impl PixelRays {
         }
     }
 
-    fn ray(&self, x: usize, y: usize) -> (DVec3, DVec3) {
+    pub(crate) fn ray(&self, x: usize, y: usize) -> (DVec3, DVec3) {
         let p = self.corner + self.dx * (x as f64 + 0.5) + self.dy * (y as f64 + 0.5);
         if self.orthographic {
             (p, self.forward)
@@ -163,6 +186,7 @@ impl DepthImages {
             position: vec![[0.0; 3]; total],
             color: vec![[0.0; 3]; total],
             cameras: cameras.to_vec(),
+            method: "conventional".into(),
             timings: vec![],
         }
     }

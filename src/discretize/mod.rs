@@ -1,6 +1,12 @@
-//! Discretizations of a scene into samples. `conventional`: one depth image per camera
-//! (the baseline of non-redundant-rendering.txt §3).
+//! Discretizations of a scene into samples (non-redundant-rendering.txt): `conventional` depth
+//! images (one per camera, the baseline of §3), `nonredundant` images (§3.2, Algorithm 1 with
+//! pixel or visibility redundancy) and depth `peeling` layers, and the `redundancy` tests
+//! (§3.1) they and the sampling metrics share.
 
 pub mod conventional;
+pub mod nonredundant;
+pub mod redundancy;
 
 pub use conventional::{discretize_conventional, DepthImages};
+pub use nonredundant::{centroid_camera, discretize_nonredundant, discretize_peeling};
+pub use redundancy::Redundancy;

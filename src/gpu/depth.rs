@@ -119,7 +119,7 @@ pub struct RasterStats {
 /// chunk overlaps the GPU's work on the next, and never more than the readback budget.
 const PIXELS_PER_CHUNK: u64 = 1 << 20;
 
-fn align(x: u64, a: u64) -> u64 {
+pub(super) fn align(x: u64, a: u64) -> u64 {
     x.div_ceil(a) * a
 }
 
@@ -444,7 +444,7 @@ fn finish_chunk(
     Ok(())
 }
 
-fn copy(
+pub(super) fn copy(
     encoder: &mut wgpu::CommandEncoder,
     tex: &wgpu::Texture,
     buf: &wgpu::Buffer,

@@ -2,6 +2,7 @@
 //! per scene; pipelines compiled once. Headless (no window or surface).
 
 pub mod depth;
+pub mod layered;
 
 use std::sync::{Arc, Mutex, OnceLock};
 
@@ -24,6 +25,7 @@ pub struct GpuContext {
     /// Serialises submissions from several Python threads.
     pub(crate) lock: Mutex<()>,
     depth_pipeline: OnceLock<depth::DepthPipeline>,
+    layered_pipeline: OnceLock<layered::LayeredPipeline>,
 }
 
 static CONTEXT: OnceLock<std::result::Result<Arc<GpuContext>, String>> = OnceLock::new();
@@ -105,6 +107,7 @@ fn create() -> std::result::Result<GpuContext, String> {
         errors,
         lock: Mutex::new(()),
         depth_pipeline: OnceLock::new(),
+        layered_pipeline: OnceLock::new(),
     })
 }
 
@@ -126,6 +129,11 @@ impl GpuContext {
     pub fn depth_pipeline(&self) -> &depth::DepthPipeline {
         self.depth_pipeline
             .get_or_init(|| depth::DepthPipeline::new(&self.device))
+    }
+
+    pub fn layered_pipeline(&self) -> &layered::LayeredPipeline {
+        self.layered_pipeline
+            .get_or_init(|| layered::LayeredPipeline::new(&self.device))
     }
 }
 

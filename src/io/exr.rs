@@ -16,6 +16,8 @@ use crate::discretize::DepthImages;
 use crate::error::{Error, Result as CoreResult};
 
 const CAMERA_ATTR: &str = "scenesample.camera";
+/// How the images were made (`DepthImages::method`), on every part.
+const METHOD_ATTR: &str = "scenesample.method";
 
 fn exr_err(path: &Path, message: impl std::fmt::Display) -> Error {
     Error::Exr {
@@ -54,6 +56,11 @@ pub fn write_depth_images(path: &Path, img: &DepthImages) -> CoreResult<()> {
         attrs
             .other
             .insert(Text::from(CAMERA_ATTR), AttributeValue::Text(text));
+        let method = Text::new_or_none(img.method.as_str())
+            .ok_or_else(|| exr_err(path, "the method name is not representable as EXR text"))?;
+        attrs
+            .other
+            .insert(Text::from(METHOD_ATTR), AttributeValue::Text(method));
         layers.push(Layer::new(
             (w, h),
             attrs,
@@ -157,6 +164,11 @@ pub fn read_depth_images(path: &Path) -> CoreResult<DepthImages> {
             }
         };
         out.cameras.push(cam);
+        // Files from before the attribute existed hold conventional images.
+        out.method = match layer.attributes.other.get(&Text::from(METHOD_ATTR)) {
+            Some(AttributeValue::Text(t)) => t.to_string(),
+            _ => "conventional".into(),
+        };
     }
     Ok(out)
 }

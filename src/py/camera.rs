@@ -57,6 +57,14 @@ impl PyCamera {
     }
 
     #[staticmethod]
+    #[pyo3(signature = (cameras, weights=None))]
+    fn blend(py: Python<'_>, cameras: Vec<PyCamera>, weights: Option<Vec<f64>>) -> PyResult<Self> {
+        let cams: Vec<Camera> = cameras.into_iter().map(|c| c.inner).collect();
+        let weights = weights.unwrap_or_else(|| vec![1.0; cams.len()]);
+        Camera::blend(&cams, &weights).map(Self::from).py_err(py)
+    }
+
+    #[staticmethod]
     #[pyo3(signature = (pose, *, yfov, width, height, znear=None, zfar=None))]
     fn from_pose(
         py: Python<'_>,

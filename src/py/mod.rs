@@ -5,6 +5,7 @@
 mod camera;
 mod convert;
 mod errors;
+mod evaluate;
 mod render;
 mod scene;
 
@@ -15,7 +16,10 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<scene::PyScene>()?;
     m.add_class::<camera::PyCamera>()?;
     m.add_function(wrap_pyfunction!(render::discretize_conventional, m)?)?;
+    m.add_function(wrap_pyfunction!(render::discretize_nonredundant, m)?)?;
+    m.add_function(wrap_pyfunction!(render::discretize_peeling, m)?)?;
     m.add_function(wrap_pyfunction!(render::cast_rays, m)?)?;
+    m.add_function(wrap_pyfunction!(evaluate::sampling_metrics, m)?)?;
     m.add_function(wrap_pyfunction!(render::device_info, m)?)?;
     m.add_function(wrap_pyfunction!(render::write_exr, m)?)?;
     m.add_function(wrap_pyfunction!(render::read_exr, m)?)?;

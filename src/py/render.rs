@@ -10,7 +10,7 @@ use super::camera::PyCamera;
 use super::convert::{array, borrow_rows, flat_i32, rows_array_of, rows_f32, rows_owned};
 use super::errors::{input, IntoPy};
 use super::scene::PyScene;
-use crate::discretize::DepthImages;
+use crate::discretize::{DepthImages, Redundancy};
 
 fn images_dict<'py>(py: Python<'py>, img: DepthImages) -> PyResult<Bound<'py, PyDict>> {
     let (n, h, w) = (img.n, img.height as usize, img.width as usize);
@@ -22,6 +22,7 @@ fn images_dict<'py>(py: Python<'py>, img: DepthImages) -> PyResult<Bound<'py, Py
     d.set_item("color", rows_owned(py, img.color, &[n, h, w, 3])?)?;
     let cams: Vec<PyCamera> = img.cameras.into_iter().map(PyCamera::from).collect();
     d.set_item("cameras", cams)?;
+    d.set_item("method", img.method)?;
     let t = PyDict::new(py);
     for (k, v) in img.timings {
         t.set_item(k, v)?;
@@ -42,6 +43,45 @@ pub fn discretize_conventional<'py>(
     let s = scene.inner.clone();
     let img = py
         .detach(|| crate::discretize::discretize_conventional(&s, &cams, cull_backfaces))
+        .py_err(py)?;
+    images_dict(py, img)
+}
+
+#[pyfunction]
+#[pyo3(signature = (scene, cameras, redundancy="pixel", cull_backfaces=false))]
+pub fn discretize_nonredundant<'py>(
+    py: Python<'py>,
+    scene: &PyScene,
+    cameras: Vec<PyCamera>,
+    redundancy: &str,
+    cull_backfaces: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let Some(r) = Redundancy::parse(redundancy) else {
+        return Err(input(
+            py,
+            format!("redundancy must be 'pixel' or 'visibility', got {redundancy:?}"),
+        ));
+    };
+    let cams: Vec<_> = cameras.into_iter().map(|c| c.inner).collect();
+    let s = scene.inner.clone();
+    let img = py
+        .detach(|| crate::discretize::discretize_nonredundant(&s, &cams, r, cull_backfaces))
+        .py_err(py)?;
+    images_dict(py, img)
+}
+
+#[pyfunction]
+#[pyo3(signature = (scene, camera, layers, cull_backfaces=false))]
+pub fn discretize_peeling<'py>(
+    py: Python<'py>,
+    scene: &PyScene,
+    camera: PyCamera,
+    layers: usize,
+    cull_backfaces: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let s = scene.inner.clone();
+    let img = py
+        .detach(|| crate::discretize::discretize_peeling(&s, &camera.inner, layers, cull_backfaces))
         .py_err(py)?;
     images_dict(py, img)
 }
@@ -110,6 +150,7 @@ pub fn write_exr(
     position: &Bound<'_, PyAny>,
     color: &Bound<'_, PyAny>,
     cameras: Vec<PyCamera>,
+    method: String,
 ) -> PyResult<()> {
     let npx = width as usize * height as usize;
     let n = cameras.len();
@@ -127,6 +168,7 @@ pub fn write_exr(
         position: rows_f32::<3>(position, "position")?,
         color: rows_f32::<3>(color, "color")?,
         cameras: cameras.into_iter().map(|c| c.inner).collect(),
+        method,
         timings: vec![],
     };
     for (name, len) in [

@@ -1,0 +1,221 @@
+//! Non-redundant rendering and depth peeling (non-redundant-rendering.txt §3.2, §6.1.1).
+//!
+//! - Pixel redundancy: Algorithm 1 with Algorithm 3 on the GPU (`gpu::layered`): one raster pass
+//!   per image, whose fragment stage discards a fragment that an earlier image already holds
+//!   (same triangle at the pixel it reprojects to) before it reaches the depth test.
+//! - Visibility redundancy: Algorithm 1 with Algorithm 2, exactly, on the CPU. Image 0 is a
+//!   conventional image (GPU). For image i > 0 every pixel-centre ray is walked front to back
+//!   through the surfaces it crosses (BVH ray casts, each resuming just beyond the previous
+//!   hit); each surface point met is a candidate sample, tested against every earlier image's
+//!   viewpoint with a visibility ray (`redundancy::visible_from`); the first candidate visible
+//!   from no earlier viewpoint is the pixel's sample. This is the nearest non-redundant sample
+//!   along the ray, which is what Algorithm 1's z-buffer keeps.
+//! - Depth peeling: k passes from one camera, pass i keeping the nearest fragment strictly
+//!   beyond pass i−1's depth at its pixel (`gpu::layered`, `fs_peel`).
+//!
+//! All three resolve depth, position, normal and colour from the triangle ids exactly as
+//! conventional images do.
+
+use std::time::Instant;
+
+use super::conventional::{check_cameras, discretize_conventional, resolve_ids, PixelRays};
+use super::redundancy::{self, Redundancy, Sample};
+use super::DepthImages;
+use crate::camera::Camera;
+use crate::error::Result;
+use crate::gpu::{self, layered};
+use crate::input_err;
+use crate::scene::Scene;
+use crate::trace;
+
+/// Non-redundant depth images, one per camera (shared resolution), image i free of samples
+/// redundant with images 0..i under `redundancy`.
+pub fn discretize_nonredundant(
+    scene: &Scene,
+    cameras: &[Camera],
+    redundancy: Redundancy,
+    cull_backfaces: bool,
+) -> Result<DepthImages> {
+    check_cameras(cameras)?;
+    match redundancy {
+        Redundancy::Pixel => layered_images(
+            scene,
+            cameras,
+            layered::LayerTest::PixelRedundancy,
+            cull_backfaces,
+            "nonredundant",
+        ),
+        Redundancy::Visibility => visibility_images(scene, cameras, cull_backfaces),
+    }
+}
+
+/// `layers` depth-peeling layers from `camera`.
+pub fn discretize_peeling(
+    scene: &Scene,
+    camera: &Camera,
+    layers: usize,
+    cull_backfaces: bool,
+) -> Result<DepthImages> {
+    if layers == 0 {
+        return input_err!("peeling needs at least one layer, got layers=0");
+    }
+    let cams = vec![camera.clone(); layers];
+    layered_images(
+        scene,
+        &cams,
+        layered::LayerTest::Peel,
+        cull_backfaces,
+        "peeling",
+    )
+}
+
+/// The viewpoint depth peeling uses by default (§6.1.3): the centroid of the reference
+/// viewpoints, with their mean orientation.
+pub fn centroid_camera(cameras: &[Camera]) -> Result<Camera> {
+    Camera::blend(cameras, &vec![1.0; cameras.len()])
+}
+
+fn layered_images(
+    scene: &Scene,
+    cameras: &[Camera],
+    test: layered::LayerTest,
+    cull_backfaces: bool,
+    method: &str,
+) -> Result<DepthImages> {
+    let total = Instant::now();
+    let start = Instant::now();
+    let ctx = gpu::context()?;
+    let device_seconds = start.elapsed().as_secs_f64();
+    let start = Instant::now();
+    super::conventional::SurfacePlane::of(scene);
+    let prepare_seconds = start.elapsed().as_secs_f64();
+    let (ids, raw) = layered::render(&ctx, scene, cameras, test, cull_backfaces)?;
+    let (mut img, resolve_seconds) = resolve_ids(scene, cameras, ids);
+    img.method = method.into();
+    img.timings = vec![
+        ("device".into(), device_seconds),
+        ("upload".into(), raw.upload_seconds),
+        ("prepare".into(), prepare_seconds),
+        ("raster".into(), raw.raster_seconds),
+    ];
+    if let Some(g) = raw.gpu_seconds {
+        img.timings.push(("raster_gpu".into(), g));
+    }
+    img.timings.push(("readback".into(), raw.readback_seconds));
+    img.timings.push(("resolve".into(), resolve_seconds));
+    img.timings
+        .push(("total".into(), total.elapsed().as_secs_f64()));
+    Ok(img)
+}
+
+/// Algorithm 1 with Algorithm 2, exactly (see the module docs).
+fn visibility_images(
+    scene: &Scene,
+    cameras: &[Camera],
+    cull_backfaces: bool,
+) -> Result<DepthImages> {
+    let total = Instant::now();
+    let first = discretize_conventional(scene, &cameras[..1], cull_backfaces)?;
+    let raster_seconds = first.timings.iter().find(|(k, _)| k == "total").unwrap().1;
+    let start = Instant::now();
+    let npx = cameras[0].width as usize * cameras[0].height as usize;
+    let mut ids = first.triangle;
+    ids.reserve(npx * (cameras.len() - 1));
+    for i in 1..cameras.len() {
+        ids.extend(walk_image(scene, cameras, i, cull_backfaces)?);
+    }
+    let walk_seconds = start.elapsed().as_secs_f64();
+    let (mut img, resolve_seconds) = resolve_ids(scene, cameras, ids);
+    img.method = "nonredundant".into();
+    img.timings = vec![
+        ("image0".into(), raster_seconds),
+        ("walk".into(), walk_seconds),
+        ("resolve".into(), resolve_seconds),
+        ("total".into(), total.elapsed().as_secs_f64()),
+    ];
+    Ok(img)
+}
+
+/// Image `i` under visibility redundancy: the nearest sample along each pixel ray that no
+/// viewpoint of images 0..i sees.
+fn walk_image(
+    scene: &Scene,
+    cameras: &[Camera],
+    i: usize,
+    cull_backfaces: bool,
+) -> Result<Vec<i32>> {
+    let cam = &cameras[i];
+    let (w, h) = (cam.width as usize, cam.height as usize);
+    let rays = PixelRays::new(cam);
+    let (near, _) = cam.clip_range(scene.bounds());
+    let tolerance = redundancy::tolerance(scene);
+    let planes_normal = |t: usize| {
+        let [a, b, c] = scene.triangle(t);
+        (b - a).cross(c - a)
+    };
+    let mut out = vec![-1i32; w * h];
+    // Pixels still walking, and the depth each resumes from.
+    let mut active: Vec<usize> = (0..w * h).collect();
+    let mut from: Vec<f64> = vec![near; w * h];
+    while !active.is_empty() {
+        let mut origins = Vec::with_capacity(active.len());
+        let mut dirs = Vec::with_capacity(active.len());
+        for &p in &active {
+            let (o, d) = rays.ray(p % w, p / w);
+            // Resume from depth `from[p]`: the ray's direction has camera z −1, so t is depth.
+            origins.push((o + d * from[p]).as_vec3().to_array());
+            dirs.push(d.as_vec3().to_array());
+        }
+        let hits = trace::cast_rays(scene, &origins, &dirs, 0.0, f32::INFINITY)?;
+        let mut candidates = Vec::new();
+        let mut at = Vec::new();
+        for (k, &p) in active.iter().enumerate() {
+            let tri = hits.triangle[k];
+            if tri < 0 {
+                continue; // nothing left along this ray: the pixel stays empty
+            }
+            let (o, d) = rays.ray(p % w, p / w);
+            let depth = from[p] + hits.t[k] as f64;
+            let point = o + d * depth;
+            from[p] = depth;
+            if cull_backfaces && planes_normal(tri as usize).dot(d) >= 0.0 {
+                at.push((p, false));
+                candidates.push(None);
+                continue;
+            }
+            at.push((p, true));
+            candidates.push(Some(Sample {
+                triangle: tri,
+                point,
+            }));
+        }
+        // Test the candidates against each earlier viewpoint in turn; redundant ones drop out.
+        let mut redundant = vec![false; candidates.len()];
+        for cam_j in &cameras[..i] {
+            let open: Vec<usize> = (0..candidates.len())
+                .filter(|&c| candidates[c].is_some() && !redundant[c])
+                .collect();
+            if open.is_empty() {
+                break;
+            }
+            let samples: Vec<Sample> = open.iter().map(|&c| candidates[c].unwrap()).collect();
+            let seen = redundancy::visible_from(scene, &samples, cam_j, tolerance)?;
+            for (k, &c) in open.iter().enumerate() {
+                redundant[c] |= seen[k];
+            }
+        }
+        let mut next = Vec::new();
+        for (c, &(p, tested)) in at.iter().enumerate() {
+            if tested && !redundant[c] {
+                out[p] = candidates[c].unwrap().triangle;
+            } else {
+                // Resume just beyond this surface: past the tolerance that makes two surfaces
+                // the same point, so the walk always advances.
+                from[p] += tolerance + 1e-5 * from[p].abs();
+                next.push(p);
+            }
+        }
+        active = next;
+    }
+    Ok(out)
+}

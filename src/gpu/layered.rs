@@ -1,0 +1,420 @@
+//! Raster passes of `shaders/layered.wgsl`: images rendered one after another, each pass testing
+//! its fragments against the images before it — non-redundant rendering with pixel redundancy
+//! (non-redundant-rendering.txt Algorithm 1 with Algorithm 3) or depth peeling. All passes go in
+//! one submission: after each pass its triangle ids are copied into a storage buffer that the
+//! later passes read (and that is read back at the end), and peeling alternates two depth
+//! textures, one the target and the other the previous layer.
+
+use std::time::Instant;
+
+use bytemuck::{Pod, Zeroable};
+use glam::DVec3;
+
+use super::depth::{align, copy, RasterStats};
+use super::{GpuContext, SceneBuffers};
+use crate::camera::Camera;
+use crate::error::{Error, Result};
+use crate::scene::Scene;
+
+const SHADER: &str = include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/shaders/layered.wgsl"));
+const TRI_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Sint;
+const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+
+/// Which test a pass applies to its fragments.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LayerTest {
+    /// Discard a fragment whose triangle an earlier image holds at the pixel it reprojects to.
+    PixelRedundancy,
+    /// Discard a fragment not strictly beyond the previous image's depth at its pixel.
+    Peel,
+}
+
+/// Host copy of `View` in layered.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct ViewUniform {
+    view_proj: [[f32; 4]; 4],
+    image: u32,
+    width: u32,
+    height: u32,
+    stride: u32,
+}
+const VIEW_SIZE: u64 = std::mem::size_of::<ViewUniform>() as u64;
+const _: () = assert!(VIEW_SIZE == 80);
+
+/// Host copy of `Earlier` in layered.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct EarlierView {
+    view_proj: [[f32; 4]; 4],
+    front: [f32; 4],
+}
+
+pub struct LayeredPipeline {
+    layout: wgpu::BindGroupLayout,
+    /// [test][cull]: test 0 = pixel redundancy, 1 = peel; cull 0 = none, 1 = back faces.
+    pipelines: [[wgpu::RenderPipeline; 2]; 2],
+}
+
+impl LayeredPipeline {
+    pub fn new(device: &wgpu::Device) -> Self {
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("layered.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(SHADER.into()),
+        });
+        let storage = |binding| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::FRAGMENT,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only: true },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("layered.wgsl bindings"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: true,
+                        min_binding_size: wgpu::BufferSize::new(VIEW_SIZE),
+                    },
+                    count: None,
+                },
+                storage(1),
+                storage(2),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 3,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Depth,
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
+            ],
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("layered.wgsl layout"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let make = |entry: &str, cull: Option<wgpu::Face>| {
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(entry),
+                layout: Some(&pipeline_layout),
+                vertex: wgpu::VertexState {
+                    module: &module,
+                    entry_point: Some("vs_main"),
+                    compilation_options: Default::default(),
+                    buffers: &[Some(wgpu::VertexBufferLayout {
+                        array_stride: 12,
+                        step_mode: wgpu::VertexStepMode::Vertex,
+                        attributes: &wgpu::vertex_attr_array![0 => Float32x3],
+                    })],
+                },
+                primitive: wgpu::PrimitiveState {
+                    topology: wgpu::PrimitiveTopology::TriangleList,
+                    front_face: wgpu::FrontFace::Ccw,
+                    cull_mode: cull,
+                    ..Default::default()
+                },
+                depth_stencil: Some(wgpu::DepthStencilState {
+                    format: DEPTH_FORMAT,
+                    depth_write_enabled: Some(true),
+                    depth_compare: Some(wgpu::CompareFunction::Greater),
+                    stencil: Default::default(),
+                    bias: Default::default(),
+                }),
+                multisample: Default::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &module,
+                    entry_point: Some(entry),
+                    compilation_options: Default::default(),
+                    targets: &[Some(TRI_FORMAT.into())],
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        };
+        let pair = |entry| [make(entry, None), make(entry, Some(wgpu::Face::Back))];
+        Self {
+            layout,
+            pipelines: [pair("fs_nonredundant"), pair("fs_peel")],
+        }
+    }
+}
+
+/// Render one image per camera (all of one resolution), image i tested against images 0..i.
+/// Returns the triangle ids, row-major, image after image (−1 where empty).
+pub fn render(
+    ctx: &GpuContext,
+    scene: &Scene,
+    cameras: &[Camera],
+    test: LayerTest,
+    cull_backfaces: bool,
+) -> Result<(Vec<i32>, RasterStats)> {
+    let (w, h) = (cameras[0].width, cameras[0].height);
+    let n = cameras.len() as u64;
+    let max_dim = ctx.limits.max_texture_dimension_2d;
+    if w > max_dim || h > max_dim {
+        return Err(Error::GpuLimit(format!(
+            "images of {w}x{h} exceed this device's largest texture ({max_dim}x{max_dim}); \
+             use a smaller resolution"
+        )));
+    }
+    let row = align(w as u64 * 4, wgpu::COPY_BYTES_PER_ROW_ALIGNMENT as u64);
+    let image_bytes = row * h as u64;
+    let history_bytes = image_bytes * n;
+    let limit = (ctx.limits.max_storage_buffer_binding_size as u64).min(ctx.limits.max_buffer_size);
+    if history_bytes > limit {
+        return Err(Error::GpuLimit(format!(
+            "{n} layered images of {w}x{h} need {history_bytes} bytes of triangle ids on the GPU, \
+             more than this device's storage limit of {limit} bytes; use fewer or smaller images"
+        )));
+    }
+    let _guard = ctx
+        .lock
+        .lock()
+        .map_err(|_| Error::Gpu("GPU lock poisoned".into()))?;
+    let cached = scene.gpu.lock().map(|s| s.is_some()).unwrap_or(false);
+    let buffers = SceneBuffers::of(ctx, scene)?;
+    let mut stats = RasterStats {
+        upload_seconds: if cached { 0.0 } else { buffers.upload_seconds },
+        gpu_seconds: ctx.timestamps.then_some(0.0),
+        ..Default::default()
+    };
+    let start = Instant::now();
+    let device = &ctx.device;
+    let pipeline = ctx.layered_pipeline();
+    let centre = scene.center();
+    let bounds = scene.bounds();
+
+    use wgpu::util::DeviceExt;
+    let stride = align(VIEW_SIZE, ctx.limits.min_uniform_buffer_offset_alignment as u64);
+    let mut uniforms = vec![0u8; (stride * n) as usize];
+    let mut earlier = Vec::with_capacity(cameras.len());
+    for (i, cam) in cameras.iter().enumerate() {
+        let (near, far) = cam.clip_range(bounds);
+        let m = (cam.projection_matrix(near, far) * cam.view_matrix_relative(centre)).as_mat4();
+        let u = ViewUniform {
+            view_proj: m.to_cols_array_2d(),
+            image: i as u32,
+            width: w,
+            height: h,
+            stride: (row / 4) as u32,
+        };
+        let at = i * stride as usize;
+        uniforms[at..at + VIEW_SIZE as usize].copy_from_slice(bytemuck::bytes_of(&u));
+        // In front: (p_rel + centre − eye)·forward > 0, i.e. p_rel·forward + (centre − eye)·forward.
+        let fwd: DVec3 = cam.forward();
+        let front = fwd.extend((centre - cam.eye()).dot(fwd)).as_vec4();
+        earlier.push(EarlierView {
+            view_proj: m.to_cols_array_2d(),
+            front: front.to_array(),
+        });
+    }
+    let uniform_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("layered view uniforms"),
+        contents: &uniforms,
+        usage: wgpu::BufferUsages::UNIFORM,
+    });
+    let earlier_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("earlier views"),
+        contents: bytemuck::cast_slice(&earlier),
+        usage: wgpu::BufferUsages::STORAGE,
+    });
+    let history = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("earlier triangle ids"),
+        size: history_bytes,
+        usage: wgpu::BufferUsages::STORAGE
+            | wgpu::BufferUsages::COPY_DST
+            | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    });
+    let readback = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("layered readback"),
+        size: history_bytes,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let texture = |label, format, usage| {
+        device.create_texture(&wgpu::TextureDescriptor {
+            label: Some(label),
+            size: wgpu::Extent3d {
+                width: w,
+                height: h,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format,
+            usage,
+            view_formats: &[],
+        })
+    };
+    let tri = texture(
+        "layered triangle ids",
+        TRI_FORMAT,
+        wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+    );
+    let tri_view = tri.create_view(&Default::default());
+    // Two depth textures: pass i renders into depths[i % 2] and reads the other.
+    let depth_usage =
+        wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
+    let depths = [
+        texture("layered depth a", DEPTH_FORMAT, depth_usage),
+        texture("layered depth b", DEPTH_FORMAT, depth_usage),
+    ];
+    let depth_views = depths
+        .each_ref()
+        .map(|d| d.create_view(&Default::default()));
+    let binds = [1, 0].map(|other: usize| {
+        device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("layered.wgsl bindings"),
+            layout: &pipeline.layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                        buffer: &uniform_buf,
+                        offset: 0,
+                        size: wgpu::BufferSize::new(VIEW_SIZE),
+                    }),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: earlier_buf.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: history.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: wgpu::BindingResource::TextureView(&depth_views[other]),
+                },
+            ],
+        })
+    });
+    let queries = ctx.timestamps.then(|| {
+        let set = device.create_query_set(&wgpu::QuerySetDescriptor {
+            label: Some("layered timestamps"),
+            ty: wgpu::QueryType::Timestamp,
+            count: 2 * n as u32,
+        });
+        let resolve = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("layered timestamp resolve"),
+            size: 16 * n,
+            usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let read = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("layered timestamp readback"),
+            size: 16 * n,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        (set, resolve, read)
+    });
+    let pipe = &pipeline.pipelines[(test == LayerTest::Peel) as usize][cull_backfaces as usize];
+    let mut encoder = device.create_command_encoder(&Default::default());
+    for i in 0..n {
+        {
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("layered.wgsl"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: &tri_view,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color {
+                            r: -1.0,
+                            g: 0.0,
+                            b: 0.0,
+                            a: 0.0,
+                        }),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &depth_views[i as usize % 2],
+                    depth_ops: Some(wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(0.0),
+                        store: wgpu::StoreOp::Store,
+                    }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: queries.as_ref().map(|(set, _, _)| {
+                    wgpu::RenderPassTimestampWrites {
+                        query_set: set,
+                        beginning_of_pass_write_index: Some(2 * i as u32),
+                        end_of_pass_write_index: Some(2 * i as u32 + 1),
+                    }
+                }),
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_pipeline(pipe);
+            pass.set_bind_group(0, &binds[i as usize % 2], &[(i * stride) as u32]);
+            pass.set_vertex_buffer(0, buffers.positions.slice(..));
+            pass.set_index_buffer(buffers.faces.slice(..), wgpu::IndexFormat::Uint32);
+            pass.draw_indexed(0..3 * buffers.triangle_count, 0, 0..1);
+        }
+        copy(&mut encoder, &tri, &history, i * image_bytes, row, w, h);
+    }
+    encoder.copy_buffer_to_buffer(&history, 0, &readback, 0, history_bytes);
+    if let Some((set, resolve, read)) = &queries {
+        encoder.resolve_query_set(set, 0..2 * n as u32, resolve, 0);
+        encoder.copy_buffer_to_buffer(resolve, 0, read, 0, 16 * n);
+    }
+    let submission = ctx.queue.submit([encoder.finish()]);
+    readback.slice(..).map_async(wgpu::MapMode::Read, |_| {});
+    if let Some((_, _, read)) = &queries {
+        read.slice(..).map_async(wgpu::MapMode::Read, |_| {});
+    }
+    device
+        .poll(wgpu::PollType::Wait {
+            submission_index: Some(submission),
+            timeout: None,
+        })
+        .map_err(|e| Error::Gpu(format!("waiting for the GPU failed: {e}")))?;
+    ctx.check_errors()?;
+    stats.raster_seconds = start.elapsed().as_secs_f64();
+
+    let start = Instant::now();
+    let (wu, hu) = (w as usize, h as usize);
+    let mut ids = vec![0i32; n as usize * wu * hu];
+    {
+        let data = readback
+            .slice(..)
+            .get_mapped_range()
+            .map_err(|e| Error::Gpu(format!("mapping the readback buffer failed: {e}")))?;
+        for (r, dst) in ids.chunks_exact_mut(wu).enumerate() {
+            let src = &data[r * row as usize..][..wu * 4];
+            dst.copy_from_slice(bytemuck::cast_slice(src));
+        }
+    }
+    readback.unmap();
+    if let Some((_, _, read)) = &queries {
+        let period = ctx.queue.get_timestamp_period() as f64 * 1e-9;
+        let data = read
+            .slice(..)
+            .get_mapped_range()
+            .map_err(|e| Error::Gpu(format!("mapping the timestamps failed: {e}")))?;
+        let ts: &[u64] = bytemuck::cast_slice(&data);
+        stats.gpu_seconds = Some(
+            ts.chunks(2)
+                .map(|t| t[1].saturating_sub(t[0]) as f64 * period)
+                .sum(),
+        );
+    }
+    stats.readback_seconds = start.elapsed().as_secs_f64();
+    Ok((ids, stats))
+}

@@ -1,0 +1,82 @@
+//! The sampling metrics, from the arrays of a `DepthImages` result.
+
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use super::camera::PyCamera;
+use super::convert::{array, flat_i32, rows_f32};
+use super::errors::{input, IntoPy};
+use super::scene::PyScene;
+use crate::discretize::{DepthImages, Redundancy};
+
+#[pyfunction]
+#[pyo3(signature = (scene, triangle, position, cameras, method, reference, frames, redundancy, cull_backfaces))]
+#[allow(clippy::too_many_arguments)]
+pub fn sampling_metrics<'py>(
+    py: Python<'py>,
+    scene: &PyScene,
+    triangle: &Bound<'py, PyAny>,
+    position: &Bound<'py, PyAny>,
+    cameras: Vec<PyCamera>,
+    method: String,
+    reference: Vec<PyCamera>,
+    frames: Vec<PyCamera>,
+    redundancy: &str,
+    cull_backfaces: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let Some(mode) = Redundancy::parse(redundancy) else {
+        return Err(input(
+            py,
+            format!("redundancy must be 'pixel' or 'visibility', got {redundancy:?}"),
+        ));
+    };
+    let cameras: Vec<_> = cameras.into_iter().map(|c| c.inner).collect();
+    let Some(first) = cameras.first() else {
+        return Err(input(py, "the images have no cameras".into()));
+    };
+    let (width, height) = (first.width, first.height);
+    let npx = width as usize * height as usize * cameras.len();
+    let img = DepthImages {
+        n: cameras.len(),
+        width,
+        height,
+        triangle: flat_i32(triangle, "triangle")?,
+        position: rows_f32::<3>(position, "position")?,
+        cameras,
+        method,
+        ..Default::default()
+    };
+    if img.triangle.len() != npx || img.position.len() != npx {
+        return Err(input(
+            py,
+            format!(
+                "triangle and position must hold {npx} pixels ({} images of {width}x{height}), \
+                 got {} and {}",
+                img.n,
+                img.triangle.len(),
+                img.position.len()
+            ),
+        ));
+    }
+    let reference: Vec<_> = reference.into_iter().map(|c| c.inner).collect();
+    let frames: Vec<_> = frames.into_iter().map(|c| c.inner).collect();
+    let s = scene.inner.clone();
+    let m = py
+        .detach(|| crate::evaluate::sampling_metrics(&s, &img, &reference, &frames, mode, cull_backfaces))
+        .py_err(py)?;
+    let n = m.samples.len();
+    let d = PyDict::new(py);
+    d.set_item("samples", array(py, m.samples, &[n])?)?;
+    d.set_item("redundant", array(py, m.redundant, &[n])?)?;
+    d.set_item("disoccluded", array(py, m.disoccluded, &[n])?)?;
+    d.set_item("useful", array(py, m.useful, &[n])?)?;
+    d.set_item("available_avg", array(py, m.available_avg, &[n])?)?;
+    d.set_item("available_min", array(py, m.available_min, &[n])?)?;
+    d.set_item("frames", m.frames)?;
+    let t = PyDict::new(py);
+    for (k, v) in m.timings {
+        t.set_item(k, v)?;
+    }
+    d.set_item("timings", t)?;
+    Ok(d)
+}
