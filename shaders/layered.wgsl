@@ -79,6 +79,13 @@ fn fs_nonredundant(in: VertexOut, @builtin(primitive_index) prim: u32) -> @locat
     return i32(prim);
 }
 
+// Image 0 of either method has nothing to test against: no discard, so the depth test can run
+// before the fragment stage (early z), as in a conventional pass.
+@fragment
+fn fs_first(@builtin(primitive_index) prim: u32) -> @location(0) i32 {
+    return i32(prim);
+}
+
 @fragment
 fn fs_peel(in: VertexOut, @builtin(primitive_index) prim: u32) -> @location(0) i32 {
     if view.image > 0u {

@@ -297,7 +297,7 @@ impl Camera {
         let total: f64 = weights.iter().sum();
         if cameras.is_empty()
             || cameras.len() != weights.len()
-            || weights.iter().any(|w| !(*w >= 0.0))
+            || weights.iter().any(|w| w.is_nan() || *w < 0.0)
             || !(total > 0.0 && total.is_finite())
         {
             return input_err!(
@@ -313,7 +313,7 @@ impl Camera {
             let w = w / total;
             let qi = glam::DQuat::from_mat3(&DMat3::from_mat4(c.pose));
             let qi = if qi.dot(q0) < 0.0 { -qi } else { qi };
-            q = q + qi * w;
+            q += qi * w;
             eye += c.eye() * w;
         }
         let q = q.normalize();

@@ -5,8 +5,8 @@
 
 pub mod camera;
 pub mod discretize;
-pub mod evaluate;
 pub mod error;
+pub mod evaluate;
 pub mod gpu;
 pub mod io;
 pub mod scene;

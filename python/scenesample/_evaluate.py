@@ -92,9 +92,10 @@ def evaluate(
           frame's samples available in (redundant with) at least one of images 0..i — the
           last entry is the paper's Table 2 figure for the whole set.
 
-        Also ``frames`` (int) and ``timings`` (seconds: ``conventional`` reference images,
-        ``view_independent`` metrics 1-2, ``frames`` rendering and testing the intermediate
-        frames, ``total``).
+        Also ``disoccluded_mask`` and ``useful_mask``, (n, H, W) bool: which pixels hold
+        disoccluded and useful samples (the paper's Fig. 6), ``frames`` (int) and ``timings``
+        (seconds: ``conventional`` reference images, ``view_independent`` metrics 1-2,
+        ``frames`` rendering and testing the intermediate frames, ``total``).
 
     Raises
     ------

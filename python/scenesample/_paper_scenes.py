@@ -279,26 +279,36 @@ def turtles(seed: int = 0, count: int = 16) -> Scene:
 
 
 def reference_cameras(
-    scene: Scene, resolution: int = 512, spread: float = 0.25, yfov: float = 0.9
+    scene: Scene,
+    resolution: int = 512,
+    spread: float = 0.25,
+    yfov: float = 0.9,
+    up: str = "z",
 ) -> list[Any]:
     """Three cameras at the corners of a viewpoint translation triangle, as in the paper: the
     triangle's centre 0.8 scene diagonals from the scene's centre, in front of it and 35 degrees
-    above (z up), its side ``spread`` diagonals, all looking at the centre."""
+    above it (``up`` is ``"z"`` for these procedural scenes, ``"y"`` for glTF ones), its side
+    ``spread`` diagonals, all looking at the centre."""
     from ._core import Camera
 
+    if up not in ("y", "z"):
+        raise ValueError(f"up must be 'y' or 'z', got {up!r}")
     lo, hi = np.asarray(scene.bounds, dtype=np.float64)
     c = (lo + hi) / 2
     diag = float(np.linalg.norm(hi - lo))
     elev = np.radians(35)
-    view = np.array([0.0, -np.cos(elev), np.sin(elev)])
+    if up == "z":
+        upv, view = np.array([0.0, 0.0, 1.0]), np.array([0.0, -np.cos(elev), np.sin(elev)])
+    else:
+        upv, view = np.array([0.0, 1.0, 0.0]), np.array([0.0, np.sin(elev), np.cos(elev)])
     eye = c + view * 0.8 * diag
-    right = np.cross(view, [0.0, 0.0, 1.0])
+    right = np.cross(view, upv)
     right /= np.linalg.norm(right)
     up = np.cross(right, view)
     r = spread * diag / np.sqrt(3)
     corners = [eye + r * (np.cos(a) * right + np.sin(a) * up) for a in np.radians([90, 210, 330])]
     return [
-        Camera.look_at(e, c, (0.0, 0.0, 1.0), yfov=yfov, width=resolution, height=resolution)
+        Camera.look_at(e, c, tuple(upv), yfov=yfov, width=resolution, height=resolution)
         for e in corners
     ]
 

@@ -48,7 +48,7 @@ pub fn pixel_of(cam: &Camera, p: DVec3) -> Option<(usize, usize)> {
     };
     let (w, h) = (cam.width as f64, cam.height as f64);
     (in_front && px.x >= 0.0 && px.y >= 0.0 && px.x < w && px.y < h)
-        .then(|| (px.x as usize, px.y as usize))
+        .then_some((px.x as usize, px.y as usize))
 }
 
 /// Algorithm 3: does the image (`cam`, row-major triangle `ids`) hold `s.triangle` at the pixel
@@ -79,9 +79,7 @@ pub fn visible_from(
         }
         let origin = match cam.projection {
             Projection::Perspective { .. } => cam.eye(),
-            Projection::Orthographic { .. } => {
-                s.point - fwd * (s.point - cam.eye()).dot(fwd)
-            }
+            Projection::Orthographic { .. } => s.point - fwd * (s.point - cam.eye()).dot(fwd),
         };
         let d = s.point - origin;
         if d.length_squared() == 0.0 {

@@ -41,10 +41,21 @@ pub struct SamplingMetrics {
     pub available_avg: Vec<f64>,
     pub available_min: Vec<f64>,
     pub frames: usize,
+    /// Per pixel of every image (row-major, image after image): disoccluded, and useful.
+    pub disoccluded_mask: Vec<bool>,
+    pub useful_mask: Vec<bool>,
     pub timings: Vec<(String, f64)>,
 }
 
-/// An image's samples, with their pixel indices.
+/// The pixels (within image i) that hold samples, in the order of `samples_of`.
+fn sample_pixels(img: &DepthImages, i: usize) -> Vec<usize> {
+    let npx = img.width as usize * img.height as usize;
+    (0..npx)
+        .filter(|&p| img.triangle[i * npx + p] >= 0)
+        .collect()
+}
+
+/// An image's samples, in pixel order.
 fn samples_of(img: &DepthImages, i: usize) -> Vec<Sample> {
     let npx = img.width as usize * img.height as usize;
     let range = i * npx..(i + 1) * npx;
@@ -131,7 +142,9 @@ pub fn sampling_metrics(
     let total = Instant::now();
     let n = images.n;
     if reference.is_empty() {
-        return input_err!("the sampling metrics need the reference cameras the images were made for");
+        return input_err!(
+            "the sampling metrics need the reference cameras the images were made for"
+        );
     }
     if images.method == "nonredundant" || images.method == "conventional" {
         if reference.len() != n {
@@ -161,6 +174,7 @@ pub fn sampling_metrics(
     let start = Instant::now();
     let samples: Vec<Vec<Sample>> = (0..n).map(|i| samples_of(images, i)).collect();
     let mut disoccluded: Vec<Vec<Sample>> = Vec::with_capacity(n);
+    let mut disoccluded_px: Vec<Vec<usize>> = Vec::with_capacity(n);
     for (i, s) in samples.iter().enumerate() {
         out.samples.push(s.len() as u64);
         let red = captured_by_any(scene, s, images, 0..i, mode)?;
@@ -179,6 +193,14 @@ pub fn sampling_metrics(
             .collect();
         out.disoccluded.push(fraction(dis.len(), s.len()));
         disoccluded.push(dis);
+        let px = sample_pixels(images, i);
+        disoccluded_px.push(
+            px.iter()
+                .zip(&held)
+                .filter(|(_, &h)| !h)
+                .map(|(&p, _)| p)
+                .collect(),
+        );
     }
     out.timings
         .push(("view_independent".into(), start.elapsed().as_secs_f64()));
@@ -214,7 +236,14 @@ pub fn sampling_metrics(
             return Err(e);
         }
     }
+    let npx = images.width as usize * images.height as usize;
+    out.disoccluded_mask = vec![false; n * npx];
+    out.useful_mask = vec![false; n * npx];
     for i in 0..n {
+        for (k, &p) in disoccluded_px[i].iter().enumerate() {
+            out.disoccluded_mask[i * npx + p] = true;
+            out.useful_mask[i * npx + p] = useful[i][k];
+        }
         let u = useful[i].iter().filter(|&&u| u).count();
         out.useful.push(fraction(u, disoccluded[i].len()));
         let a = &available[i];
@@ -250,7 +279,10 @@ fn consume_frame(
             continue;
         }
         let sub: Vec<Sample> = open.iter().map(|&s| dis[s]).collect();
-        for (j, c) in captured(scene, &sub, chunk, f, mode)?.into_iter().enumerate() {
+        for (j, c) in captured(scene, &sub, chunk, f, mode)?
+            .into_iter()
+            .enumerate()
+        {
             use_[open[j]] |= c;
         }
     }
@@ -265,7 +297,10 @@ fn consume_frame(
             break;
         }
         let sub: Vec<Sample> = open.iter().map(|&s| frame[s]).collect();
-        for (j, c) in captured(scene, &sub, images, k, mode)?.into_iter().enumerate() {
+        for (j, c) in captured(scene, &sub, images, k, mode)?
+            .into_iter()
+            .enumerate()
+        {
             if c {
                 first_holder[open[j]] = k;
             }

@@ -52,8 +52,9 @@ struct EarlierView {
 
 pub struct LayeredPipeline {
     layout: wgpu::BindGroupLayout,
-    /// [test][cull]: test 0 = pixel redundancy, 1 = peel; cull 0 = none, 1 = back faces.
-    pipelines: [[wgpu::RenderPipeline; 2]; 2],
+    /// [test][cull]: test 0 = pixel redundancy, 1 = peel, 2 = none (image 0, early depth
+    /// test); cull 0 = none, 1 = back faces.
+    pipelines: [[wgpu::RenderPipeline; 2]; 3],
 }
 
 impl LayeredPipeline {
@@ -145,7 +146,7 @@ impl LayeredPipeline {
         let pair = |entry| [make(entry, None), make(entry, Some(wgpu::Face::Back))];
         Self {
             layout,
-            pipelines: [pair("fs_nonredundant"), pair("fs_peel")],
+            pipelines: [pair("fs_nonredundant"), pair("fs_peel"), pair("fs_first")],
         }
     }
 }
@@ -171,7 +172,10 @@ pub fn render(
     let row = align(w as u64 * 4, wgpu::COPY_BYTES_PER_ROW_ALIGNMENT as u64);
     let image_bytes = row * h as u64;
     let history_bytes = image_bytes * n;
-    let limit = (ctx.limits.max_storage_buffer_binding_size as u64).min(ctx.limits.max_buffer_size);
+    let limit = ctx
+        .limits
+        .max_storage_buffer_binding_size
+        .min(ctx.limits.max_buffer_size);
     if history_bytes > limit {
         return Err(Error::GpuLimit(format!(
             "{n} layered images of {w}x{h} need {history_bytes} bytes of triangle ids on the GPU, \
@@ -196,7 +200,10 @@ pub fn render(
     let bounds = scene.bounds();
 
     use wgpu::util::DeviceExt;
-    let stride = align(VIEW_SIZE, ctx.limits.min_uniform_buffer_offset_alignment as u64);
+    let stride = align(
+        VIEW_SIZE,
+        ctx.limits.min_uniform_buffer_offset_alignment as u64,
+    );
     let mut uniforms = vec![0u8; (stride * n) as usize];
     let mut earlier = Vec::with_capacity(cameras.len());
     for (i, cam) in cameras.iter().enumerate() {
@@ -266,8 +273,7 @@ pub fn render(
     );
     let tri_view = tri.create_view(&Default::default());
     // Two depth textures: pass i renders into depths[i % 2] and reads the other.
-    let depth_usage =
-        wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
+    let depth_usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
     let depths = [
         texture("layered depth a", DEPTH_FORMAT, depth_usage),
         texture("layered depth b", DEPTH_FORMAT, depth_usage),
@@ -323,7 +329,9 @@ pub fn render(
         });
         (set, resolve, read)
     });
-    let pipe = &pipeline.pipelines[(test == LayerTest::Peel) as usize][cull_backfaces as usize];
+    let cull = cull_backfaces as usize;
+    let pipe = &pipeline.pipelines[(test == LayerTest::Peel) as usize][cull];
+    let first = &pipeline.pipelines[2][cull];
     let mut encoder = device.create_command_encoder(&Default::default());
     for i in 0..n {
         {
@@ -361,7 +369,7 @@ pub fn render(
                 occlusion_query_set: None,
                 multiview_mask: None,
             });
-            pass.set_pipeline(pipe);
+            pass.set_pipeline(if i == 0 { first } else { pipe });
             pass.set_bind_group(0, &binds[i as usize % 2], &[(i * stride) as u32]);
             pass.set_vertex_buffer(0, buffers.positions.slice(..));
             pass.set_index_buffer(buffers.faces.slice(..), wgpu::IndexFormat::Uint32);

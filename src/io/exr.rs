@@ -308,6 +308,7 @@ mod tests {
                 .collect(),
             color: (0..12).map(|i| [0.1 * i as f32, 0.2, 0.3]).collect(),
             cameras: vec![cam, cam2],
+            method: "peeling".into(),
             timings: vec![],
         };
         let path = std::env::temp_dir().join(format!("scenesample-exr-{}.exr", std::process::id()));
@@ -330,5 +331,6 @@ mod tests {
             bits(img.color.as_flattened())
         );
         assert_eq!(back.cameras, img.cameras);
+        assert_eq!(back.method, "peeling");
     }
 }

@@ -62,7 +62,9 @@ pub fn sampling_metrics<'py>(
     let frames: Vec<_> = frames.into_iter().map(|c| c.inner).collect();
     let s = scene.inner.clone();
     let m = py
-        .detach(|| crate::evaluate::sampling_metrics(&s, &img, &reference, &frames, mode, cull_backfaces))
+        .detach(|| {
+            crate::evaluate::sampling_metrics(&s, &img, &reference, &frames, mode, cull_backfaces)
+        })
         .py_err(py)?;
     let n = m.samples.len();
     let d = PyDict::new(py);
@@ -73,6 +75,9 @@ pub fn sampling_metrics<'py>(
     d.set_item("available_avg", array(py, m.available_avg, &[n])?)?;
     d.set_item("available_min", array(py, m.available_min, &[n])?)?;
     d.set_item("frames", m.frames)?;
+    let shape = [n, height as usize, width as usize];
+    d.set_item("disoccluded_mask", array(py, m.disoccluded_mask, &shape)?)?;
+    d.set_item("useful_mask", array(py, m.useful_mask, &shape)?)?;
     let t = PyDict::new(py);
     for (k, v) in m.timings {
         t.set_item(k, v)?;

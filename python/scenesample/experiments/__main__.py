@@ -1,0 +1,21 @@
+"""``python -m scenesample.experiments sampling [--scenes ...] [--resolution ...] [--out DIR]``."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Optional
+
+from . import sampling
+
+EXPERIMENTS = {"sampling": sampling}
+
+
+def main(argv: Optional[list[str]] = None) -> None:
+    p = argparse.ArgumentParser(prog="python -m scenesample.experiments")
+    p.add_argument("experiment", choices=sorted(EXPERIMENTS))
+    known, rest = p.parse_known_args(argv)
+    EXPERIMENTS[known.experiment].main(rest)
+
+
+if __name__ == "__main__":
+    main()
