@@ -66,20 +66,39 @@ pub fn discretize_conventional(
         img.triangle[range.clone()].copy_from_slice(ids);
         resolve_into(&mut img, range, &rays, planes);
     })?;
-    img.timings = vec![
+    img.timings = raster_timings(
+        device_seconds,
+        prepare_seconds,
+        &raw,
+        raw.consumer_seconds,
+        total,
+    );
+    Ok(img)
+}
+
+/// The stages of a GPU discretization, in the order they run: device creation, scene upload,
+/// per-triangle preparation, raster (CPU side, and GPU timestamps when available), readback,
+/// the f64 resolve, and the total since `total` started.
+pub(crate) fn raster_timings(
+    device_seconds: f64,
+    prepare_seconds: f64,
+    raw: &gpu::depth::RasterStats,
+    resolve_seconds: f64,
+    total: Instant,
+) -> Vec<(String, f64)> {
+    let mut t = vec![
         ("device".into(), device_seconds),
         ("upload".into(), raw.upload_seconds),
         ("prepare".into(), prepare_seconds),
         ("raster".into(), raw.raster_seconds),
     ];
     if let Some(g) = raw.gpu_seconds {
-        img.timings.push(("raster_gpu".into(), g));
+        t.push(("raster_gpu".into(), g));
     }
-    img.timings.push(("readback".into(), raw.readback_seconds));
-    img.timings.push(("resolve".into(), raw.consumer_seconds));
-    img.timings
-        .push(("total".into(), total.elapsed().as_secs_f64()));
-    Ok(img)
+    t.push(("readback".into(), raw.readback_seconds));
+    t.push(("resolve".into(), resolve_seconds));
+    t.push(("total".into(), total.elapsed().as_secs_f64()));
+    t
 }
 
 /// At least one camera, all of one resolution.

@@ -18,7 +18,9 @@
 
 use std::time::Instant;
 
-use super::conventional::{check_cameras, discretize_conventional, resolve_ids, PixelRays};
+use super::conventional::{
+    check_cameras, discretize_conventional, raster_timings, resolve_ids, PixelRays,
+};
 use super::redundancy::{self, Redundancy, Sample};
 use super::DepthImages;
 use crate::camera::Camera;
@@ -92,19 +94,13 @@ fn layered_images(
     let (ids, raw) = layered::render(&ctx, scene, cameras, test, cull_backfaces)?;
     let (mut img, resolve_seconds) = resolve_ids(scene, cameras, ids);
     img.method = method.into();
-    img.timings = vec![
-        ("device".into(), device_seconds),
-        ("upload".into(), raw.upload_seconds),
-        ("prepare".into(), prepare_seconds),
-        ("raster".into(), raw.raster_seconds),
-    ];
-    if let Some(g) = raw.gpu_seconds {
-        img.timings.push(("raster_gpu".into(), g));
-    }
-    img.timings.push(("readback".into(), raw.readback_seconds));
-    img.timings.push(("resolve".into(), resolve_seconds));
-    img.timings
-        .push(("total".into(), total.elapsed().as_secs_f64()));
+    img.timings = raster_timings(
+        device_seconds,
+        prepare_seconds,
+        &raw,
+        resolve_seconds,
+        total,
+    );
     Ok(img)
 }
 

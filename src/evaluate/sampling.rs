@@ -98,6 +98,28 @@ fn captured(
     }
 }
 
+/// The samples, among those `open`, that image `k` of `set` captures (indices into `samples`).
+fn newly_captured(
+    scene: &Scene,
+    samples: &[Sample],
+    open: impl Fn(usize) -> bool,
+    set: &DepthImages,
+    k: usize,
+    mode: Redundancy,
+) -> Result<Vec<usize>> {
+    let open: Vec<usize> = (0..samples.len()).filter(|&s| open(s)).collect();
+    if open.is_empty() {
+        return Ok(open);
+    }
+    let sub: Vec<Sample> = open.iter().map(|&s| samples[s]).collect();
+    let got = captured(scene, &sub, set, k, mode)?;
+    Ok(open
+        .into_iter()
+        .zip(got)
+        .filter_map(|(s, c)| c.then_some(s))
+        .collect())
+}
+
 /// OR of `captured` over images `ks` of `set`, testing each sample only until captured.
 fn captured_by_any(
     scene: &Scene,
@@ -108,13 +130,11 @@ fn captured_by_any(
 ) -> Result<Vec<bool>> {
     let mut hit = vec![false; samples.len()];
     for k in ks {
-        let open: Vec<usize> = (0..samples.len()).filter(|&s| !hit[s]).collect();
-        if open.is_empty() {
+        if hit.iter().all(|&h| h) {
             break;
         }
-        let sub: Vec<Sample> = open.iter().map(|&s| samples[s]).collect();
-        for (j, c) in captured(scene, &sub, set, k, mode)?.into_iter().enumerate() {
-            hit[open[j]] |= c;
+        for s in newly_captured(scene, samples, |s| !hit[s], set, k, mode)? {
+            hit[s] = true;
         }
     }
     Ok(hit)
@@ -274,36 +294,18 @@ fn consume_frame(
     mode: Redundancy,
 ) -> Result<Vec<f64>> {
     for (dis, use_) in disoccluded.iter().zip(useful.iter_mut()) {
-        let open: Vec<usize> = (0..dis.len()).filter(|&s| !use_[s]).collect();
-        if open.is_empty() {
-            continue;
-        }
-        let sub: Vec<Sample> = open.iter().map(|&s| dis[s]).collect();
-        for (j, c) in captured(scene, &sub, chunk, f, mode)?
-            .into_iter()
-            .enumerate()
-        {
-            use_[open[j]] |= c;
+        for s in newly_captured(scene, dis, |s| !use_[s], chunk, f, mode)? {
+            use_[s] = true;
         }
     }
     // Available: the first image of the set that captures each frame sample.
     let frame = samples_of(chunk, f);
     let mut first_holder = vec![usize::MAX; frame.len()];
     for k in 0..images.n {
-        let open: Vec<usize> = (0..frame.len())
-            .filter(|&s| first_holder[s] == usize::MAX)
-            .collect();
-        if open.is_empty() {
-            break;
-        }
-        let sub: Vec<Sample> = open.iter().map(|&s| frame[s]).collect();
-        for (j, c) in captured(scene, &sub, images, k, mode)?
-            .into_iter()
-            .enumerate()
-        {
-            if c {
-                first_holder[open[j]] = k;
-            }
+        let open = |s: usize| first_holder[s] == usize::MAX;
+        let got = newly_captured(scene, &frame, open, images, k, mode)?;
+        for s in got {
+            first_holder[s] = k;
         }
     }
     Ok((0..images.n)

@@ -5,14 +5,16 @@ use std::time::Instant;
 
 use bytemuck::{Pod, Zeroable};
 
+use super::raster::{
+    align, check_image_size, copy, draw_ids, id_pipeline, IdPass, Timestamps, DEPTH_FORMAT,
+    TRI_FORMAT,
+};
 use super::{GpuContext, SceneBuffers};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::scene::Scene;
 
 const SHADER: &str = include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/shaders/depth.wgsl"));
-const TRI_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Sint;
-const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 /// Upper bound on readback memory held at once; larger requests are split into chunks.
 const READBACK_BUDGET: u64 = 256 << 20;
 
@@ -55,45 +57,7 @@ impl DepthPipeline {
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
-        let make = |cull: Option<wgpu::Face>| {
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some("depth.wgsl"),
-                layout: Some(&pipeline_layout),
-                vertex: wgpu::VertexState {
-                    module: &module,
-                    entry_point: Some("vs_main"),
-                    compilation_options: Default::default(),
-                    buffers: &[Some(wgpu::VertexBufferLayout {
-                        array_stride: 12,
-                        step_mode: wgpu::VertexStepMode::Vertex,
-                        attributes: &wgpu::vertex_attr_array![0 => Float32x3],
-                    })],
-                },
-                primitive: wgpu::PrimitiveState {
-                    topology: wgpu::PrimitiveTopology::TriangleList,
-                    front_face: wgpu::FrontFace::Ccw,
-                    cull_mode: cull,
-                    ..Default::default()
-                },
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: DEPTH_FORMAT,
-                    depth_write_enabled: Some(true),
-                    // Reversed depth: larger is nearer (see Camera::projection_matrix).
-                    depth_compare: Some(wgpu::CompareFunction::Greater),
-                    stencil: Default::default(),
-                    bias: Default::default(),
-                }),
-                multisample: Default::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &module,
-                    entry_point: Some("fs_main"),
-                    compilation_options: Default::default(),
-                    targets: &[Some(TRI_FORMAT.into())],
-                }),
-                multiview_mask: None,
-                cache: None,
-            })
-        };
+        let make = |cull| id_pipeline(device, &module, &pipeline_layout, "fs_main", cull);
         Self {
             layout,
             pipelines: [make(None), make(Some(wgpu::Face::Back))],
@@ -119,10 +83,6 @@ pub struct RasterStats {
 /// chunk overlaps the GPU's work on the next, and never more than the readback budget.
 const PIXELS_PER_CHUNK: u64 = 1 << 20;
 
-pub(super) fn align(x: u64, a: u64) -> u64 {
-    x.div_ceil(a) * a
-}
-
 /// Rasterise `scene` from every camera (all of one resolution). Images are rendered in chunks;
 /// `on_chunk(first, ids)` receives the triangle ids of images `first..first + k` (row-major,
 /// −1 where empty) while the GPU already renders the next chunk.
@@ -134,13 +94,7 @@ pub fn rasterize(
     mut on_chunk: impl FnMut(usize, &[i32]),
 ) -> Result<RasterStats> {
     let (w, h) = (cameras[0].width, cameras[0].height);
-    let max_dim = ctx.limits.max_texture_dimension_2d;
-    if w > max_dim || h > max_dim {
-        return Err(Error::GpuLimit(format!(
-            "images of {w}x{h} exceed this device's largest texture ({max_dim}x{max_dim}); \
-             use a smaller resolution"
-        )));
-    }
+    check_image_size(ctx, w, h)?;
     let _guard = ctx
         .lock
         .lock()
@@ -197,7 +151,7 @@ pub fn rasterize(
 /// A submitted chunk whose readback is not yet consumed.
 struct Pending {
     readback: wgpu::Buffer,
-    queries: Option<(wgpu::QuerySet, wgpu::Buffer, wgpu::Buffer)>,
+    queries: Option<Timestamps>,
     submission: wgpu::SubmissionIndex,
     first: usize,
     n: usize,
@@ -301,82 +255,30 @@ fn submit_chunk(
         usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     });
-    let queries = ctx.timestamps.then(|| {
-        let set = device.create_query_set(&wgpu::QuerySetDescriptor {
-            label: Some("raster timestamps"),
-            ty: wgpu::QueryType::Timestamp,
-            count: 2 * n as u32,
-        });
-        let resolve = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("timestamp resolve"),
-            size: 16 * n,
-            usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
-        let read = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("timestamp readback"),
-            size: 16 * n,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        (set, resolve, read)
-    });
+    let queries = Timestamps::new(ctx, n as u32);
 
     let mut encoder = device.create_command_encoder(&Default::default());
     let image_bytes = row_tri * h as u64;
     for i in 0..n {
-        {
-            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("depth.wgsl"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &targets.tri_view,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color {
-                            r: -1.0,
-                            g: 0.0,
-                            b: 0.0,
-                            a: 0.0,
-                        }),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: &targets.depth_view,
-                    depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(0.0),
-                        store: wgpu::StoreOp::Discard,
-                    }),
-                    stencil_ops: None,
-                }),
-                timestamp_writes: queries.as_ref().map(|(set, _, _)| {
-                    wgpu::RenderPassTimestampWrites {
-                        query_set: set,
-                        beginning_of_pass_write_index: Some(2 * i as u32),
-                        end_of_pass_write_index: Some(2 * i as u32 + 1),
-                    }
-                }),
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
-            pass.set_pipeline(&pipeline.pipelines[cull_backfaces as usize]);
-            pass.set_bind_group(0, &bind, &[(i * stride) as u32]);
-            pass.set_vertex_buffer(0, buffers.positions.slice(..));
-            pass.set_index_buffer(buffers.faces.slice(..), wgpu::IndexFormat::Uint32);
-            pass.draw_indexed(0..3 * buffers.triangle_count, 0, 0..1);
-        }
+        let pass = IdPass {
+            tri_view: &targets.tri_view,
+            depth_view: &targets.depth_view,
+            store_depth: false,
+            pipeline: &pipeline.pipelines[cull_backfaces as usize],
+            bind: &bind,
+            offset: (i * stride) as u32,
+        };
+        draw_ids(&mut encoder, buffers, &pass, queries.as_ref(), i as u32);
         let base = i * image_bytes;
         copy(&mut encoder, &targets.tri, &readback, base, row_tri, w, h);
     }
-    if let Some((set, resolve, read)) = &queries {
-        encoder.resolve_query_set(set, 0..2 * n as u32, resolve, 0);
-        encoder.copy_buffer_to_buffer(resolve, 0, read, 0, 16 * n);
+    if let Some(q) = &queries {
+        q.resolve(&mut encoder);
     }
     let submission = ctx.queue.submit([encoder.finish()]);
     readback.slice(..).map_async(wgpu::MapMode::Read, |_| {});
-    if let Some((_, _, read)) = &queries {
-        read.slice(..).map_async(wgpu::MapMode::Read, |_| {});
+    if let Some(q) = &queries {
+        q.map();
     }
     Pending {
         readback,
@@ -422,17 +324,8 @@ fn finish_chunk(
         }
     }
     p.readback.unmap();
-    if let Some((_, _, read)) = &p.queries {
-        let period = ctx.queue.get_timestamp_period() as f64 * 1e-9;
-        let data = read
-            .slice(..)
-            .get_mapped_range()
-            .map_err(|e| Error::Gpu(format!("mapping the timestamps failed: {e}")))?;
-        let ts: &[u64] = bytemuck::cast_slice(&data);
-        let gpu: f64 = ts
-            .chunks(2)
-            .map(|t| t[1].saturating_sub(t[0]) as f64 * period)
-            .sum();
+    if let Some(q) = &p.queries {
+        let gpu = q.seconds(ctx)?;
         if let Some(total) = stats.gpu_seconds.as_mut() {
             *total += gpu;
         }
@@ -442,31 +335,4 @@ fn finish_chunk(
     on_chunk(p.first, &ids);
     stats.consumer_seconds += start.elapsed().as_secs_f64();
     Ok(())
-}
-
-pub(super) fn copy(
-    encoder: &mut wgpu::CommandEncoder,
-    tex: &wgpu::Texture,
-    buf: &wgpu::Buffer,
-    offset: u64,
-    row: u64,
-    w: u32,
-    h: u32,
-) {
-    encoder.copy_texture_to_buffer(
-        tex.as_image_copy(),
-        wgpu::TexelCopyBufferInfo {
-            buffer: buf,
-            layout: wgpu::TexelCopyBufferLayout {
-                offset,
-                bytes_per_row: Some(row as u32),
-                rows_per_image: Some(h),
-            },
-        },
-        wgpu::Extent3d {
-            width: w,
-            height: h,
-            depth_or_array_layers: 1,
-        },
-    );
 }

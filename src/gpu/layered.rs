@@ -10,15 +10,17 @@ use std::time::Instant;
 use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
 
-use super::depth::{align, copy, RasterStats};
+use super::depth::RasterStats;
+use super::raster::{
+    align, check_image_size, copy, draw_ids, id_pipeline, IdPass, Timestamps, DEPTH_FORMAT,
+    TRI_FORMAT,
+};
 use super::{GpuContext, SceneBuffers};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::scene::Scene;
 
 const SHADER: &str = include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/shaders/layered.wgsl"));
-const TRI_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Sint;
-const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
 /// Which test a pass applies to its fragments.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -105,44 +107,7 @@ impl LayeredPipeline {
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
-        let make = |entry: &str, cull: Option<wgpu::Face>| {
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some(entry),
-                layout: Some(&pipeline_layout),
-                vertex: wgpu::VertexState {
-                    module: &module,
-                    entry_point: Some("vs_main"),
-                    compilation_options: Default::default(),
-                    buffers: &[Some(wgpu::VertexBufferLayout {
-                        array_stride: 12,
-                        step_mode: wgpu::VertexStepMode::Vertex,
-                        attributes: &wgpu::vertex_attr_array![0 => Float32x3],
-                    })],
-                },
-                primitive: wgpu::PrimitiveState {
-                    topology: wgpu::PrimitiveTopology::TriangleList,
-                    front_face: wgpu::FrontFace::Ccw,
-                    cull_mode: cull,
-                    ..Default::default()
-                },
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: DEPTH_FORMAT,
-                    depth_write_enabled: Some(true),
-                    depth_compare: Some(wgpu::CompareFunction::Greater),
-                    stencil: Default::default(),
-                    bias: Default::default(),
-                }),
-                multisample: Default::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &module,
-                    entry_point: Some(entry),
-                    compilation_options: Default::default(),
-                    targets: &[Some(TRI_FORMAT.into())],
-                }),
-                multiview_mask: None,
-                cache: None,
-            })
-        };
+        let make = |entry, cull| id_pipeline(device, &module, &pipeline_layout, entry, cull);
         let pair = |entry| [make(entry, None), make(entry, Some(wgpu::Face::Back))];
         Self {
             layout,
@@ -162,13 +127,7 @@ pub fn render(
 ) -> Result<(Vec<i32>, RasterStats)> {
     let (w, h) = (cameras[0].width, cameras[0].height);
     let n = cameras.len() as u64;
-    let max_dim = ctx.limits.max_texture_dimension_2d;
-    if w > max_dim || h > max_dim {
-        return Err(Error::GpuLimit(format!(
-            "images of {w}x{h} exceed this device's largest texture ({max_dim}x{max_dim}); \
-             use a smaller resolution"
-        )));
-    }
+    check_image_size(ctx, w, h)?;
     let row = align(w as u64 * 4, wgpu::COPY_BYTES_PER_ROW_ALIGNMENT as u64);
     let image_bytes = row * h as u64;
     let history_bytes = image_bytes * n;
@@ -309,83 +268,31 @@ pub fn render(
             ],
         })
     });
-    let queries = ctx.timestamps.then(|| {
-        let set = device.create_query_set(&wgpu::QuerySetDescriptor {
-            label: Some("layered timestamps"),
-            ty: wgpu::QueryType::Timestamp,
-            count: 2 * n as u32,
-        });
-        let resolve = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("layered timestamp resolve"),
-            size: 16 * n,
-            usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
-        let read = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("layered timestamp readback"),
-            size: 16 * n,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        (set, resolve, read)
-    });
+    let queries = Timestamps::new(ctx, n as u32);
     let cull = cull_backfaces as usize;
     let pipe = &pipeline.pipelines[(test == LayerTest::Peel) as usize][cull];
     let first = &pipeline.pipelines[2][cull];
     let mut encoder = device.create_command_encoder(&Default::default());
     for i in 0..n {
-        {
-            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("layered.wgsl"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &tri_view,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color {
-                            r: -1.0,
-                            g: 0.0,
-                            b: 0.0,
-                            a: 0.0,
-                        }),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: &depth_views[i as usize % 2],
-                    depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(0.0),
-                        store: wgpu::StoreOp::Store,
-                    }),
-                    stencil_ops: None,
-                }),
-                timestamp_writes: queries.as_ref().map(|(set, _, _)| {
-                    wgpu::RenderPassTimestampWrites {
-                        query_set: set,
-                        beginning_of_pass_write_index: Some(2 * i as u32),
-                        end_of_pass_write_index: Some(2 * i as u32 + 1),
-                    }
-                }),
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
-            pass.set_pipeline(if i == 0 { first } else { pipe });
-            pass.set_bind_group(0, &binds[i as usize % 2], &[(i * stride) as u32]);
-            pass.set_vertex_buffer(0, buffers.positions.slice(..));
-            pass.set_index_buffer(buffers.faces.slice(..), wgpu::IndexFormat::Uint32);
-            pass.draw_indexed(0..3 * buffers.triangle_count, 0, 0..1);
-        }
+        let pass = IdPass {
+            tri_view: &tri_view,
+            depth_view: &depth_views[i as usize % 2],
+            store_depth: true,
+            pipeline: if i == 0 { first } else { pipe },
+            bind: &binds[i as usize % 2],
+            offset: (i * stride) as u32,
+        };
+        draw_ids(&mut encoder, &buffers, &pass, queries.as_ref(), i as u32);
         copy(&mut encoder, &tri, &history, i * image_bytes, row, w, h);
     }
     encoder.copy_buffer_to_buffer(&history, 0, &readback, 0, history_bytes);
-    if let Some((set, resolve, read)) = &queries {
-        encoder.resolve_query_set(set, 0..2 * n as u32, resolve, 0);
-        encoder.copy_buffer_to_buffer(resolve, 0, read, 0, 16 * n);
+    if let Some(q) = &queries {
+        q.resolve(&mut encoder);
     }
     let submission = ctx.queue.submit([encoder.finish()]);
     readback.slice(..).map_async(wgpu::MapMode::Read, |_| {});
-    if let Some((_, _, read)) = &queries {
-        read.slice(..).map_async(wgpu::MapMode::Read, |_| {});
+    if let Some(q) = &queries {
+        q.map();
     }
     device
         .poll(wgpu::PollType::Wait {
@@ -410,18 +317,8 @@ pub fn render(
         }
     }
     readback.unmap();
-    if let Some((_, _, read)) = &queries {
-        let period = ctx.queue.get_timestamp_period() as f64 * 1e-9;
-        let data = read
-            .slice(..)
-            .get_mapped_range()
-            .map_err(|e| Error::Gpu(format!("mapping the timestamps failed: {e}")))?;
-        let ts: &[u64] = bytemuck::cast_slice(&data);
-        stats.gpu_seconds = Some(
-            ts.chunks(2)
-                .map(|t| t[1].saturating_sub(t[0]) as f64 * period)
-                .sum(),
-        );
+    if let Some(q) = &queries {
+        stats.gpu_seconds = Some(q.seconds(ctx)?);
     }
     stats.readback_seconds = start.elapsed().as_secs_f64();
     Ok((ids, stats))

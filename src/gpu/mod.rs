@@ -3,6 +3,7 @@
 
 pub mod depth;
 pub mod layered;
+pub mod raster;
 
 use std::sync::{Arc, Mutex, OnceLock};
 

@@ -205,3 +205,13 @@ pub fn rows_owned<'py, T: numpy::Element, const K: usize>(
 ) -> PyResult<Bound<'py, PyAny>> {
     array(py, v.into_flattened(), shape)
 }
+
+/// A redundancy definition by name ("pixel" or "visibility").
+pub fn redundancy(py: Python<'_>, name: &str) -> PyResult<crate::discretize::Redundancy> {
+    crate::discretize::Redundancy::parse(name).ok_or_else(|| {
+        input(
+            py,
+            format!("redundancy must be 'pixel' or 'visibility', got {name:?}"),
+        )
+    })
+}

@@ -7,7 +7,7 @@ use super::camera::PyCamera;
 use super::convert::{array, flat_i32, rows_f32};
 use super::errors::{input, IntoPy};
 use super::scene::PyScene;
-use crate::discretize::{DepthImages, Redundancy};
+use crate::discretize::DepthImages;
 
 #[pyfunction]
 #[pyo3(signature = (scene, triangle, position, cameras, method, reference, frames, redundancy, cull_backfaces))]
@@ -24,12 +24,7 @@ pub fn sampling_metrics<'py>(
     redundancy: &str,
     cull_backfaces: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let Some(mode) = Redundancy::parse(redundancy) else {
-        return Err(input(
-            py,
-            format!("redundancy must be 'pixel' or 'visibility', got {redundancy:?}"),
-        ));
-    };
+    let mode = super::convert::redundancy(py, redundancy)?;
     let cameras: Vec<_> = cameras.into_iter().map(|c| c.inner).collect();
     let Some(first) = cameras.first() else {
         return Err(input(py, "the images have no cameras".into()));

@@ -10,7 +10,7 @@ use super::camera::PyCamera;
 use super::convert::{array, borrow_rows, flat_i32, rows_array_of, rows_f32, rows_owned};
 use super::errors::{input, IntoPy};
 use super::scene::PyScene;
-use crate::discretize::{DepthImages, Redundancy};
+use crate::discretize::DepthImages;
 
 fn images_dict<'py>(py: Python<'py>, img: DepthImages) -> PyResult<Bound<'py, PyDict>> {
     let (n, h, w) = (img.n, img.height as usize, img.width as usize);
@@ -56,12 +56,7 @@ pub fn discretize_nonredundant<'py>(
     redundancy: &str,
     cull_backfaces: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let Some(r) = Redundancy::parse(redundancy) else {
-        return Err(input(
-            py,
-            format!("redundancy must be 'pixel' or 'visibility', got {redundancy:?}"),
-        ));
-    };
+    let r = super::convert::redundancy(py, redundancy)?;
     let cams: Vec<_> = cameras.into_iter().map(|c| c.inner).collect();
     let s = scene.inner.clone();
     let img = py
