@@ -4,13 +4,16 @@
 // - fs_nonredundant: Algorithm 1 with the pixel redundancy test of Algorithm 3 (§3.2, §6.1.1).
 //   A fragment of triangle t is reprojected into every earlier image j; when image j holds t at
 //   that pixel, the fragment is redundant and discarded here, before the depth test can let it
-//   occlude a non-redundant fragment behind it.
+//   occlude a non-redundant fragment behind it. The reprojection starts from the fragment's own
+//   window position and depth (@builtin(position)), through one matrix per earlier image formed
+//   in f64 on the host, so the vertex stage stays as light as a conventional pass's (on a
+//   software rasterizer, per-vertex outputs cost as much as the test itself).
 // - fs_peel: depth peeling (§2, §6.1.1): a fragment survives only strictly beyond the previous
 //   layer's depth at its pixel, so each pass keeps the next surface along every pixel ray.
 //
 // Like depth.wgsl, the output is the triangle id at each pixel centre; depth, position, normal and
 // colour are resolved from it in f64 on the host. Fragments run at pixel centres (no
-// multisampling), so the interpolated `rel` is the sample's point (relative to the scene centre).
+// multisampling), so the fragment's window position and depth are the sample's point.
 enable primitive_index;
 
 struct View {
@@ -24,43 +27,36 @@ struct View {
     stride: u32,
 };
 
-// An earlier image's camera: where a point lands in it and whether it lies in front.
-struct Earlier {
-    view_proj: mat4x4<f32>,
-    // dot(front.xyz, p) + front.w > 0 for a point in front of the camera's image plane.
-    front: vec4<f32>,
-};
-
 @group(0) @binding(0) var<uniform> view: View;
-@group(0) @binding(1) var<storage, read> earlier: array<Earlier>;
+// The number of earlier images (= view.image) for fs_nonredundant, fixed when its pipeline is
+// made, so that the loop over them unrolls and each matrix load has a constant address.
+override earlier_count: u32 = 0u;
+// For this image i and each earlier image j < i: the map from a fragment's homogeneous window
+// coordinates (x, y, depth, 1) in image i to (x·w, y·w, w, f) in image j, where (x, y) is the
+// pixel position in image j and f > 0 when the point lies in front of camera j's image plane.
+// w and f keep their signs: the point's homogeneous weight is 1/w_i > 0 for any rasterized
+// fragment. A uniform rather than a storage buffer: on lavapipe a storage load costs a gather
+// per lane, a uniform load at a constant address a single load.
+const MAX_EARLIER: u32 = 255u;
+@group(0) @binding(1) var<uniform> reproject: array<mat4x4<f32>, MAX_EARLIER>;
 // Triangle ids of the earlier images, image after image, rows `stride` apart; -1 where empty.
 @group(0) @binding(2) var<storage, read> earlier_ids: array<i32>;
 // The previous peeling layer's depth (reversed: larger is nearer); unused by fs_nonredundant.
 @group(0) @binding(3) var previous_depth: texture_depth_2d;
 
-struct VertexOut {
-    @builtin(position) clip: vec4<f32>,
-    @location(0) rel: vec3<f32>,
-};
-
 @vertex
-fn vs_main(@location(0) p: vec3<f32>) -> VertexOut {
-    var out: VertexOut;
-    out.clip = view.view_proj * vec4<f32>(p, 1.0);
-    out.rel = p;
-    return out;
+fn vs_main(@location(0) p: vec3<f32>) -> @builtin(position) vec4<f32> {
+    return view.view_proj * vec4<f32>(p, 1.0);
 }
 
-// Algorithm 3: is the sample at `rel` of triangle `prim` held by earlier image j at the pixel it
-// projects to?
-fn held_by(j: u32, rel: vec3<f32>, prim: i32) -> bool {
-    let e = earlier[j];
-    if dot(e.front.xyz, rel) + e.front.w <= 0.0 {
+// Algorithm 3: is the sample at window position `frag` of triangle `prim` held by earlier image
+// j at the pixel it projects to?
+fn held_by(j: u32, frag: vec4<f32>, prim: i32) -> bool {
+    let c = reproject[j] * vec4<f32>(frag.xyz, 1.0);
+    if !(c.w > 0.0 && c.z > 0.0) {
         return false;
     }
-    let clip = e.view_proj * vec4<f32>(rel, 1.0);
-    let ndc = clip.xy / clip.w;
-    let px = vec2<f32>((ndc.x + 1.0) * 0.5 * f32(view.width), (1.0 - ndc.y) * 0.5 * f32(view.height));
+    let px = c.xy / c.z;
     if !(px.x >= 0.0 && px.y >= 0.0 && px.x < f32(view.width) && px.y < f32(view.height)) {
         return false;
     }
@@ -70,9 +66,12 @@ fn held_by(j: u32, rel: vec3<f32>, prim: i32) -> bool {
 }
 
 @fragment
-fn fs_nonredundant(in: VertexOut, @builtin(primitive_index) prim: u32) -> @location(0) i32 {
-    for (var j = 0u; j < view.image; j++) {
-        if held_by(j, in.rel, i32(prim)) {
+fn fs_nonredundant(
+    @builtin(position) frag: vec4<f32>,
+    @builtin(primitive_index) prim: u32,
+) -> @location(0) i32 {
+    for (var j = 0u; j < earlier_count; j++) {
+        if held_by(j, frag, i32(prim)) {
             discard;
         }
     }
@@ -87,11 +86,14 @@ fn fs_first(@builtin(primitive_index) prim: u32) -> @location(0) i32 {
 }
 
 @fragment
-fn fs_peel(in: VertexOut, @builtin(primitive_index) prim: u32) -> @location(0) i32 {
+fn fs_peel(
+    @builtin(position) frag: vec4<f32>,
+    @builtin(primitive_index) prim: u32,
+) -> @location(0) i32 {
     if view.image > 0u {
-        let previous = textureLoad(previous_depth, vec2<i32>(in.clip.xy), 0);
+        let previous = textureLoad(previous_depth, vec2<i32>(frag.xy), 0);
         // Reversed depth: strictly beyond the previous layer means strictly smaller.
-        if !(in.clip.z < previous) {
+        if !(frag.z < previous) {
             discard;
         }
     }

@@ -38,9 +38,8 @@ def test_image0_is_the_conventional_image(grass_set):
     np.testing.assert_array_equal(nr.depth[0], conv.depth[0])
 
 
-def test_no_sample_is_pixel_redundant_with_an_earlier_image(grass_set):
-    """Independent numpy check of Algorithm 3 on every sample of images 1 and 2."""
-    _, cams, _, nr = grass_set
+def assert_no_sample_is_pixel_redundant(cams: list[ss.Camera], nr: ss.DepthImages) -> None:
+    """Independent numpy check of Algorithm 3 on every sample of images 1 and up."""
     checked = bad = 0
     for i in range(1, nr.n):
         mask = nr.mask[i]
@@ -60,6 +59,31 @@ def test_no_sample_is_pixel_redundant_with_an_earlier_image(grass_set):
         checked += len(pts)
     assert checked > 10_000
     assert bad <= 0.001 * checked, f"{bad} of {checked} samples are pixel-redundant"
+
+
+def test_no_sample_is_pixel_redundant_with_an_earlier_image(grass_set):
+    _, cams, _, nr = grass_set
+    assert_no_sample_is_pixel_redundant(cams, nr)
+
+
+def test_six_views_one_orthographic(gpu):
+    """Each pass is compiled for its count of earlier images; check passes testing against up to
+    five of them, with a perspective and an orthographic camera mixed."""
+    scene = ss.scenes.tree()
+    cams = ss.scenes.reference_cameras(scene, 128)
+    cams += ss.scenes.reference_cameras(scene, 128, spread=0.5)[:2]
+    lo, hi = scene.bounds
+    centre, radius = (lo + hi) / 2, float(np.linalg.norm(hi - lo)) / 2
+    pose = np.array(cams[0].pose, dtype=np.float64)
+    pose[:3, 3] = centre + 3 * radius * pose[:3, 2]
+    cams.append(
+        ss.Camera.orthographic(
+            pose, xmag=radius, ymag=radius, width=128, height=128, zfar=6 * radius
+        )
+    )
+    nr = ss.discretize(scene, cams, "nonredundant")
+    assert nr.n == 6 and all(nr.mask[i].any() for i in range(6))
+    assert_no_sample_is_pixel_redundant(cams, nr)
 
 
 def test_same_camera_twice_gives_the_second_peeling_layer(gpu):
@@ -226,6 +250,9 @@ def test_bad_arguments_raise_typed_errors(gpu):
     other = ss.Camera.look_at((0, 0, 3), (0, 0, 0), (0, 1, 0), yfov=0.5, width=16, height=16)
     with pytest.raises(ss.InputError, match="match"):
         ss.discretize(scene, [cam], "peeling", layers=2, camera=other)
+    tiny = ss.Camera.look_at((0, 0, 3), (0, 0, 0), (0, 1, 0), yfov=0.5, width=4, height=4)
+    with pytest.raises(ss.GpuLimitError, match="at most 256"):
+        ss.discretize(scene, [tiny] * 257, "nonredundant")
     images = ss.discretize(scene, [cam])
     with pytest.raises(ss.InputError, match="metric"):
         ss.evaluate(images, scene, "psnr")

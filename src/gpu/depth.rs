@@ -57,7 +57,7 @@ impl DepthPipeline {
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
-        let make = |cull| id_pipeline(device, &module, &pipeline_layout, "fs_main", cull);
+        let make = |cull| id_pipeline(device, &module, &pipeline_layout, "fs_main", cull, &[]);
         Self {
             layout,
             pipelines: [make(None), make(Some(wgpu::Face::Back))],
@@ -266,7 +266,7 @@ fn submit_chunk(
             store_depth: false,
             pipeline: &pipeline.pipelines[cull_backfaces as usize],
             bind: &bind,
-            offset: (i * stride) as u32,
+            offsets: &[(i * stride) as u32],
         };
         draw_ids(&mut encoder, buffers, &pass, queries.as_ref(), i as u32);
         let base = i * image_bytes;

@@ -3,12 +3,17 @@
 //! (non-redundant-rendering.txt Algorithm 1 with Algorithm 3) or depth peeling. All passes go in
 //! one submission: after each pass its triangle ids are copied into a storage buffer that the
 //! later passes read (and that is read back at the end), and peeling alternates two depth
-//! textures, one the target and the other the previous layer.
+//! textures, one the target and the other the previous layer. A non-redundant pass maps each
+//! fragment's window position and depth straight into the earlier images with matrices formed
+//! here in f64, and its pipeline is compiled for its count of earlier images (see
+//! `LayeredPipeline::nonredundant`).
 
+use std::collections::HashMap;
+use std::sync::Mutex;
 use std::time::Instant;
 
 use bytemuck::{Pod, Zeroable};
-use glam::DVec3;
+use glam::DMat4;
 
 use super::depth::RasterStats;
 use super::raster::{
@@ -44,19 +49,23 @@ struct ViewUniform {
 const VIEW_SIZE: u64 = std::mem::size_of::<ViewUniform>() as u64;
 const _: () = assert!(VIEW_SIZE == 80);
 
-/// Host copy of `Earlier` in layered.wgsl.
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct EarlierView {
-    view_proj: [[f32; 4]; 4],
-    front: [f32; 4],
-}
+/// How many earlier images a non-redundant pass can test against (`MAX_EARLIER` in
+/// layered.wgsl): the reprojection matrices of one pass are one uniform binding.
+pub const MAX_EARLIER: usize = 255;
+const REPROJECT_SIZE: u64 = 64 * MAX_EARLIER as u64;
 
 pub struct LayeredPipeline {
     layout: wgpu::BindGroupLayout,
-    /// [test][cull]: test 0 = pixel redundancy, 1 = peel, 2 = none (image 0, early depth
-    /// test); cull 0 = none, 1 = back faces.
-    pipelines: [[wgpu::RenderPipeline; 2]; 3],
+    pipeline_layout: wgpu::PipelineLayout,
+    module: wgpu::ShaderModule,
+    /// [test][cull]: test 0 = peel, 1 = none (image 0, early depth test); cull 0 = none,
+    /// 1 = back faces.
+    fixed: [[wgpu::RenderPipeline; 2]; 2],
+    /// `fs_nonredundant` compiled for one count of earlier images (the override
+    /// `earlier_count`), by (count, cull), made on first use. With the count a constant the
+    /// shader compiler unrolls the loop over earlier images and loads each reprojection matrix
+    /// from a constant address; on lavapipe that halves the cost of the test.
+    nonredundant: Mutex<HashMap<(u32, bool), wgpu::RenderPipeline>>,
 }
 
 impl LayeredPipeline {
@@ -88,7 +97,16 @@ impl LayeredPipeline {
                     },
                     count: None,
                 },
-                storage(1),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 1,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: true,
+                        min_binding_size: wgpu::BufferSize::new(REPROJECT_SIZE),
+                    },
+                    count: None,
+                },
                 storage(2),
                 wgpu::BindGroupLayoutEntry {
                     binding: 3,
@@ -107,12 +125,34 @@ impl LayeredPipeline {
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
-        let make = |entry, cull| id_pipeline(device, &module, &pipeline_layout, entry, cull);
+        let make = |entry, cull| id_pipeline(device, &module, &pipeline_layout, entry, cull, &[]);
         let pair = |entry| [make(entry, None), make(entry, Some(wgpu::Face::Back))];
+        let fixed = [pair("fs_peel"), pair("fs_first")];
         Self {
             layout,
-            pipelines: [pair("fs_nonredundant"), pair("fs_peel"), pair("fs_first")],
+            pipeline_layout,
+            module,
+            fixed,
+            nonredundant: Mutex::new(HashMap::new()),
         }
+    }
+
+    /// The pipeline of image `image` (> 0) of a non-redundant call.
+    fn nonredundant(&self, device: &wgpu::Device, image: u32, cull: bool) -> wgpu::RenderPipeline {
+        let mut cache = self.nonredundant.lock().unwrap_or_else(|e| e.into_inner());
+        cache
+            .entry((image, cull))
+            .or_insert_with(|| {
+                id_pipeline(
+                    device,
+                    &self.module,
+                    &self.pipeline_layout,
+                    "fs_nonredundant",
+                    cull.then_some(wgpu::Face::Back),
+                    &[("earlier_count", image as f64)],
+                )
+            })
+            .clone()
     }
 }
 
@@ -128,6 +168,13 @@ pub fn render(
     let (w, h) = (cameras[0].width, cameras[0].height);
     let n = cameras.len() as u64;
     check_image_size(ctx, w, h)?;
+    if test == LayerTest::PixelRedundancy && cameras.len() > MAX_EARLIER + 1 {
+        return Err(Error::GpuLimit(format!(
+            "non-redundant rendering tests each image against the ones before it, at most \
+             {MAX_EARLIER} of them; got {n} cameras, split them into calls of at most {}",
+            MAX_EARLIER + 1
+        )));
+    }
     let row = align(w as u64 * 4, wgpu::COPY_BYTES_PER_ROW_ALIGNMENT as u64);
     let image_bytes = row * h as u64;
     let history_bytes = image_bytes * n;
@@ -164,12 +211,12 @@ pub fn render(
         ctx.limits.min_uniform_buffer_offset_alignment as u64,
     );
     let mut uniforms = vec![0u8; (stride * n) as usize];
-    let mut earlier = Vec::with_capacity(cameras.len());
+    let mut clip = Vec::with_capacity(cameras.len());
     for (i, cam) in cameras.iter().enumerate() {
         let (near, far) = cam.clip_range(bounds);
-        let m = (cam.projection_matrix(near, far) * cam.view_matrix_relative(centre)).as_mat4();
+        let m = cam.projection_matrix(near, far) * cam.view_matrix_relative(centre);
         let u = ViewUniform {
-            view_proj: m.to_cols_array_2d(),
+            view_proj: m.as_mat4().to_cols_array_2d(),
             image: i as u32,
             width: w,
             height: h,
@@ -177,23 +224,30 @@ pub fn render(
         };
         let at = i * stride as usize;
         uniforms[at..at + VIEW_SIZE as usize].copy_from_slice(bytemuck::bytes_of(&u));
-        // In front: (p_rel + centre − eye)·forward > 0, i.e. p_rel·forward + (centre − eye)·forward.
-        let fwd: DVec3 = cam.forward();
-        let front = fwd.extend((centre - cam.eye()).dot(fwd)).as_vec4();
-        earlier.push(EarlierView {
-            view_proj: m.to_cols_array_2d(),
-            front: front.to_array(),
-        });
+        clip.push(m);
     }
+    // Image i's i reprojection matrices, each image's block at an aligned offset.
+    let mut reproject = Vec::new();
+    let mut reproject_at = Vec::with_capacity(cameras.len());
+    for block in reprojections(cameras, &clip, centre, w, h) {
+        reproject_at.push(reproject.len() as u32);
+        reproject.extend_from_slice(bytemuck::cast_slice(&block));
+        let end = align(
+            reproject.len() as u64,
+            ctx.limits.min_uniform_buffer_offset_alignment as u64,
+        );
+        reproject.resize(end as usize, 0u8);
+    }
+    reproject.resize(reproject.len() + REPROJECT_SIZE as usize, 0u8);
     let uniform_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("layered view uniforms"),
         contents: &uniforms,
         usage: wgpu::BufferUsages::UNIFORM,
     });
-    let earlier_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("earlier views"),
-        contents: bytemuck::cast_slice(&earlier),
-        usage: wgpu::BufferUsages::STORAGE,
+    let reproject_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("reprojections"),
+        contents: &reproject,
+        usage: wgpu::BufferUsages::UNIFORM,
     });
     let history = device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("earlier triangle ids"),
@@ -255,7 +309,11 @@ pub fn render(
                 },
                 wgpu::BindGroupEntry {
                     binding: 1,
-                    resource: earlier_buf.as_entire_binding(),
+                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                        buffer: &reproject_buf,
+                        offset: 0,
+                        size: wgpu::BufferSize::new(REPROJECT_SIZE),
+                    }),
                 },
                 wgpu::BindGroupEntry {
                     binding: 2,
@@ -270,17 +328,22 @@ pub fn render(
     });
     let queries = Timestamps::new(ctx, n as u32);
     let cull = cull_backfaces as usize;
-    let pipe = &pipeline.pipelines[(test == LayerTest::Peel) as usize][cull];
-    let first = &pipeline.pipelines[2][cull];
+    let passes: Vec<wgpu::RenderPipeline> = (0..n as u32)
+        .map(|i| match (i, test) {
+            (0, _) => pipeline.fixed[1][cull].clone(),
+            (_, LayerTest::Peel) => pipeline.fixed[0][cull].clone(),
+            (_, LayerTest::PixelRedundancy) => pipeline.nonredundant(device, i, cull_backfaces),
+        })
+        .collect();
     let mut encoder = device.create_command_encoder(&Default::default());
     for i in 0..n {
         let pass = IdPass {
             tri_view: &tri_view,
             depth_view: &depth_views[i as usize % 2],
             store_depth: true,
-            pipeline: if i == 0 { first } else { pipe },
+            pipeline: &passes[i as usize],
             bind: &binds[i as usize % 2],
-            offset: (i * stride) as u32,
+            offsets: &[(i * stride) as u32, reproject_at[i as usize]],
         };
         draw_ids(&mut encoder, &buffers, &pass, queries.as_ref(), i as u32);
         copy(&mut encoder, &tri, &history, i * image_bytes, row, w, h);
@@ -322,4 +385,50 @@ pub fn render(
     }
     stats.readback_seconds = start.elapsed().as_secs_f64();
     Ok((ids, stats))
+}
+
+/// The matrices `reproject` of layered.wgsl, a block per image: for image i and each earlier
+/// image j < i, the map from i's homogeneous window coordinates (x, y, depth, 1) to
+/// (x·w, y·w, w, f) in image j — pixel position, clip w and signed distance in front of j's image
+/// plane, all scaled by the same positive weight. Formed in f64 from the clip matrices `clip`
+/// (relative to `centre`) and rounded once to f32. Image 0's block is empty.
+fn reprojections(
+    cameras: &[Camera],
+    clip: &[DMat4],
+    centre: glam::DVec3,
+    w: u32,
+    h: u32,
+) -> Vec<Vec<[[f32; 4]; 4]>> {
+    let (wf, hf) = (w as f64, h as f64);
+    let rows = |r: [[f64; 4]; 4]| DMat4::from_cols_array_2d(&r).transpose();
+    // Window (x right, y down, depth) to normalized device coordinates.
+    let window_to_ndc = rows([
+        [2.0 / wf, 0.0, 0.0, -1.0],
+        [0.0, -2.0 / hf, 0.0, 1.0],
+        [0.0, 0.0, 1.0, 0.0],
+        [0.0, 0.0, 0.0, 1.0],
+    ]);
+    // Clip coordinates to (x·w, y·w, w) in pixels.
+    let clip_to_pixel = rows([
+        [wf / 2.0, 0.0, 0.0, wf / 2.0],
+        [0.0, -hf / 2.0, 0.0, hf / 2.0],
+        [0.0, 0.0, 0.0, 1.0],
+        [0.0, 0.0, 0.0, 0.0],
+    ]);
+    let mut out = vec![Vec::new()];
+    for i in 1..cameras.len() {
+        let back = clip[i].inverse() * window_to_ndc;
+        let mut block = Vec::with_capacity(i);
+        for j in 0..i {
+            let fwd = cameras[j].forward();
+            // In front: (p_rel + centre − eye)·forward > 0.
+            let front = fwd.extend((centre - cameras[j].eye()).dot(fwd));
+            let mut r = clip_to_pixel * clip[j] * back;
+            r = r.transpose();
+            r.w_axis = back.transpose() * front;
+            block.push(r.transpose().as_mat4().to_cols_array_2d());
+        }
+        out.push(block);
+    }
+    out
 }

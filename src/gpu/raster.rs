@@ -27,13 +27,15 @@ pub fn align(x: u64, a: u64) -> u64 {
 
 /// A pipeline drawing the scene's indexed triangles (positions relative to the scene centre,
 /// `vs_main`) into a `TRI_FORMAT` target with a reversed depth test, fragment stage `fs_entry`,
-/// counter-clockwise fronts, culling `cull`.
+/// counter-clockwise fronts, culling `cull`, and the fragment stage's pipeline-overridable
+/// `constants`.
 pub fn id_pipeline(
     device: &wgpu::Device,
     module: &wgpu::ShaderModule,
     layout: &wgpu::PipelineLayout,
     fs_entry: &str,
     cull: Option<wgpu::Face>,
+    constants: &[(&str, f64)],
 ) -> wgpu::RenderPipeline {
     device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
         label: Some(fs_entry),
@@ -65,7 +67,10 @@ pub fn id_pipeline(
         fragment: Some(wgpu::FragmentState {
             module,
             entry_point: Some(fs_entry),
-            compilation_options: Default::default(),
+            compilation_options: wgpu::PipelineCompilationOptions {
+                constants,
+                ..Default::default()
+            },
             targets: &[Some(TRI_FORMAT.into())],
         }),
         multiview_mask: None,
@@ -81,8 +86,8 @@ pub struct IdPass<'a> {
     pub store_depth: bool,
     pub pipeline: &'a wgpu::RenderPipeline,
     pub bind: &'a wgpu::BindGroup,
-    /// Dynamic offset of this image's view uniform.
-    pub offset: u32,
+    /// Dynamic offsets of this image's uniforms, in binding order.
+    pub offsets: &'a [u32],
 }
 
 /// Record pass `i`: clear ids to −1 and depth to far, draw every triangle of the scene.
@@ -130,7 +135,7 @@ pub fn draw_ids(
         multiview_mask: None,
     });
     rp.set_pipeline(pass.pipeline);
-    rp.set_bind_group(0, pass.bind, &[pass.offset]);
+    rp.set_bind_group(0, pass.bind, pass.offsets);
     rp.set_vertex_buffer(0, buffers.positions.slice(..));
     rp.set_index_buffer(buffers.faces.slice(..), wgpu::IndexFormat::Uint32);
     rp.draw_indexed(0..3 * buffers.triangle_count, 0, 0..1);
