@@ -153,6 +153,43 @@ impl Camera {
         DMat3::from_mat4(self.pose).transpose()
     }
 
+    /// World size of one pixel (its height) on the plane facing the camera at camera depth
+    /// `depth`: `depth · 2 tan(yfov/2) / height` (perspective) or `2 ymag / height`
+    /// (orthographic).
+    pub fn pixel_footprint(&self, depth: f64) -> f64 {
+        let h = self.half_extents();
+        match self.projection {
+            Projection::Perspective { .. } => depth * 2.0 * h.y / self.height as f64,
+            Projection::Orthographic { .. } => 2.0 * h.y / self.height as f64,
+        }
+    }
+
+    /// The camera offset by half a pixel in both directions (non-redundant-rendering.txt
+    /// Algorithm 4, step 1): same pose and pixel size, (width+1)×(height+1) pixels, so that its
+    /// pixel (x, y) centre lies on this camera's pixel corner (x, y).
+    pub fn corner_camera(&self) -> Result<Camera> {
+        let (w, h) = (self.width as f64, self.height as f64);
+        let projection = match self.projection {
+            Projection::Perspective { yfov } => Projection::Perspective {
+                yfov: 2.0 * ((yfov * 0.5).tan() * (h + 1.0) / h).atan(),
+            },
+            Projection::Orthographic { xmag, ymag } => Projection::Orthographic {
+                xmag: xmag * (w + 1.0) / w,
+                ymag: ymag * (h + 1.0) / h,
+            },
+        };
+        let mut c = Camera::new(
+            self.pose,
+            projection,
+            self.width + 1,
+            self.height + 1,
+            self.znear,
+            self.zfar,
+        )?;
+        c.name = self.name.clone();
+        Ok(c)
+    }
+
     /// Camera-space half extents of the image plane at z = −1 (perspective) or of the view
     /// volume (orthographic).
     fn half_extents(&self) -> DVec2 {
@@ -420,6 +457,18 @@ mod tests {
             None,
         )
         .unwrap()
+    }
+
+    #[test]
+    fn corner_camera_centres_lie_on_pixel_corners() {
+        let c = cam();
+        let k = c.corner_camera().unwrap();
+        for (x, y) in [(0.0, 0.0), (3.0, 5.0), (c.width as f64, c.height as f64)] {
+            let (o1, d1) = c.ray_z1(DVec2::new(x, y));
+            let (o2, d2) = k.ray_z1(DVec2::new(x + 0.5, y + 0.5));
+            assert!((o1 - o2).length() < 1e-12 && (d1 - d2).length() < 1e-12);
+        }
+        assert!((k.pixel_footprint(2.0) - c.pixel_footprint(2.0)).abs() < 1e-12);
     }
 
     #[test]

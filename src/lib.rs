@@ -9,7 +9,9 @@ pub mod error;
 pub mod evaluate;
 pub mod gpu;
 pub mod io;
+pub mod reconstruct;
 pub mod scene;
+pub mod shadows;
 pub mod trace;
 
 #[cfg(feature = "python")]

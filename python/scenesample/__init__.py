@@ -14,11 +14,12 @@ Conventions (shared by every function):
 from __future__ import annotations
 
 from . import errors, references, scenes
-from ._api import cast_rays, device_info, discretize
+from ._api import cast_rays, device_info, discretize, reconstruct
 from ._core import Camera
 from ._core import __version__ as __version__
 from ._evaluate import evaluate, intermediate_cameras
 from ._scene import Scene
+from ._shadows import AreaLight, ShadowResult, soft_shadows
 from .errors import (
     ExrError,
     GpuError,
@@ -30,9 +31,10 @@ from .errors import (
     ScenesampleError,
     SceneWarning,
 )
-from .results import DepthImages, RayHits
+from .results import DepthImages, Mesh, RayHits
 
 __all__ = [
+    "AreaLight",
     "Camera",
     "DepthImages",
     "ExrError",
@@ -40,11 +42,13 @@ __all__ = [
     "GpuLimitError",
     "GpuUnavailableError",
     "InputError",
+    "Mesh",
     "RayHits",
     "Scene",
     "SceneError",
     "SceneFileError",
     "SceneWarning",
+    "ShadowResult",
     "ScenesampleError",
     "cast_rays",
     "device_info",
@@ -52,6 +56,8 @@ __all__ = [
     "errors",
     "evaluate",
     "intermediate_cameras",
+    "reconstruct",
     "references",
     "scenes",
+    "soft_shadows",
 ]

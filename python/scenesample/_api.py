@@ -1,5 +1,5 @@
-"""The verbs: ``discretize`` and ray casting (``reconstruct``, ``splat`` and ``evaluate`` arrive
-with the capabilities that define them)."""
+"""The verbs ``discretize`` and ``reconstruct``, and ray casting (``evaluate`` lives in
+``_evaluate``; ``splat`` arrives with the capability that defines it)."""
 
 from __future__ import annotations
 
@@ -11,9 +11,9 @@ import numpy as np
 from . import _core
 from ._scene import Scene
 from .errors import InputError
-from .results import DepthImages, RayHits
+from .results import DepthImages, Mesh, RayHits
 
-__all__ = ["discretize", "cast_rays", "device_info"]
+__all__ = ["discretize", "reconstruct", "cast_rays", "device_info"]
 
 Camera = _core.Camera
 DISCRETIZE_METHODS = ("conventional", "nonredundant", "peeling")
@@ -127,7 +127,100 @@ def discretize(
                 f"{cams[0].width}x{cams[0].height}; they must match"
             )
         d = _core.discretize_peeling(core, camera, int(layers), cull)
-    return DepthImages._from_core(d, cams, cull)
+    images = DepthImages._from_core(d, cams, cull)
+    # Provenance, so that ``reconstruct(images, "hybrid")`` can render the offset images.
+    images._source = (scene, method, redundancy)
+    return images
+
+
+RECONSTRUCT_METHODS = ("mesh", "hybrid", "points")
+
+
+def reconstruct(
+    images: DepthImages,
+    method: str = "hybrid",
+    *,
+    scene: Optional[Scene] = None,
+    offset: Optional[DepthImages] = None,
+) -> Mesh:
+    """Rebuild surfaces from depth-image samples (non-redundant-rendering.txt §4).
+
+    Parameters
+    ----------
+    images : DepthImages
+        Any discretization (conventional, non-redundant, peeling, or loaded from EXR).
+    method : {"hybrid", "mesh", "points"}
+        ``"mesh"``: the conventional depth-image mesh. Neighbouring samples are connected when
+        they hold the same triangle or each lies within one pixel footprint (the pixel's size at
+        the sample's depth, ``Camera.pixel_footprint``) of the other's tangent plane; a 2x2
+        block gives two triangles when its four samples connect around it, one when three do;
+        isolated samples are dropped.
+
+        ``"hybrid"`` (Algorithm 4): every sample becomes a quad over its pixel. Each corner is
+        the offset image's sample at that corner when it belongs to the same surface (same test
+        as above), shared by all quads that take it, so a continuous surface is tiled without
+        cracks or overlap; otherwise the corner ray's intersection with the sample's tangent
+        plane. No corner lies farther than 8 footprints from its sample: beyond that (grazing
+        planes), or without a normal, the corner is taken on the plane facing the camera at the
+        sample's depth. Every vertex is finite.
+
+        ``"points"``: one square per sample in its tangent plane with the area of the pixel's
+        footprint on that plane (side at most 8 footprints).
+    scene : Scene, optional
+        For ``hybrid``: the scene to render the offset images from; by default the scene the
+        images were discretized from (required for images loaded from EXR).
+    offset : DepthImages, optional
+        For ``hybrid``: precomputed offset images, made by the same method from
+        ``[c.corner_camera() for c in images.cameras]``.
+
+    Returns
+    -------
+    Mesh
+        ``vertices`` (V, 3) float32, ``faces`` (F, 3) uint32 (counter-clockwise as seen from
+        the sample's camera), ``sample`` (F,) int64 flat index (image * H * W + row * W +
+        column) of the sample each face came from, ``timings`` (``offset`` for rendering H,
+        then the method's own step).
+    """
+    if not isinstance(images, DepthImages):
+        raise InputError(f"images must be a DepthImages, got {type(images).__name__}")
+    if method not in RECONSTRUCT_METHODS:
+        raise InputError(f"method must be one of {list(RECONSTRUCT_METHODS)}, got {method!r}")
+    timings: dict[str, float] = {}
+    if method == "hybrid" and offset is None:
+        offset = offset_images(images, scene)
+        timings["offset"] = offset.timings.get("total", 0.0)
+    elif method != "hybrid" and (offset is not None or scene is not None):
+        raise InputError(f"scene and offset apply to method='hybrid', not {method!r}")
+    if offset is not None and not isinstance(offset, DepthImages):
+        raise InputError(f"offset must be a DepthImages, got {type(offset).__name__}")
+    d = _core.reconstruct(images, method, offset)
+    timings.update(d.pop("timings"))
+    return Mesh(**d, timings=timings, method=method)
+
+
+def offset_images(images: DepthImages, scene: Optional[Scene] = None) -> DepthImages:
+    """The offset images H of hybrid reconstruction: the same discretization as ``images``
+    from each camera's ``corner_camera()`` (half a pixel off in both directions, one pixel
+    larger), rendered from ``scene`` (by default the scene ``images`` came from)."""
+    source = getattr(images, "_source", None)
+    method, redundancy = images.method, "pixel"
+    if source is not None:
+        scene = source[0] if scene is None else scene
+        redundancy = source[2]
+    if scene is None:
+        raise InputError(
+            "hybrid reconstruction renders offset images from the scene: pass scene= (images "
+            "loaded from a file do not remember theirs) or offset="
+        )
+    corners = [c.corner_camera() for c in images.cameras]
+    cull = images.cull_backfaces
+    if method == "peeling":
+        return discretize(
+            scene, corners[:1], "peeling", layers=images.n, camera=corners[0], cull_backfaces=cull
+        )
+    if method == "nonredundant":
+        return discretize(scene, corners, method, redundancy=redundancy, cull_backfaces=cull)
+    return discretize(scene, corners, "conventional", cull_backfaces=cull)
 
 
 def cast_rays(

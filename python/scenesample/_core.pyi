@@ -15,7 +15,9 @@ __all__ = [
     "discretize_nonredundant",
     "discretize_peeling",
     "read_exr",
+    "reconstruct",
     "sampling_metrics",
+    "soft_shadows",
     "write_exr",
     "__version__",
 ]
@@ -136,6 +138,8 @@ class Camera:
     def project(self, points: ArrayLike) -> tuple[np.ndarray, np.ndarray]: ...
     def unproject(self, pixels: ArrayLike, depth: ArrayLike) -> np.ndarray: ...
     def pixel_rays(self, *, normalize: bool = True) -> tuple[np.ndarray, np.ndarray]: ...
+    def corner_camera(self) -> Camera: ...
+    def pixel_footprint(self, depth: float) -> float: ...
     def __eq__(self, value: object, /) -> bool: ...
     def __ne__(self, value: object, /) -> bool: ...
 
@@ -161,6 +165,21 @@ def sampling_metrics(
     frames: list[Camera],
     redundancy: str,
     cull_backfaces: bool,
+) -> dict[str, Any]: ...
+def reconstruct(images: Any, method: str, offset: Optional[Any] = None) -> dict[str, Any]: ...
+def soft_shadows(
+    scene: Scene,
+    camera: Camera,
+    center: ArrayLike,
+    u: ArrayLike,
+    v: ArrayLike,
+    samples: tuple[int, int],
+    discretization: str,
+    resolution: int,
+    corners: bool,
+    reconstruction: str,
+    shadow_resolution: int,
+    layers: int,
 ) -> dict[str, Any]: ...
 def cast_rays(
     scene: Scene,

@@ -10,11 +10,11 @@ import numpy as np
 from . import _core
 from ._scene import Scene
 from .errors import InputError
-from .results import DepthImages
+from .results import DepthImages, Mesh
 
 __all__ = ["evaluate", "intermediate_cameras"]
 
-METRICS = ("sampling",)
+METRICS = ("sampling", "shadow", "geometry")
 
 
 def intermediate_cameras(region: Sequence[Any], count: int, seed: int = 0) -> list[Any]:
@@ -47,17 +47,37 @@ def intermediate_cameras(region: Sequence[Any], count: int, seed: int = 0) -> li
 
 
 def evaluate(
-    images: DepthImages,
-    scene: Scene,
-    metric: str = "sampling",
+    images: Any,
+    scene: Any,
+    metric: Optional[str] = None,
     *,
     region: Optional[Sequence[Any]] = None,
     intermediate: int = 1000,
     redundancy: str = "pixel",
     seed: int = 0,
+    cameras: Optional[Sequence[Any]] = None,
+    tolerance: float = 0.01,
 ) -> dict[str, Any]:
-    """Measure how well a set of depth images samples a scene (non-redundant-rendering.txt
-    §6.1.2).
+    """Measure a result's accuracy. The metric defaults from the first argument's type:
+    ``DepthImages`` -> ``"sampling"``, ``ShadowResult`` -> ``"shadow"``, ``Mesh`` ->
+    ``"geometry"``.
+
+    ``evaluate(shadows, reference, "shadow")`` compares two :class:`ShadowResult` of one view
+    (non-redundant-rendering.txt §6.2) over the pixels both see a surface at, on a 0-255 scale:
+    ``intensity_error`` (mean absolute difference of the visible fraction: opposite errors at
+    a pixel cancel), ``visibility_error`` (mean share of light samples resolved differently),
+    ``max_intensity_error``, and ``pixels``. Intensity error never exceeds visibility error.
+
+    ``evaluate(mesh, scene, "geometry", cameras=...)`` renders the scene and the mesh from each
+    camera and compares, over all cameras' pixels: ``coverage`` (fraction of the true surface's
+    pixels where the mesh lies within the depth tolerance), ``over_coverage`` (pixels where the
+    mesh lies in front of the true surface by more than the tolerance or where there is none,
+    as a fraction of the true surface's pixels), ``mean_depth_error`` and ``max_depth_error``
+    (world units, where both have a surface), and ``timings``. The tolerance at depth d is
+    ``tolerance * d`` plus one pixel footprint.
+
+    The rest of this docstring describes ``"sampling"``: how well a set of depth images
+    samples a scene (non-redundant-rendering.txt §6.1.2).
 
     Parameters
     ----------
@@ -102,8 +122,16 @@ def evaluate(
     InputError
         Unknown metric or redundancy, images without reference cameras, bad ``intermediate``.
     """
+    from ._shadows import ShadowResult
+
+    if metric is None:
+        metric = {ShadowResult: "shadow", Mesh: "geometry"}.get(type(images), "sampling")
     if metric not in METRICS:
         raise InputError(f"metric must be one of {list(METRICS)}, got {metric!r}")
+    if metric == "shadow":
+        return _shadow_error(images, scene)
+    if metric == "geometry":
+        return _geometry_error(images, scene, cameras, tolerance)
     if not isinstance(images, DepthImages):
         raise InputError(f"images must be a DepthImages, got {type(images).__name__}")
     if not isinstance(scene, Scene):
@@ -130,3 +158,73 @@ def evaluate(
     )
     d["samples"] = d["samples"].astype(np.int64)
     return d
+
+
+def _shadow_error(result: Any, reference: Any) -> dict[str, Any]:
+    from ._shadows import ShadowResult
+
+    for name, r in (("result", result), ("reference", reference)):
+        if not isinstance(r, ShadowResult):
+            raise InputError(
+                f"metric='shadow' compares ShadowResults; {name} is {type(r).__name__}"
+            )
+    if result.visible.shape != reference.visible.shape:
+        raise InputError(
+            f"the results differ in shape: {result.visible.shape} vs {reference.visible.shape} "
+            "(same camera and light samples needed)"
+        )
+    both = result.mask & reference.mask
+    if not both.any():
+        raise InputError("the two results share no pixel with a surface")
+    diff = np.abs(result.visibility.astype(np.float64) - reference.visibility)[both]
+    wrong = (result.visible != reference.visible)[both].mean(axis=-1)
+    return {
+        "intensity_error": float(255 * diff.mean()),
+        "visibility_error": float(255 * wrong.mean()),
+        "max_intensity_error": float(255 * diff.max()),
+        "pixels": int(both.sum()),
+    }
+
+
+def _geometry_error(
+    mesh: Any, scene: Any, cameras: Optional[Sequence[Any]], tolerance: float
+) -> dict[str, Any]:
+    import time
+
+    from ._api import discretize
+
+    if not isinstance(mesh, Mesh):
+        raise InputError(f"metric='geometry' measures a Mesh, got {type(mesh).__name__}")
+    if not isinstance(scene, Scene):
+        raise InputError(f"scene must be a scenesample.Scene, got {type(scene).__name__}")
+    if not cameras:
+        raise InputError("metric='geometry' needs cameras=[...] to compare from")
+    if not (np.isfinite(tolerance) and tolerance >= 0):
+        raise InputError(f"tolerance must be a non-negative number, got {tolerance!r}")
+    start = time.perf_counter()
+    cams = list(cameras)
+    truth = discretize(scene, cams)
+    if len(mesh.faces):
+        rebuilt = discretize(mesh.to_scene(), cams)
+        dm = rebuilt.depth.astype(np.float64)
+    else:
+        dm = np.full(truth.depth.shape, np.inf)
+    dt = truth.depth.astype(np.float64)
+    tol = np.empty_like(dt)
+    for i, c in enumerate(cams):
+        f0, f1 = c.pixel_footprint(0.0), c.pixel_footprint(1.0)
+        tol[i] = tolerance * dt[i] + f0 + (f1 - f0) * dt[i]
+    t_in, m_in = np.isfinite(dt), np.isfinite(dm)
+    both = t_in & m_in
+    diff = np.where(both, dm, 0.0) - np.where(both, dt, 0.0)
+    err = np.abs(diff)[both]
+    close = both & (np.abs(diff) <= np.where(both, tol, 0.0))
+    over = (m_in & ~t_in) | (both & (diff < -np.where(both, tol, 0.0)))
+    surface = max(int(t_in.sum()), 1)
+    return {
+        "coverage": float(close.sum() / surface),
+        "over_coverage": float(over.sum() / surface),
+        "mean_depth_error": float(err.mean()) if err.size else float("nan"),
+        "max_depth_error": float(err.max()) if err.size else float("nan"),
+        "timings": {"total": time.perf_counter() - start},
+    }

@@ -11,7 +11,7 @@ import numpy as np
 from . import _core
 from .errors import InputError
 
-__all__ = ["DepthImages", "RayHits"]
+__all__ = ["DepthImages", "Mesh", "RayHits"]
 
 
 @dataclass(eq=False, repr=False)
@@ -178,3 +178,57 @@ class RayHits:
     def __repr__(self) -> str:
         trace = self.timings.get("trace", float("nan"))
         return f"RayHits(n={len(self)}, hit={int(self.hit.sum())}, trace={trace:.4f}s)"
+
+
+@dataclass(eq=False, repr=False)
+class Mesh:
+    """A surface rebuilt from samples by :func:`scenesample.reconstruct`.
+
+    Attributes
+    ----------
+    vertices : (V, 3) float32
+        World positions.
+    faces : (F, 3) uint32
+        Vertex indices, counter-clockwise as seen from the camera of the face's sample.
+    sample : (F,) int64
+        Flat index (image * H * W + row * W + column) of the sample each face came from.
+    method : str
+        ``"mesh"``, ``"hybrid"`` or ``"points"``.
+    timings : dict of str to float
+        Seconds: ``offset`` (rendering the offset images, hybrid only) and the method's step.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    sample: np.ndarray
+    timings: dict[str, float] = field(default_factory=dict)
+    method: str = "hybrid"
+
+    def __len__(self) -> int:
+        return int(self.faces.shape[0])
+
+    def __repr__(self) -> str:
+        return f"Mesh({self.method}, {len(self.vertices):,} vertices, {len(self.faces):,} faces)"
+
+    @property
+    def area(self) -> float:
+        """Total area of the faces (float64)."""
+        v = self.vertices.astype(np.float64)
+        a, b, c = (v[self.faces[:, k]] for k in range(3))
+        return float(0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
+
+    def as_dict(self) -> dict[str, Any]:
+        """Every field by name (arrays are not copied)."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    def to_trimesh(self) -> Any:
+        """A ``trimesh.Trimesh`` of the faces (vertices not merged, nothing removed)."""
+        import trimesh
+
+        return trimesh.Trimesh(self.vertices, self.faces, process=False)
+
+    def to_scene(self) -> Any:
+        """The mesh as a :class:`scenesample.Scene` (to render, ray cast or evaluate it)."""
+        from ._scene import Scene
+
+        return Scene.from_arrays(self.vertices, self.faces)

@@ -4,6 +4,7 @@
 pub mod depth;
 pub mod layered;
 pub mod raster;
+pub mod shadow;
 
 use std::sync::{Arc, Mutex, OnceLock};
 
@@ -27,6 +28,7 @@ pub struct GpuContext {
     pub(crate) lock: Mutex<()>,
     depth_pipeline: OnceLock<depth::DepthPipeline>,
     layered_pipeline: OnceLock<layered::LayeredPipeline>,
+    shadow_pipeline: OnceLock<shadow::ShadowPipeline>,
 }
 
 static CONTEXT: OnceLock<std::result::Result<Arc<GpuContext>, String>> = OnceLock::new();
@@ -109,6 +111,7 @@ fn create() -> std::result::Result<GpuContext, String> {
         lock: Mutex::new(()),
         depth_pipeline: OnceLock::new(),
         layered_pipeline: OnceLock::new(),
+        shadow_pipeline: OnceLock::new(),
     })
 }
 
@@ -135,6 +138,11 @@ impl GpuContext {
     pub fn layered_pipeline(&self) -> &layered::LayeredPipeline {
         self.layered_pipeline
             .get_or_init(|| layered::LayeredPipeline::new(&self.device))
+    }
+
+    pub fn shadow_pipeline(&self) -> &shadow::ShadowPipeline {
+        self.shadow_pipeline
+            .get_or_init(|| shadow::ShadowPipeline::new(&self.device))
     }
 }
 
@@ -189,15 +197,24 @@ impl SceneBuffers {
     }
 
     fn upload(ctx: &GpuContext, scene: &Scene) -> Result<Self> {
+        Self::from_triangles(ctx, scene.vertices(), scene.faces(), scene.center())
+    }
+
+    /// Upload any triangles, positions relative to `centre` (formed in f64, rounded to f32).
+    pub fn from_triangles(
+        ctx: &GpuContext,
+        vertices: &[[f32; 3]],
+        faces: &[[u32; 3]],
+        centre: glam::DVec3,
+    ) -> Result<Self> {
         use wgpu::util::DeviceExt;
         let start = std::time::Instant::now();
-        let c = scene.center();
-        let rel: Vec<f32> = scene
-            .vertices()
+        let c = centre;
+        let rel: Vec<f32> = vertices
             .iter()
             .flat_map(|v| [0, 1, 2].map(|k| (v[k] as f64 - c[k]) as f32))
             .collect();
-        let faces: Vec<u32> = scene.faces().iter().flatten().copied().collect();
+        let faces: Vec<u32> = faces.iter().flatten().copied().collect();
         let limit = ctx.limits.max_buffer_size;
         for (name, bytes) in [
             ("vertex positions", rel.len() * 4),
@@ -205,30 +222,37 @@ impl SceneBuffers {
         ] {
             if bytes as u64 > limit {
                 return Err(Error::GpuLimit(format!(
-                    "the scene's {name} take {bytes} bytes, more than this device's buffer \
-                     limit of {limit} bytes; split the scene"
+                    "the {name} take {bytes} bytes, more than this device's buffer limit of \
+                     {limit} bytes; split the geometry"
                 )));
             }
         }
+        // wgpu rejects empty buffers' bindings; keep one degenerate triangle's worth.
+        let pad = |mut v: Vec<u8>| {
+            if v.is_empty() {
+                v.resize(12, 0);
+            }
+            v
+        };
         let positions = ctx
             .device
             .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("scene positions"),
-                contents: bytemuck::cast_slice(&rel),
+                label: Some("positions"),
+                contents: &pad(bytemuck::cast_slice(&rel).to_vec()),
                 usage: wgpu::BufferUsages::VERTEX,
             });
         let faces_buf = ctx
             .device
             .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("scene faces"),
-                contents: bytemuck::cast_slice(&faces),
+                label: Some("faces"),
+                contents: &pad(bytemuck::cast_slice(&faces).to_vec()),
                 usage: wgpu::BufferUsages::INDEX,
             });
         ctx.check_errors()?;
         Ok(Self {
             positions,
             faces: faces_buf,
-            triangle_count: scene.triangle_count() as u32,
+            triangle_count: (faces.len() / 3) as u32,
             upload_seconds: start.elapsed().as_secs_f64(),
         })
     }

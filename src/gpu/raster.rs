@@ -126,11 +126,7 @@ pub fn draw_ids(
             }),
             stencil_ops: None,
         }),
-        timestamp_writes: timestamps.map(|t| wgpu::RenderPassTimestampWrites {
-            query_set: &t.set,
-            beginning_of_pass_write_index: Some(2 * i),
-            end_of_pass_write_index: Some(2 * i + 1),
-        }),
+        timestamp_writes: timestamps.map(|t| t.writes(i)),
         occlusion_query_set: None,
         multiview_mask: None,
     });
@@ -150,6 +146,15 @@ pub struct Timestamps {
 }
 
 impl Timestamps {
+    /// The begin and end writes of render pass `i`.
+    pub fn writes(&self, i: u32) -> wgpu::RenderPassTimestampWrites<'_> {
+        wgpu::RenderPassTimestampWrites {
+            query_set: &self.set,
+            beginning_of_pass_write_index: Some(2 * i),
+            end_of_pass_write_index: Some(2 * i + 1),
+        }
+    }
+
     /// Queries for `n` passes, when the adapter has timestamps.
     pub fn new(ctx: &GpuContext, n: u32) -> Option<Self> {
         ctx.timestamps.then(|| {

@@ -258,6 +258,19 @@ impl PyCamera {
         Ok((array(py, o, &[h, w, 3])?, array(py, d, &[h, w, 3])?))
     }
 
+    /// The camera offset by half a pixel in both directions (hybrid reconstruction's H): same
+    /// pose and pixel size, (width+1)x(height+1) pixels whose centres are this camera's pixel
+    /// corners.
+    fn corner_camera(&self, py: Python<'_>) -> PyResult<Self> {
+        self.inner.corner_camera().map(Self::from).py_err(py)
+    }
+
+    /// World size of one pixel at camera depth ``depth`` (perspective: depth * 2 tan(yfov/2) /
+    /// height; orthographic: 2 ymag / height).
+    fn pixel_footprint(&self, depth: f64) -> f64 {
+        self.inner.pixel_footprint(depth)
+    }
+
     fn __repr__(&self) -> String {
         let c = &self.inner;
         let proj = match c.projection {

@@ -6,8 +6,10 @@ mod camera;
 mod convert;
 mod errors;
 mod evaluate;
+mod reconstruct;
 mod render;
 mod scene;
+mod shadows;
 
 use pyo3::prelude::*;
 
@@ -20,6 +22,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(render::discretize_peeling, m)?)?;
     m.add_function(wrap_pyfunction!(render::cast_rays, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate::sampling_metrics, m)?)?;
+    m.add_function(wrap_pyfunction!(reconstruct::reconstruct, m)?)?;
+    m.add_function(wrap_pyfunction!(shadows::soft_shadows, m)?)?;
     m.add_function(wrap_pyfunction!(render::device_info, m)?)?;
     m.add_function(wrap_pyfunction!(render::write_exr, m)?)?;
     m.add_function(wrap_pyfunction!(render::read_exr, m)?)?;

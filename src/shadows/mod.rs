@@ -1,0 +1,444 @@
+//! Soft shadows from a discretized scene (non-redundant-rendering.txt §5, Algorithm 5): the
+//! scene is discretized from the area light (non-redundant or conventional images from its
+//! corners, or peeling layers from its centre), the images are reconstructed into meshes
+//! (§4), and every light sample shadow-maps the meshes on the GPU (`gpu::shadow`). Two
+//! references: shadow maps of the original triangles (`Geometry`, the paper's ground truth) and
+//! exact visibility by BVH ray casts (`Raytraced`).
+
+use std::time::Instant;
+
+use glam::{DVec2, DVec3};
+
+use crate::camera::Camera;
+use crate::discretize::{
+    discretize_conventional, discretize_nonredundant, discretize_peeling, DepthImages, Redundancy,
+};
+use crate::error::Result;
+use crate::gpu;
+use crate::input_err;
+use crate::reconstruct::{reconstruct_hybrid, reconstruct_mesh, reconstruct_points, Mesh};
+use crate::scene::Scene;
+
+/// A rectangular area light: corners `center ± u/2 ± v/2`, emitting on both sides.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AreaLight {
+    pub center: DVec3,
+    pub u: DVec3,
+    pub v: DVec3,
+}
+
+impl AreaLight {
+    pub fn new(center: DVec3, u: DVec3, v: DVec3) -> Result<Self> {
+        if !(center.is_finite() && u.is_finite() && v.is_finite()) {
+            return input_err!("the light's center, u and v must be finite");
+        }
+        let n = u.cross(v);
+        let scale = (u.length() * v.length()).max(f64::MIN_POSITIVE);
+        if n.length() <= 1e-12 * scale || n.length().is_nan() {
+            return input_err!("the light's u and v must be non-zero and not parallel");
+        }
+        Ok(Self { center, u, v })
+    }
+
+    /// Stratified samples at the centres of an `nu × nv` grid, row by row along v.
+    pub fn samples(&self, nu: u32, nv: u32) -> Vec<DVec3> {
+        let mut out = Vec::with_capacity((nu * nv) as usize);
+        for b in 0..nv {
+            for a in 0..nu {
+                let s = (a as f64 + 0.5) / nu as f64 - 0.5;
+                let t = (b as f64 + 0.5) / nv as f64 - 0.5;
+                out.push(self.center + self.u * s + self.v * t);
+            }
+        }
+        out
+    }
+
+    pub fn corners(&self) -> [DVec3; 4] {
+        let (hu, hv) = (self.u * 0.5, self.v * 0.5);
+        [
+            self.center - hu - hv,
+            self.center + hu - hv,
+            self.center + hu + hv,
+            self.center - hu + hv,
+        ]
+    }
+
+    /// The light's unit normal on the side of `target`.
+    pub fn facing(&self, target: DVec3) -> DVec3 {
+        let n = self.u.cross(self.v).normalize();
+        if n.dot(target - self.center) >= 0.0 {
+            n
+        } else {
+            -n
+        }
+    }
+}
+
+/// How the occluders are represented.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Discretization {
+    Nonredundant,
+    Conventional,
+    Peeling,
+    Geometry,
+    Raytraced,
+}
+
+impl Discretization {
+    pub fn parse(s: &str) -> Option<Self> {
+        Some(match s {
+            "nonredundant" => Self::Nonredundant,
+            "conventional" => Self::Conventional,
+            "peeling" => Self::Peeling,
+            "geometry" => Self::Geometry,
+            "raytraced" => Self::Raytraced,
+            _ => return None,
+        })
+    }
+}
+
+/// Which reconstruction turns the light's depth images into occluders.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Reconstruction {
+    Hybrid,
+    Mesh,
+    Points,
+}
+
+#[derive(Clone, Debug)]
+pub struct ShadowOptions {
+    /// Light samples along u and v.
+    pub samples: (u32, u32),
+    pub discretization: Discretization,
+    /// Resolution of the light's depth images (square).
+    pub resolution: u32,
+    /// Depth images from the light's four corners (`false`: one from its centre); peeling
+    /// always uses the centre.
+    pub corners: bool,
+    pub reconstruction: Reconstruction,
+    /// Resolution of each light sample's shadow map (square).
+    pub shadow_resolution: u32,
+    /// Peeling layers.
+    pub layers: u32,
+}
+
+pub struct ShadowResult {
+    pub width: u32,
+    pub height: u32,
+    /// Fraction of light samples visible from each output pixel (1 where no surface).
+    pub visibility: Vec<f32>,
+    /// Per pixel, per light sample (sample fastest).
+    pub visible: Vec<bool>,
+    /// Output pixels that see a surface.
+    pub mask: Vec<bool>,
+    /// Occluder triangles each shadow map drew (0 for `Raytraced`).
+    pub occluder_triangles: usize,
+    pub timings: Vec<(String, f64)>,
+}
+
+/// A shadow or depth camera at `at` facing `dir`, square, whose view holds every corner of the
+/// scene's bounding box (2% margin; yfov at most 170°).
+pub fn light_camera(
+    scene: &Scene,
+    at: DVec3,
+    dir: DVec3,
+    up_hint: DVec3,
+    res: u32,
+) -> Result<Camera> {
+    let [lo, hi] = scene.bounds();
+    let up = {
+        let u = up_hint - dir * dir.dot(up_hint);
+        if u.length() > 1e-9 {
+            u.normalize()
+        } else {
+            dir.any_orthonormal_vector()
+        }
+    };
+    let right = dir.cross(up);
+    let mut tan_max: f64 = 1e-3;
+    for k in 0..8 {
+        let c = DVec3::new(
+            if k & 1 == 0 { lo[0] } else { hi[0] } as f64,
+            if k & 2 == 0 { lo[1] } else { hi[1] } as f64,
+            if k & 4 == 0 { lo[2] } else { hi[2] } as f64,
+        );
+        let r = c - at;
+        let z = r.dot(dir);
+        let t = if z > 1e-12 {
+            r.dot(right).abs().max(r.dot(up).abs()) / z
+        } else {
+            f64::INFINITY
+        };
+        tan_max = tan_max.max(t);
+    }
+    let limit = (85f64).to_radians();
+    let half = (tan_max * 1.02).atan().min(limit);
+    Camera::look_at(at, at + dir, up, 2.0 * half, res, res, None, None)
+}
+
+/// Algorithm 5 with the output image of `eye`.
+pub fn soft_shadows(
+    scene: &Scene,
+    eye: &Camera,
+    light: &AreaLight,
+    opts: &ShadowOptions,
+) -> Result<ShadowResult> {
+    let total = Instant::now();
+    let (nu, nv) = opts.samples;
+    if nu == 0 || nv == 0 {
+        return input_err!("samples must be positive, got {nu}x{nv}");
+    }
+    if opts.resolution == 0 || opts.shadow_resolution == 0 {
+        return input_err!("resolution and shadow_resolution must be positive");
+    }
+    let mut timings = Vec::new();
+
+    // The output image's surface points, with normals facing the eye.
+    let start = Instant::now();
+    let seen = discretize_conventional(scene, std::slice::from_ref(eye), false)?;
+    let (points, normals, mask) = eye_points(&seen, eye);
+    timings.push(("eye".to_string(), start.elapsed().as_secs_f64()));
+
+    let samples = light.samples(nu, nv);
+    let diagonal = scene.diagonal();
+    let s_count = samples.len();
+    let p_count = points.len();
+    let (occluder_triangles, bits) = match opts.discretization {
+        Discretization::Raytraced => {
+            let start = Instant::now();
+            let bits = raytraced(scene, &samples, &points, &normals, diagonal)?;
+            timings.push(("shadow".to_string(), start.elapsed().as_secs_f64()));
+            (0, bits)
+        }
+        Discretization::Geometry => {
+            let start = Instant::now();
+            let bits = shadow_maps(
+                scene,
+                scene.vertices(),
+                scene.faces(),
+                light,
+                &samples,
+                &points,
+                &normals,
+                opts.shadow_resolution,
+            )?;
+            timings.push(("shadow".to_string(), start.elapsed().as_secs_f64()));
+            (scene.triangle_count(), bits)
+        }
+        d => {
+            let start = Instant::now();
+            let (images, offset) = discretize_light(scene, light, d, opts)?;
+            timings.push(("discretize".to_string(), start.elapsed().as_secs_f64()));
+            let start = Instant::now();
+            let mesh: Mesh = match opts.reconstruction {
+                Reconstruction::Hybrid => {
+                    let offset = offset.expect("offset images rendered for hybrid");
+                    reconstruct_hybrid(&images, &offset)?
+                }
+                Reconstruction::Mesh => reconstruct_mesh(&images)?,
+                Reconstruction::Points => reconstruct_points(&images)?,
+            };
+            timings.push(("reconstruct".to_string(), start.elapsed().as_secs_f64()));
+            let start = Instant::now();
+            let bits = shadow_maps(
+                scene,
+                &mesh.vertices,
+                &mesh.faces,
+                light,
+                &samples,
+                &points,
+                &normals,
+                opts.shadow_resolution,
+            )?;
+            timings.push(("shadow".to_string(), start.elapsed().as_secs_f64()));
+            (mesh.faces.len(), bits)
+        }
+    };
+
+    let words = p_count.div_ceil(32).max(1);
+    let npx = mask.len();
+    let mut visible = vec![true; npx * s_count];
+    let mut visibility = vec![1.0f32; npx];
+    let mut k = 0;
+    for (px, &m) in mask.iter().enumerate() {
+        if !m {
+            continue;
+        }
+        let mut lit = 0u32;
+        for s in 0..s_count {
+            let bit = (bits[s * words + k / 32] >> (k % 32)) & 1 == 1;
+            visible[px * s_count + s] = bit;
+            lit += bit as u32;
+        }
+        visibility[px] = lit as f32 / s_count as f32;
+        k += 1;
+    }
+    timings.push(("total".to_string(), total.elapsed().as_secs_f64()));
+    Ok(ShadowResult {
+        width: eye.width,
+        height: eye.height,
+        visibility,
+        visible,
+        mask,
+        occluder_triangles,
+        timings,
+    })
+}
+
+/// World points and eye-facing unit normals of the covered pixels (in pixel order), and the
+/// coverage mask.
+fn eye_points(seen: &DepthImages, eye: &Camera) -> (Vec<DVec3>, Vec<DVec3>, Vec<bool>) {
+    let mut points = Vec::new();
+    let mut normals = Vec::new();
+    let mut mask = Vec::with_capacity(seen.triangle.len());
+    let w = seen.width as usize;
+    for (k, &t) in seen.triangle.iter().enumerate() {
+        let p = DVec3::from_array(seen.position[k].map(f64::from));
+        let ok = t >= 0 && p.is_finite();
+        mask.push(ok);
+        if !ok {
+            continue;
+        }
+        let n = DVec3::from_array(seen.normal[k].map(f64::from));
+        let n = if n.length() > 1e-12 {
+            n.normalize()
+        } else {
+            DVec3::ZERO
+        };
+        let (x, y) = ((k % w) as f64 + 0.5, (k / w) as f64 + 0.5);
+        let (_, ray) = eye.ray_z1(DVec2::new(x, y));
+        points.push(p);
+        normals.push(if n.dot(ray) > 0.0 { -n } else { n });
+    }
+    (points, normals, mask)
+}
+
+type LightImages = (DepthImages, Option<DepthImages>);
+
+/// Step 1: the light's depth images (and, for hybrid reconstruction, their offset images).
+fn discretize_light(
+    scene: &Scene,
+    light: &AreaLight,
+    d: Discretization,
+    opts: &ShadowOptions,
+) -> Result<LightImages> {
+    let dir = light.facing(scene.center());
+    let up = light.v;
+    let res = opts.resolution;
+    let views: Vec<DVec3> = if opts.corners && d != Discretization::Peeling {
+        light.corners().to_vec()
+    } else {
+        vec![light.center]
+    };
+    let cams = views
+        .iter()
+        .map(|&at| light_camera(scene, at, dir, up, res))
+        .collect::<Result<Vec<_>>>()?;
+    let render = |cams: &[Camera]| -> Result<DepthImages> {
+        match d {
+            Discretization::Nonredundant => {
+                discretize_nonredundant(scene, cams, Redundancy::Pixel, false)
+            }
+            Discretization::Conventional => discretize_conventional(scene, cams, false),
+            _ => discretize_peeling(scene, &cams[0], opts.layers as usize, false),
+        }
+    };
+    let images = render(&cams)?;
+    let offset = if opts.reconstruction == Reconstruction::Hybrid {
+        let corners = cams
+            .iter()
+            .map(Camera::corner_camera)
+            .collect::<Result<Vec<_>>>()?;
+        Some(render(&corners)?)
+    } else {
+        None
+    };
+    Ok((images, offset))
+}
+
+/// Steps 4-9: one shadow map of the occluders per light sample.
+#[allow(clippy::too_many_arguments)]
+fn shadow_maps(
+    scene: &Scene,
+    vertices: &[[f32; 3]],
+    faces: &[[u32; 3]],
+    light: &AreaLight,
+    samples: &[DVec3],
+    points: &[DVec3],
+    normals: &[DVec3],
+    res: u32,
+) -> Result<Vec<u32>> {
+    let ctx = gpu::context()?;
+    let dir = light.facing(scene.center());
+    let cams = samples
+        .iter()
+        .map(|&at| light_camera(scene, at, dir, light.v, res))
+        .collect::<Result<Vec<_>>>()?;
+    // Depth range from everything drawn or tested: the scene, the occluders and the points.
+    let mut lo = DVec3::from_array(scene.bounds()[0].map(f64::from));
+    let mut hi = DVec3::from_array(scene.bounds()[1].map(f64::from));
+    for v in vertices {
+        let p = DVec3::from_array(v.map(f64::from));
+        lo = lo.min(p);
+        hi = hi.max(p);
+    }
+    let bounds = [lo.as_vec3().to_array(), hi.as_vec3().to_array()];
+    let (bits, _) = gpu::shadow::visibility(
+        &ctx,
+        vertices,
+        faces,
+        scene.center(),
+        bounds,
+        &cams,
+        points,
+        normals,
+        scene.diagonal(),
+    )?;
+    Ok(bits)
+}
+
+/// Exact visibility: a ray from each light sample toward each point, stopped
+/// `ABS_BIAS · diagonal` short of it; a hit before that blocks the sample. A point facing away
+/// from a sample does not see it.
+fn raytraced(
+    scene: &Scene,
+    samples: &[DVec3],
+    points: &[DVec3],
+    normals: &[DVec3],
+    diagonal: f64,
+) -> Result<Vec<u32>> {
+    let words = points.len().div_ceil(32).max(1);
+    let mut bits = vec![0u32; words * samples.len()];
+    let eps = gpu::shadow::ABS_BIAS * diagonal;
+    for (s, &l) in samples.iter().enumerate() {
+        let origins = vec![l.as_vec3().to_array(); points.len()];
+        let dirs: Vec<[f32; 3]> = points
+            .iter()
+            .map(|&p| {
+                let r = p - l;
+                let len = r.length();
+                (r * ((len - eps).max(0.0) / len.max(f64::MIN_POSITIVE)))
+                    .as_vec3()
+                    .to_array()
+            })
+            .collect();
+        let usable: Vec<bool> = points
+            .iter()
+            .zip(normals)
+            .map(|(&p, &n)| n.dot(l - p) > 0.0 && (p - l).length() > eps)
+            .collect();
+        // Rays of points facing away are never traced: give them a harmless direction.
+        let dirs: Vec<[f32; 3]> = dirs
+            .into_iter()
+            .zip(&usable)
+            .map(|(d, &u)| if u { d } else { [0.0, 0.0, 1.0] })
+            .collect();
+        let hits = crate::trace::cast_rays(scene, &origins, &dirs, 0.0, 1.0)?;
+        for (k, &u) in usable.iter().enumerate() {
+            if u && hits.triangle[k] < 0 {
+                bits[s * words + k / 32] |= 1 << (k % 32);
+            }
+        }
+    }
+    Ok(bits)
+}
