@@ -226,3 +226,17 @@ def test_area_light_and_soft_shadow_arguments(gpu):
         ss.soft_shadows(scene, cam, light, samples=(1, 1), resolution=16, reconstruction="x")
     with pytest.raises(ss.InputError, match="emissive"):
         ss.AreaLight.from_scene(scene)
+
+
+def test_shadow_experiment_writes_tables_and_figures(gpu, tmp_path):
+    from scenesample.experiments import shadows
+
+    shadows.main(
+        ["--scenes", "grass", "--resolutions", "64", "--sizes", "1", "--resolution", "64"]
+        + ["--samples", "2", "--output", "32", "--shadow-resolution", "64", "--out", str(tmp_path)]
+    )
+    md = (tmp_path / "shadows.md").read_text()
+    assert "| grass | resolution | 64 |" in md and "| grass | nonredundant |" in md
+    rows = (tmp_path / "shadows.csv").read_text().splitlines()
+    assert len(rows) == 1 + 2 * 3  # header + (one resolution + one light size) x 3 methods
+    assert (tmp_path / "fig8_grass.png").stat().st_size > 100

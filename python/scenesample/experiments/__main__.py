@@ -1,13 +1,13 @@
-"""``python -m scenesample.experiments sampling [--scenes ...] [--resolution ...] [--out DIR]``."""
+"""``python -m scenesample.experiments {sampling,shadows} [options]``; see each module."""
 
 from __future__ import annotations
 
 import argparse
 from typing import Optional
 
-from . import sampling
+from . import sampling, shadows
 
-EXPERIMENTS = {"sampling": sampling}
+EXPERIMENTS = {"sampling": sampling, "shadows": shadows}
 
 
 def main(argv: Optional[list[str]] = None) -> None:
