@@ -6,8 +6,8 @@ use std::time::Instant;
 use bytemuck::{Pod, Zeroable};
 
 use super::raster::{
-    align, check_image_size, copy, draw_ids, id_pipeline, IdPass, Timestamps, DEPTH_FORMAT,
-    TRI_FORMAT,
+    align, check_image_size, copy, draw_ids, id_pipeline, submit_readback, wait, IdPass,
+    Timestamps, DEPTH_FORMAT, TRI_FORMAT,
 };
 use super::{GpuContext, SceneBuffers};
 use crate::camera::Camera;
@@ -272,14 +272,7 @@ fn submit_chunk(
         let base = i * image_bytes;
         copy(&mut encoder, &targets.tri, &readback, base, row_tri, w, h);
     }
-    if let Some(q) = &queries {
-        q.resolve(&mut encoder);
-    }
-    let submission = ctx.queue.submit([encoder.finish()]);
-    readback.slice(..).map_async(wgpu::MapMode::Read, |_| {});
-    if let Some(q) = &queries {
-        q.map();
-    }
+    let submission = submit_readback(ctx, encoder, &readback, queries.as_ref());
     Pending {
         readback,
         queries,
@@ -300,13 +293,7 @@ fn finish_chunk(
     on_chunk: &mut impl FnMut(usize, &[i32]),
 ) -> Result<()> {
     let start = Instant::now();
-    ctx.device
-        .poll(wgpu::PollType::Wait {
-            submission_index: Some(p.submission),
-            timeout: None,
-        })
-        .map_err(|e| Error::Gpu(format!("waiting for the GPU failed: {e}")))?;
-    ctx.check_errors()?;
+    wait(ctx, p.submission)?;
     stats.raster_seconds += start.elapsed().as_secs_f64();
 
     let start = Instant::now();

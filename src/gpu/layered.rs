@@ -17,8 +17,8 @@ use glam::DMat4;
 
 use super::depth::RasterStats;
 use super::raster::{
-    align, check_image_size, copy, draw_ids, id_pipeline, IdPass, Timestamps, DEPTH_FORMAT,
-    TRI_FORMAT,
+    align, check_image_size, copy, draw_ids, id_pipeline, submit_readback, wait, IdPass,
+    Timestamps, DEPTH_FORMAT, TRI_FORMAT,
 };
 use super::{GpuContext, SceneBuffers};
 use crate::camera::Camera;
@@ -349,21 +349,8 @@ pub fn render(
         copy(&mut encoder, &tri, &history, i * image_bytes, row, w, h);
     }
     encoder.copy_buffer_to_buffer(&history, 0, &readback, 0, history_bytes);
-    if let Some(q) = &queries {
-        q.resolve(&mut encoder);
-    }
-    let submission = ctx.queue.submit([encoder.finish()]);
-    readback.slice(..).map_async(wgpu::MapMode::Read, |_| {});
-    if let Some(q) = &queries {
-        q.map();
-    }
-    device
-        .poll(wgpu::PollType::Wait {
-            submission_index: Some(submission),
-            timeout: None,
-        })
-        .map_err(|e| Error::Gpu(format!("waiting for the GPU failed: {e}")))?;
-    ctx.check_errors()?;
+    let submission = submit_readback(ctx, encoder, &readback, queries.as_ref());
+    wait(ctx, submission)?;
     stats.raster_seconds = start.elapsed().as_secs_f64();
 
     let start = Instant::now();

@@ -240,3 +240,33 @@ pub fn copy(
         },
     );
 }
+
+/// Resolve the timestamps, submit `encoder`, and start mapping `readback` (and the
+/// timestamps) for reading once the GPU is done.
+pub fn submit_readback(
+    ctx: &GpuContext,
+    mut encoder: wgpu::CommandEncoder,
+    readback: &wgpu::Buffer,
+    queries: Option<&Timestamps>,
+) -> wgpu::SubmissionIndex {
+    if let Some(q) = queries {
+        q.resolve(&mut encoder);
+    }
+    let submission = ctx.queue.submit([encoder.finish()]);
+    readback.slice(..).map_async(wgpu::MapMode::Read, |_| {});
+    if let Some(q) = queries {
+        q.map();
+    }
+    submission
+}
+
+/// Wait for `submission` and raise any error wgpu reported meanwhile.
+pub fn wait(ctx: &GpuContext, submission: wgpu::SubmissionIndex) -> Result<()> {
+    ctx.device
+        .poll(wgpu::PollType::Wait {
+            submission_index: Some(submission),
+            timeout: None,
+        })
+        .map_err(|e| Error::Gpu(format!("waiting for the GPU failed: {e}")))?;
+    ctx.check_errors()
+}

@@ -8,7 +8,7 @@ use std::time::Instant;
 use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
 
-use super::raster::{align, Timestamps, DEPTH_FORMAT};
+use super::raster::{align, submit_readback, wait, Timestamps, DEPTH_FORMAT};
 use super::{GpuContext, SceneBuffers};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
@@ -385,21 +385,8 @@ pub fn visibility(
         cp.dispatch_workgroups(groups as u32, 1, 1);
     }
     encoder.copy_buffer_to_buffer(&out, 0, &readback, 0, out_bytes);
-    if let Some(q) = &queries {
-        q.resolve(&mut encoder);
-    }
-    let submission = ctx.queue.submit([encoder.finish()]);
-    readback.slice(..).map_async(wgpu::MapMode::Read, |_| {});
-    if let Some(q) = &queries {
-        q.map();
-    }
-    device
-        .poll(wgpu::PollType::Wait {
-            submission_index: Some(submission),
-            timeout: None,
-        })
-        .map_err(|e| Error::Gpu(format!("waiting for the GPU failed: {e}")))?;
-    ctx.check_errors()?;
+    let submission = submit_readback(ctx, encoder, &readback, queries.as_ref());
+    wait(ctx, submission)?;
     let bits: Vec<u32> = {
         let data = readback
             .slice(..)

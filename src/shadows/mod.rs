@@ -16,7 +16,7 @@ use crate::discretize::{
 use crate::error::Result;
 use crate::gpu;
 use crate::input_err;
-use crate::reconstruct::{reconstruct_hybrid, reconstruct_mesh, reconstruct_points, Mesh};
+use crate::reconstruct::{reconstruct_hybrid, reconstruct_mesh, reconstruct_points};
 use crate::scene::Scene;
 
 /// A rectangular area light: corners `center ± u/2 ± v/2`, emitting on both sides.
@@ -210,40 +210,35 @@ pub fn soft_shadows(
             timings.push(("shadow".to_string(), start.elapsed().as_secs_f64()));
             (0, bits)
         }
-        Discretization::Geometry => {
-            let start = Instant::now();
-            let bits = shadow_maps(
-                scene,
-                scene.vertices(),
-                scene.faces(),
-                light,
-                &samples,
-                &points,
-                &normals,
-                opts.shadow_resolution,
-            )?;
-            timings.push(("shadow".to_string(), start.elapsed().as_secs_f64()));
-            (scene.triangle_count(), bits)
-        }
         d => {
-            let start = Instant::now();
-            let (images, offset) = discretize_light(scene, light, d, opts)?;
-            timings.push(("discretize".to_string(), start.elapsed().as_secs_f64()));
-            let start = Instant::now();
-            let mesh: Mesh = match opts.reconstruction {
-                Reconstruction::Hybrid => {
-                    let offset = offset.expect("offset images rendered for hybrid");
-                    reconstruct_hybrid(&images, &offset)?
-                }
-                Reconstruction::Mesh => reconstruct_mesh(&images)?,
-                Reconstruction::Points => reconstruct_points(&images)?,
+            // Steps 1-2 (none for `Geometry`, which draws the scene's own triangles).
+            let mesh = if d == Discretization::Geometry {
+                None
+            } else {
+                let start = Instant::now();
+                let (images, offset) = discretize_light(scene, light, d, opts)?;
+                timings.push(("discretize".to_string(), start.elapsed().as_secs_f64()));
+                let start = Instant::now();
+                let mesh = match (opts.reconstruction, offset) {
+                    (Reconstruction::Hybrid, Some(offset)) => reconstruct_hybrid(&images, &offset)?,
+                    (Reconstruction::Hybrid, None) => {
+                        return input_err!("hybrid reconstruction needs the offset images")
+                    }
+                    (Reconstruction::Points, _) => reconstruct_points(&images)?,
+                    (Reconstruction::Mesh, _) => reconstruct_mesh(&images)?,
+                };
+                timings.push(("reconstruct".to_string(), start.elapsed().as_secs_f64()));
+                Some(mesh)
             };
-            timings.push(("reconstruct".to_string(), start.elapsed().as_secs_f64()));
+            let (vertices, faces) = match &mesh {
+                Some(m) => (&m.vertices[..], &m.faces[..]),
+                None => (scene.vertices(), scene.faces()),
+            };
             let start = Instant::now();
             let bits = shadow_maps(
                 scene,
-                &mesh.vertices,
-                &mesh.faces,
+                vertices,
+                faces,
                 light,
                 &samples,
                 &points,
@@ -251,7 +246,7 @@ pub fn soft_shadows(
                 opts.shadow_resolution,
             )?;
             timings.push(("shadow".to_string(), start.elapsed().as_secs_f64()));
-            (mesh.faces.len(), bits)
+            (faces.len(), bits)
         }
     };
 
