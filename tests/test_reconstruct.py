@@ -240,3 +240,16 @@ def test_shadow_experiment_writes_tables_and_figures(gpu, tmp_path):
     rows = (tmp_path / "shadows.csv").read_text().splitlines()
     assert len(rows) == 1 + 2 * 3  # header + (one resolution + one light size) x 3 methods
     assert (tmp_path / "fig8_grass.png").stat().st_size > 100
+
+
+def test_a_surface_facing_away_from_the_light_is_dark(gpu):
+    """The camera sees the side of a wall that faces away from the light: no light sample is
+    visible, for every discretization (the shadow map alone would call it lit)."""
+    scene = ss.Scene.from_arrays(
+        [[-1, 0, -1], [1, 0, -1], [1, 0, 1], [-1, 0, 1]], [[0, 1, 2], [0, 2, 3]]
+    )
+    cam = ss.Camera.look_at((0, -3, 0), (0, 0, 0), (0, 0, 1), yfov=0.5, width=24, height=24)
+    light = ss.AreaLight((0, 2, 0), (0.5, 0, 0), (0, 0, 0.5))
+    for d in ss._shadows.DISCRETIZATIONS:
+        r = ss.soft_shadows(scene, cam, light, samples=(2, 2), discretization=d, resolution=32)
+        assert r.mask.any() and (r.visibility[r.mask] == 0).all(), d
