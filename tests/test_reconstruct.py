@@ -9,6 +9,7 @@ import copy
 import numpy as np
 import pytest
 import scenesample as ss
+from conftest import SHARED
 from scenesample._api import offset_images
 
 RES = 64
@@ -234,12 +235,39 @@ def test_shadow_experiment_writes_tables_and_figures(gpu, tmp_path):
     shadows.main(
         ["--scenes", "grass", "--resolutions", "64", "--sizes", "1", "--resolution", "64"]
         + ["--samples", "2", "--output", "32", "--shadow-resolution", "64", "--out", str(tmp_path)]
+        + ["--fig9-blades", "20", "80", "--fig9-samples", "2"]
     )
     md = (tmp_path / "shadows.md").read_text()
     assert "| grass | resolution | 64 |" in md and "| grass | nonredundant |" in md
     rows = (tmp_path / "shadows.csv").read_text().splitlines()
     assert len(rows) == 1 + 2 * 3  # header + (one resolution + one light size) x 3 methods
     assert (tmp_path / "fig8_grass.png").stat().st_size > 100
+    fig9 = (tmp_path / "fig9.csv").read_text().splitlines()
+    assert len(fig9) == 1 + 2 * 3  # header + two blade counts x 3 methods
+    assert "| 1,122 | geometry |" in md and "beats geometry shadow maps" in md
+    assert (tmp_path / "fig9.png").stat().st_size > 1000
+
+
+def test_fig9_crossover_is_interpolated_in_log_triangles():
+    from scenesample.experiments.shadows import crossover
+
+    tris = [1000, 10000, 100000]
+    # ours - theirs goes +1 -> -1 between 10^4 and 10^5: halfway in log, 10^4.5.
+    assert crossover(tris, [5, 3, 1], [1, 2, 2]) == pytest.approx(10**4.5)
+    assert crossover(tris, [1, 1, 1], [2, 2, 2]) == 1000  # already below at the smallest
+    assert crossover(tris, [2, 2, 2], [1, 1, 1]) is None  # never
+
+
+@pytest.mark.skipif("cornell_box" not in SHARED, reason="../shared/scenes is absent")
+def test_shadow_experiment_on_the_cornell_box_uses_its_ceiling_light(gpu, tmp_path):
+    from scenesample.experiments import shadows
+
+    scene, camera, light_of, sweep_sizes = shadows.shadow_scene("cornell_box", 32)
+    light = light_of(4.0)
+    assert not sweep_sizes and light.center[1] < scene.bounds[1][1]  # inside, under the ceiling
+    r = ss.soft_shadows(scene, camera, light, samples=(2, 2), discretization="geometry")
+    # The floor beside the boxes is lit, the floor under them (seen past them) partly dark.
+    assert 0.2 < r.visibility[r.mask].mean() < 0.95
 
 
 def test_a_surface_facing_away_from_the_light_is_dark(gpu):
