@@ -12,6 +12,7 @@ pub mod io;
 pub mod reconstruct;
 pub mod scene;
 pub mod shadows;
+pub mod splat;
 pub mod trace;
 
 #[cfg(feature = "python")]

@@ -17,6 +17,7 @@ from . import errors, references, scenes
 from ._api import cast_rays, device_info, discretize, reconstruct
 from ._core import Camera
 from ._core import __version__ as __version__
+from ._epr import Points, Reflector, SplatBuffers, cube_resolution, splat
 from ._evaluate import evaluate, intermediate_cameras
 from ._scene import Scene
 from ._shadows import AreaLight, ShadowResult, soft_shadows
@@ -43,14 +44,18 @@ __all__ = [
     "GpuUnavailableError",
     "InputError",
     "Mesh",
+    "Points",
     "RayHits",
+    "Reflector",
     "Scene",
     "SceneError",
     "SceneFileError",
     "SceneWarning",
     "ShadowResult",
+    "SplatBuffers",
     "ScenesampleError",
     "cast_rays",
+    "cube_resolution",
     "device_info",
     "discretize",
     "errors",
@@ -58,6 +63,7 @@ __all__ = [
     "intermediate_cameras",
     "reconstruct",
     "references",
+    "splat",
     "scenes",
     "soft_shadows",
 ]

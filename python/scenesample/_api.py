@@ -1,5 +1,5 @@
 """The verbs ``discretize`` and ``reconstruct``, and ray casting (``evaluate`` lives in
-``_evaluate``; ``splat`` arrives with the capability that defines it)."""
+``_evaluate``, ``splat`` in ``_epr``)."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ from typing import Any, Optional, Union
 import numpy as np
 
 from . import _core
+from ._epr import Points, epr_points
 from ._scene import Scene
 from .errors import InputError
 from .results import DepthImages, Mesh, RayHits
@@ -16,7 +17,7 @@ from .results import DepthImages, Mesh, RayHits
 __all__ = ["discretize", "reconstruct", "cast_rays", "device_info"]
 
 Camera = _core.Camera
-DISCRETIZE_METHODS = ("conventional", "nonredundant", "peeling")
+DISCRETIZE_METHODS = ("conventional", "nonredundant", "peeling", "epr", "ivir")
 
 
 def _scene_core(scene: Any) -> _core.Scene:
@@ -37,22 +38,29 @@ def _camera_list(cameras: Union[Camera, Sequence[Camera]]) -> list[Camera]:
 
 def discretize(
     scene: Scene,
-    cameras: Union[Camera, Sequence[Camera]],
+    cameras: Union[None, Camera, Sequence[Camera]] = None,
     method: str = "conventional",
     *,
     redundancy: str = "pixel",
     layers: Optional[int] = None,
     camera: Optional[Camera] = None,
     cull_backfaces: bool = False,
-) -> DepthImages:
-    """Sample a scene with depth images (non-redundant-rendering.txt §3, §6.1).
+    eye: Optional[Camera] = None,
+    reflectors: Any = None,
+    rho_scale: float = 0.5,
+    seed: int = 0,
+    resolution: Union[None, int, Sequence[int]] = None,
+) -> Union[DepthImages, Points]:
+    """Sample a scene with depth images (non-redundant-rendering.txt §3, §6.1) or with points
+    for many off-screen views (eye-based-point-rendering.txt §3).
 
     Parameters
     ----------
     scene : Scene
     cameras : Camera or sequence of Camera
-        The reference views; poses and projections may differ, resolutions must match.
-    method : {"conventional", "nonredundant", "peeling"}
+        The reference views of the depth-image methods; poses and projections may differ,
+        resolutions must match. Not used by ``epr`` / ``ivir``.
+    method : {"conventional", "nonredundant", "peeling", "epr", "ivir"}
         ``"conventional"``: one image per camera, each sampling every surface it sees (one GPU
         raster pass per image, nearest surface at each pixel centre, no multisampling).
 
@@ -78,10 +86,34 @@ def discretize(
         For ``peeling``: the viewpoint (its resolution must match ``cameras``).
     cull_backfaces : bool
         Drop triangles whose counter-clockwise front faces away (off by default).
+    eye : Camera
+        For ``epr`` / ``ivir`` (required there): the eye whose pixels the points must fill.
+    reflectors : list, optional
+        For ``epr`` / ``ivir``: object names, :class:`Reflector` objects or ``(center,
+        radius)`` bounding spheres; by default every object whose material has metallic >= 0.9
+        and roughness <= 0.1. Each gets a cube map of six views.
+    rho_scale : float
+        For ``epr``: points per eye pixel along each axis (§3.2; 0.5 is the paper's choice).
+    seed : int
+        For ``epr`` / ``ivir``: seeds the stochastic culling of sub-1/10-pixel triangles.
+    resolution : int or sequence of int, optional
+        For ``epr`` / ``ivir``: cube-map face resolution (one, or one per reflector); by
+        default the adaptive size of §4.1.1 (see :func:`scenesample.cube_resolution`).
+
+    ``"epr"`` (§3.1-3.4, Eq. 2-4): per triangle, one visibility bit per cube-map view
+    (conservative: dropped only when all vertices lie outside one plane of the 20%-enlarged
+    frustum; a reflector's own triangles are left out of its own cube); point spacing = the
+    eye's pixel footprint at the distance light travels from the triangle via the nearest
+    reflector's bounding sphere to the eye, divided by ``rho_scale``, never finer than the finest
+    cube map that sees the triangle; triangles under 1/10 point-cell dropped with probability
+    1 - 10 A; every lattice cell overlapping the triangle gives a point (exact conservative
+    rasterization, on the CPU, since wgpu here has none). ``"ivir"``: the same, spaced by the
+    cube-map texel at the triangle's distance from the reflector.
 
     Returns
     -------
-    DepthImages
+    DepthImages or Points
+        For ``epr`` / ``ivir``: :class:`Points`. Otherwise :class:`DepthImages`:
         ``depth`` (n, H, W) float32 camera-space z (+inf empty), ``triangle`` (n, H, W) int32
         (-1 empty), ``normal``/``position``/``color`` (n, H, W, 3) float32, ``cameras``,
         ``method``, ``reference`` (= ``cameras``), ``timings``. n is ``len(cameras)``, or
@@ -99,6 +131,24 @@ def discretize(
     """
     if method not in DISCRETIZE_METHODS:
         raise InputError(f"method must be one of {list(DISCRETIZE_METHODS)}, got {method!r}")
+    if method in ("epr", "ivir"):
+        if eye is None:
+            raise InputError(f"method={method!r} needs eye=, the camera the points serve")
+        if cameras is not None:
+            raise InputError(f"method={method!r} makes its own cube-map views; pass no cameras")
+        return epr_points(
+            scene,
+            eye,
+            reflectors=reflectors,
+            rho_scale=rho_scale,
+            seed=seed,
+            resolution=resolution,
+            density="eye" if method == "epr" else "offscreen",
+        )
+    if eye is not None or reflectors is not None or resolution is not None:
+        raise InputError(f"eye, reflectors and resolution apply to method='epr', not {method!r}")
+    if cameras is None:
+        raise InputError(f"method={method!r} needs cameras")
     cams = _camera_list(cameras)
     core = _scene_core(scene)
     cull = bool(cull_backfaces)

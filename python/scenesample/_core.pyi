@@ -1,5 +1,6 @@
 # Hand-written stubs for the native module (src/py/); checked against it by tests/test_api.py
 # with mypy.stubtest.
+from collections.abc import Sequence
 from os import PathLike
 from typing import Any, Optional, Union, final
 
@@ -14,10 +15,12 @@ __all__ = [
     "discretize_conventional",
     "discretize_nonredundant",
     "discretize_peeling",
+    "epr_points",
     "read_exr",
     "reconstruct",
     "sampling_metrics",
     "soft_shadows",
+    "splat",
     "write_exr",
     "__version__",
 ]
@@ -180,6 +183,26 @@ def soft_shadows(
     reconstruction: str,
     shadow_resolution: int,
     layers: int,
+) -> dict[str, Any]: ...
+def epr_points(
+    scene: Scene,
+    eye: Camera,
+    centers: ArrayLike,
+    radii: Sequence[float],
+    triangles: Sequence[ArrayLike],
+    resolutions: Sequence[int],
+    density: str,
+    rho_scale: float,
+    seed: int,
+) -> dict[str, Any]: ...
+def splat(
+    scene: Scene,
+    center: ArrayLike,
+    length: ArrayLike,
+    triangle: ArrayLike,
+    views: ArrayLike,
+    cameras: Sequence[Camera],
+    clip_to_triangle: bool,
 ) -> dict[str, Any]: ...
 def cast_rays(
     scene: Scene,

@@ -4,6 +4,7 @@
 //! (§3.1) they and the sampling metrics share.
 
 pub mod conventional;
+pub mod epr;
 pub mod nonredundant;
 pub mod redundancy;
 

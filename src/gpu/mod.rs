@@ -5,6 +5,7 @@ pub mod depth;
 pub mod layered;
 pub mod raster;
 pub mod shadow;
+pub mod splat;
 
 use std::sync::{Arc, Mutex, OnceLock};
 
@@ -29,6 +30,7 @@ pub struct GpuContext {
     depth_pipeline: OnceLock<depth::DepthPipeline>,
     layered_pipeline: OnceLock<layered::LayeredPipeline>,
     shadow_pipeline: OnceLock<shadow::ShadowPipeline>,
+    splat_pipeline: OnceLock<splat::SplatPipeline>,
 }
 
 static CONTEXT: OnceLock<std::result::Result<Arc<GpuContext>, String>> = OnceLock::new();
@@ -112,6 +114,7 @@ fn create() -> std::result::Result<GpuContext, String> {
         depth_pipeline: OnceLock::new(),
         layered_pipeline: OnceLock::new(),
         shadow_pipeline: OnceLock::new(),
+        splat_pipeline: OnceLock::new(),
     })
 }
 
@@ -144,6 +147,11 @@ impl GpuContext {
         self.shadow_pipeline
             .get_or_init(|| shadow::ShadowPipeline::new(&self.device))
     }
+
+    pub fn splat_pipeline(&self) -> &splat::SplatPipeline {
+        self.splat_pipeline
+            .get_or_init(|| splat::SplatPipeline::new(&self.device))
+    }
 }
 
 /// What `scenesample.device_info()` reports.
@@ -172,7 +180,7 @@ pub fn device_info() -> Result<DeviceInfo> {
 }
 
 /// A scene's geometry on the GPU: vertex positions relative to the scene centre (vertex buffer)
-/// and the faces (index buffer).
+/// and the faces (index buffer), both also readable as storage (the splat pass reads triangles).
 #[derive(Debug)]
 pub struct SceneBuffers {
     pub positions: wgpu::Buffer,
@@ -239,14 +247,14 @@ impl SceneBuffers {
             .create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("positions"),
                 contents: &pad(bytemuck::cast_slice(&rel).to_vec()),
-                usage: wgpu::BufferUsages::VERTEX,
+                usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::STORAGE,
             });
         let faces_buf = ctx
             .device
             .create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("faces"),
                 contents: &pad(bytemuck::cast_slice(&faces).to_vec()),
-                usage: wgpu::BufferUsages::INDEX,
+                usage: wgpu::BufferUsages::INDEX | wgpu::BufferUsages::STORAGE,
             });
         ctx.check_errors()?;
         Ok(Self {

@@ -10,6 +10,7 @@ mod reconstruct;
 mod render;
 mod scene;
 mod shadows;
+mod splat;
 
 use pyo3::prelude::*;
 
@@ -24,6 +25,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(evaluate::sampling_metrics, m)?)?;
     m.add_function(wrap_pyfunction!(reconstruct::reconstruct, m)?)?;
     m.add_function(wrap_pyfunction!(shadows::soft_shadows, m)?)?;
+    m.add_function(wrap_pyfunction!(splat::epr_points, m)?)?;
+    m.add_function(wrap_pyfunction!(splat::splat, m)?)?;
     m.add_function(wrap_pyfunction!(render::device_info, m)?)?;
     m.add_function(wrap_pyfunction!(render::write_exr, m)?)?;
     m.add_function(wrap_pyfunction!(render::read_exr, m)?)?;

@@ -1,0 +1,352 @@
+//! The compute pass of `shaders/splat.wgsl` (eye-based-point-rendering.txt §3.5): points
+//! scattered into many off-screen views at once with 64-bit atomics. Views go in chunks whose
+//! buffers fit the device's storage-binding limit, points in dispatches of at most
+//! `MAX_GROUPS · 64`; each view chunk is one submission, read back while the next one runs.
+
+use std::time::Instant;
+
+use bytemuck::{Pod, Zeroable};
+
+use super::raster::align;
+use super::{GpuContext, SceneBuffers};
+use crate::camera::Camera;
+use crate::error::{Error, Result};
+use crate::scene::Scene;
+
+const SHADER: &str = include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/shaders/splat.wgsl"));
+
+/// Host copy of `Params` in splat.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct Params {
+    count: u32,
+    first: u32,
+    words: u32,
+    clip: u32,
+    width: u32,
+    height: u32,
+    view_count: u32,
+    first_view: u32,
+}
+const PARAMS_SIZE: u64 = std::mem::size_of::<Params>() as u64;
+
+/// Host copy of `View` in splat.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct ViewUniform {
+    view_proj: [[f32; 4]; 4],
+    forward_depth: [f32; 4],
+}
+
+/// Workgroups per dispatch dimension (wgpu's default limit) and threads per workgroup.
+const MAX_GROUPS: u32 = 65535;
+const GROUP: u32 = 64;
+
+pub struct SplatPipeline {
+    layout: wgpu::BindGroupLayout,
+    pipeline: wgpu::ComputePipeline,
+}
+
+impl SplatPipeline {
+    pub fn new(device: &wgpu::Device) -> Self {
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("splat.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(SHADER.into()),
+        });
+        let entry = |binding, ty| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty,
+                has_dynamic_offset: binding == 0,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let read = wgpu::BufferBindingType::Storage { read_only: true };
+        let mut entries = vec![entry(0, wgpu::BufferBindingType::Uniform)];
+        entries.extend((1..7).map(|b| entry(b, read)));
+        entries.push(entry(
+            7,
+            wgpu::BufferBindingType::Storage { read_only: false },
+        ));
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("splat.wgsl bindings"),
+            entries: &entries,
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("splat.wgsl layout"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("cs_splat"),
+            layout: Some(&pipeline_layout),
+            module: &module,
+            entry_point: Some("cs_splat"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        Self { layout, pipeline }
+    }
+}
+
+/// The points to splat, in the layout splat.wgsl reads.
+pub struct PointBuffersIn<'a> {
+    /// Centres relative to the scene centre (xyz) and side length (w).
+    pub centers: &'a [[f32; 4]],
+    /// Triangle index per point.
+    pub triangles: &'a [u32],
+    /// `words` visibility words per point.
+    pub bits: &'a [u64],
+    pub words: usize,
+}
+
+/// Wall-clock seconds of the steps of one `splat` call.
+#[derive(Debug, Default, Clone)]
+pub struct SplatStats {
+    pub upload_seconds: f64,
+    pub splat_seconds: f64,
+    pub readback_seconds: f64,
+}
+
+/// Splat the points into one buffer per camera (all of one resolution); returns the keys
+/// (depth bits << 32 | point index, `u64::MAX` empty), view after view, row-major.
+pub fn splat(
+    ctx: &GpuContext,
+    scene: &Scene,
+    points: &PointBuffersIn,
+    cameras: &[Camera],
+    clip_to_triangle: bool,
+) -> Result<(Vec<u64>, SplatStats)> {
+    let needed = wgpu::Features::SHADER_INT64 | wgpu::Features::SHADER_INT64_ATOMIC_MIN_MAX;
+    if !ctx.device.features().contains(needed) {
+        return Err(Error::GpuUnavailable(format!(
+            "splatting needs 64-bit atomics (SHADER_INT64 and SHADER_INT64_ATOMIC_MIN_MAX), \
+             which the adapter '{}' lacks",
+            ctx.info.name
+        )));
+    }
+    let (w, h) = (cameras[0].width, cameras[0].height);
+    let pixels = w as u64 * h as u64;
+    let binding = ctx
+        .limits
+        .max_storage_buffer_binding_size
+        .min(ctx.limits.max_buffer_size);
+    let view_bytes = pixels * 8;
+    if view_bytes > binding {
+        return Err(Error::GpuLimit(format!(
+            "one {w}x{h} splat buffer takes {view_bytes} bytes, more than this device's storage \
+             limit of {binding} bytes; use smaller views"
+        )));
+    }
+    let n = points.triangles.len();
+    let words = points.words;
+    for (name, bytes) in [
+        ("centres", n as u64 * 16),
+        ("visibility strings", n as u64 * words as u64 * 8),
+    ] {
+        if bytes > binding {
+            return Err(Error::GpuLimit(format!(
+                "the points' {name} take {bytes} bytes, more than this device's storage limit \
+                 of {binding} bytes; splat fewer points per call"
+            )));
+        }
+    }
+    if n > u32::MAX as usize {
+        return Err(Error::GpuLimit(format!(
+            "{n} points: at most 2^32 - 1 fit the 32-bit point index of a splat key"
+        )));
+    }
+    let _guard = ctx
+        .lock
+        .lock()
+        .map_err(|_| Error::Gpu("GPU lock poisoned".into()))?;
+    let device = &ctx.device;
+    let mut stats = SplatStats::default();
+
+    use wgpu::util::DeviceExt;
+    let start = Instant::now();
+    let buffers = SceneBuffers::of(ctx, scene)?;
+    let centre = scene.center();
+    // wgpu rejects empty bindings: pad each array to at least one element.
+    let storage = |label, bytes: &[u8]| {
+        let mut v = bytes.to_vec();
+        if v.len() < 16 {
+            v.resize(16, 0);
+        }
+        device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents: &v,
+            usage: wgpu::BufferUsages::STORAGE,
+        })
+    };
+    let centers = storage("splat centres", bytemuck::cast_slice(points.centers));
+    let triangles = storage("splat triangles", bytemuck::cast_slice(points.triangles));
+    let bits = storage("splat visibility", bytemuck::cast_slice(points.bits));
+    // The clip range only shapes the projection's depth row, unused here (a splat's depth comes
+    // from `forward_depth`).
+    let bounds = scene.bounds();
+    let view_data: Vec<ViewUniform> = cameras
+        .iter()
+        .map(|cam| {
+            let (near, far) = cam.clip_range(bounds);
+            let m = cam.projection_matrix(near, far) * cam.view_matrix_relative(centre);
+            let f = cam.forward();
+            let eye = cam.eye() - centre;
+            ViewUniform {
+                view_proj: m.as_mat4().to_cols_array_2d(),
+                forward_depth: [f.x as f32, f.y as f32, f.z as f32, eye.dot(f) as f32],
+            }
+        })
+        .collect();
+    stats.upload_seconds = start.elapsed().as_secs_f64();
+
+    // Views per chunk: as many whole buffers as one binding holds.
+    let chunk = ((binding / view_bytes) as usize).clamp(1, MAX_GROUPS as usize);
+    let point_dispatches = (n as u64).div_ceil((MAX_GROUPS * GROUP) as u64).max(1) as usize;
+    let param_stride = align(
+        PARAMS_SIZE,
+        ctx.limits.min_uniform_buffer_offset_alignment as u64,
+    );
+    let mut out = vec![0u64; cameras.len() * pixels as usize];
+    let mut pending: Option<(usize, usize, wgpu::Buffer, wgpu::SubmissionIndex)> = None;
+    for (c, cams) in view_data.chunks(chunk).enumerate() {
+        let start = Instant::now();
+        let first_view = c * chunk;
+        let mut params = vec![0u8; param_stride as usize * point_dispatches];
+        for d in 0..point_dispatches {
+            let first = d * (MAX_GROUPS * GROUP) as usize;
+            let p = Params {
+                count: (n - first.min(n)).min((MAX_GROUPS * GROUP) as usize) as u32,
+                first: first as u32,
+                words: words as u32,
+                clip: clip_to_triangle as u32,
+                width: w,
+                height: h,
+                view_count: cams.len() as u32,
+                first_view: first_view as u32,
+            };
+            let at = d * param_stride as usize;
+            params[at..at + PARAMS_SIZE as usize].copy_from_slice(bytemuck::bytes_of(&p));
+        }
+        let params_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("splat params"),
+            contents: &params,
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let views_buf = storage("splat views", bytemuck::cast_slice(cams));
+        let bytes = view_bytes * cams.len() as u64;
+        let target = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("splat buffers"),
+            size: bytes,
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let readback = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("splat readback"),
+            size: bytes,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("splat.wgsl bindings"),
+            layout: &ctx.splat_pipeline().layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                        buffer: &params_buf,
+                        offset: 0,
+                        size: wgpu::BufferSize::new(PARAMS_SIZE),
+                    }),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: views_buf.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: centers.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: triangles.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: bits.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: buffers.positions.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 6,
+                    resource: buffers.faces.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 7,
+                    resource: target.as_entire_binding(),
+                },
+            ],
+        });
+        let mut encoder = device.create_command_encoder(&Default::default());
+        // Zero is "empty": the shader stores complemented keys with atomicMax.
+        encoder.clear_buffer(&target, 0, None);
+        {
+            let mut pass = encoder.begin_compute_pass(&Default::default());
+            pass.set_pipeline(&ctx.splat_pipeline().pipeline);
+            for d in 0..point_dispatches {
+                let first = d * (MAX_GROUPS * GROUP) as usize;
+                let count = (n - first.min(n)).min((MAX_GROUPS * GROUP) as usize) as u32;
+                if count == 0 {
+                    continue;
+                }
+                pass.set_bind_group(0, &bind, &[(d as u64 * param_stride) as u32]);
+                pass.dispatch_workgroups(count.div_ceil(GROUP), cams.len() as u32, 1);
+            }
+        }
+        encoder.copy_buffer_to_buffer(&target, 0, &readback, 0, bytes);
+        let submission = ctx.queue.submit([encoder.finish()]);
+        readback.slice(..).map_async(wgpu::MapMode::Read, |_| {});
+        stats.splat_seconds += start.elapsed().as_secs_f64();
+        if let Some(done) = pending.replace((first_view, cams.len(), readback, submission)) {
+            finish(ctx, done, pixels as usize, &mut out, &mut stats)?;
+        }
+    }
+    if let Some(done) = pending {
+        finish(ctx, done, pixels as usize, &mut out, &mut stats)?;
+    }
+    Ok((out, stats))
+}
+
+/// Wait for one chunk of views and copy its keys, un-complemented, into `out`.
+fn finish(
+    ctx: &GpuContext,
+    (first_view, views, readback, submission): (usize, usize, wgpu::Buffer, wgpu::SubmissionIndex),
+    pixels: usize,
+    out: &mut [u64],
+    stats: &mut SplatStats,
+) -> Result<()> {
+    let start = Instant::now();
+    super::raster::wait(ctx, submission)?;
+    stats.splat_seconds += start.elapsed().as_secs_f64();
+    let start = Instant::now();
+    {
+        let data = readback
+            .slice(..)
+            .get_mapped_range()
+            .map_err(|e| Error::Gpu(format!("mapping the splat readback failed: {e}")))?;
+        let keys: &[u64] = bytemuck::cast_slice(&data);
+        let dst = &mut out[first_view * pixels..(first_view + views) * pixels];
+        for (d, k) in dst.iter_mut().zip(keys) {
+            *d = !*k;
+        }
+    }
+    readback.unmap();
+    stats.readback_seconds += start.elapsed().as_secs_f64();
+    Ok(())
+}

@@ -1,0 +1,155 @@
+//! EPR points (§3.1-3.4) and splatting (§3.5) from Python arguments.
+
+use numpy::{PyReadonlyArray2, PyUntypedArrayMethods};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use super::camera::PyCamera;
+use super::convert::{array, flat_i32, rows_f32, rows_f64, rows_owned};
+use super::errors::{input, IntoPy};
+use super::scene::PyScene;
+use crate::discretize::epr::{self, Density, Reflector};
+use crate::splat::Points;
+
+fn timings<'py>(py: Python<'py>, items: Vec<(String, f64)>) -> PyResult<Bound<'py, PyDict>> {
+    let t = PyDict::new(py);
+    for (k, v) in items {
+        t.set_item(k, v)?;
+    }
+    Ok(t)
+}
+
+/// Points for the cube maps of the reflectors (centres (R, 3), radii, triangle ids per
+/// reflector, cube-map resolution per reflector); `density` is "eye" (EPR) or "offscreen"
+/// (iVIR).
+#[pyfunction]
+#[pyo3(signature = (scene, eye, centers, radii, triangles, resolutions, density, rho_scale, seed))]
+#[allow(clippy::too_many_arguments)]
+pub fn epr_points<'py>(
+    py: Python<'py>,
+    scene: &PyScene,
+    eye: &PyCamera,
+    centers: &Bound<'py, PyAny>,
+    radii: Vec<f64>,
+    triangles: Vec<Bound<'py, PyAny>>,
+    resolutions: Vec<u32>,
+    density: &str,
+    rho_scale: f64,
+    seed: u64,
+) -> PyResult<Bound<'py, PyDict>> {
+    let centers = rows_f64::<3>(centers, "reflector centres")?;
+    if centers.len() != radii.len() || centers.len() != triangles.len() {
+        return Err(input(
+            py,
+            format!(
+                "{} reflector centres, {} radii and {} triangle lists: one of each per reflector",
+                centers.len(),
+                radii.len(),
+                triangles.len()
+            ),
+        ));
+    }
+    let mut reflectors = Vec::with_capacity(centers.len());
+    for (k, ((c, r), t)) in centers.iter().zip(&radii).zip(&triangles).enumerate() {
+        let ids = flat_i32(t, &format!("reflector {k}'s triangles"))?;
+        let n = scene.inner.triangle_count();
+        if let Some(bad) = ids.iter().find(|&&i| i < 0 || i as usize >= n) {
+            return Err(input(
+                py,
+                format!("reflector {k} names triangle {bad}, but the scene has {n} triangles"),
+            ));
+        }
+        reflectors.push(Reflector {
+            center: glam::DVec3::from_array(*c),
+            radius: *r,
+            triangles: ids.into_iter().map(|i| i as u32).collect(),
+        });
+    }
+    let density = match density {
+        "eye" => Density::Eye { rho_scale },
+        "offscreen" => Density::OffScreen,
+        other => {
+            return Err(input(
+                py,
+                format!("density must be 'eye' or 'offscreen', got {other:?}"),
+            ))
+        }
+    };
+    let s = scene.inner.clone();
+    let cam = eye.inner.clone();
+    let p = py
+        .detach(|| epr::generate(&s, &cam, &reflectors, &resolutions, density, seed))
+        .py_err(py)?;
+    let views = epr::cube_views(&reflectors, &resolutions).py_err(py)?;
+    let n = p.len();
+    let words = p.words();
+    let d = PyDict::new(py);
+    d.set_item("center", rows_owned(py, p.center, &[n, 3])?)?;
+    d.set_item("length", array(py, p.length, &[n])?)?;
+    d.set_item("triangle", array(py, p.triangle, &[n])?)?;
+    d.set_item("normal", rows_owned(py, p.normal, &[n, 3])?)?;
+    d.set_item("material", array(py, p.material, &[n])?)?;
+    d.set_item("views", array(py, p.views, &[n, words])?)?;
+    let cams: Vec<PyCamera> = views.into_iter().map(PyCamera::from).collect();
+    d.set_item("cameras", cams)?;
+    d.set_item("timings", timings(py, p.timings)?)?;
+    d.set_item("stats", timings(py, p.stats)?)?;
+    Ok(d)
+}
+
+/// Splat points (centres (P, 3), lengths (P,), triangles (P,), visibility words (P, W) uint64)
+/// into one buffer per camera.
+#[pyfunction]
+#[pyo3(signature = (scene, center, length, triangle, views, cameras, clip_to_triangle))]
+#[allow(clippy::too_many_arguments)]
+pub fn splat<'py>(
+    py: Python<'py>,
+    scene: &PyScene,
+    center: &Bound<'py, PyAny>,
+    length: &Bound<'py, PyAny>,
+    triangle: &Bound<'py, PyAny>,
+    views: &Bound<'py, PyAny>,
+    cameras: Vec<PyCamera>,
+    clip_to_triangle: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let center = rows_f32::<3>(center, "center")?;
+    let length = rows_f32::<1>(&length.call_method1("reshape", ((-1i64, 1i64),))?, "length")?;
+    let triangle = flat_i32(triangle, "triangle")?;
+    let bits: PyReadonlyArray2<u64> = views.extract().map_err(|_| {
+        input(
+            py,
+            "views must be a 2-D uint64 array of visibility words (P, ceil(V / 64))".to_string(),
+        )
+    })?;
+    let words = bits.shape()[1];
+    let view_count = cameras.len();
+    if words != view_count.div_ceil(64).max(1) {
+        return Err(input(
+            py,
+            format!(
+                "{view_count} views need {} visibility words per point, got {words}",
+                view_count.div_ceil(64).max(1)
+            ),
+        ));
+    }
+    let points = Points {
+        center,
+        length: length.into_iter().map(|[l]| l).collect(),
+        triangle,
+        views: bits.as_array().iter().copied().collect(),
+        view_count,
+        ..Default::default()
+    };
+    let cams: Vec<_> = cameras.into_iter().map(|c| c.inner).collect();
+    let s = scene.inner.clone();
+    let b = py
+        .detach(|| crate::splat::splat(&s, &points, &cams, clip_to_triangle))
+        .py_err(py)?;
+    let shape = [b.views, b.height as usize, b.width as usize];
+    let d = PyDict::new(py);
+    d.set_item("depth", array(py, b.depth(), &shape)?)?;
+    d.set_item("index", array(py, b.index(), &shape)?)?;
+    d.set_item("packed", array(py, b.packed, &shape)?)?;
+    d.set_item("timings", timings(py, b.timings)?)?;
+    Ok(d)
+}

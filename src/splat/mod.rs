@@ -1,0 +1,225 @@
+//! Points and their splatting into many off-screen views at once
+//! (eye-based-point-rendering.txt §3.4-3.5).
+//!
+//! A point is a world-space square: its centre, its side `length` (Eq. 4), the triangle it
+//! samples (the square lies in that triangle's plane, aligned with its longest edge) and a
+//! visibility bit string saying which views may see it (§3.1). `splat` scatters every point into
+//! every view whose bit is set, on the GPU (`gpu::splat`, `shaders/splat.wgsl`): the pixels of the
+//! bounding box of the square's projection, optionally only those overlapping the projected
+//! triangle, keep the nearest point through a 64-bit atomic on (depth bits << 32 | index).
+
+use std::time::Instant;
+
+use crate::camera::Camera;
+use crate::error::Result;
+use crate::gpu;
+use crate::input_err;
+use crate::scene::Scene;
+
+/// A point set, as `discretize(method="epr")` makes it or a caller builds it.
+#[derive(Debug, Clone, Default)]
+pub struct Points {
+    pub center: Vec<[f32; 3]>,
+    /// Side of the point's square, world units.
+    pub length: Vec<f32>,
+    pub triangle: Vec<i32>,
+    pub normal: Vec<[f32; 3]>,
+    pub material: Vec<i32>,
+    /// `words()` words per point: bit v % 64 of word v / 64 is set when view v may see the point.
+    pub views: Vec<u64>,
+    /// How many views the bit strings describe.
+    pub view_count: usize,
+    pub timings: Vec<(String, f64)>,
+    pub stats: Vec<(String, f64)>,
+}
+
+impl Points {
+    /// 64-bit words per point in `views`.
+    pub fn words(&self) -> usize {
+        self.view_count.div_ceil(64).max(1)
+    }
+
+    pub fn len(&self) -> usize {
+        self.center.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.center.is_empty()
+    }
+
+    /// Check the arrays against each other and against `scene`.
+    pub fn validate(&self, scene: &Scene) -> Result<()> {
+        let n = self.len();
+        // Normals and materials are for shading, not splatting: they may be left empty.
+        for (name, len, optional) in [
+            ("length", self.length.len(), false),
+            ("triangle", self.triangle.len(), false),
+            ("normal", self.normal.len(), true),
+            ("material", self.material.len(), true),
+        ] {
+            if len != n && !(optional && len == 0) {
+                return input_err!("points have {n} centres but {len} entries in {name}");
+            }
+        }
+        if self.views.len() != n * self.words() {
+            return input_err!(
+                "points over {} views need {} visibility words each ({} in all), got {}",
+                self.view_count,
+                self.words(),
+                n * self.words(),
+                self.views.len()
+            );
+        }
+        let t = scene.triangle_count();
+        if let Some((i, &bad)) = self
+            .triangle
+            .iter()
+            .enumerate()
+            .find(|(_, &k)| k < 0 || k as usize >= t)
+        {
+            return input_err!("point {i} names triangle {bad}, but the scene has {t} triangles");
+        }
+        if let Some(i) = self
+            .center
+            .iter()
+            .position(|c| !c.iter().all(|x| x.is_finite()))
+        {
+            return input_err!("point {i} has a non-finite centre {:?}", self.center[i]);
+        }
+        if let Some(i) = self
+            .length
+            .iter()
+            .position(|l| !(l.is_finite() && *l >= 0.0))
+        {
+            return input_err!(
+                "point {i} has length {}; lengths must be finite and >= 0",
+                self.length[i]
+            );
+        }
+        Ok(())
+    }
+}
+
+/// Off-screen buffers filled by `splat`: one W×H buffer per view.
+#[derive(Debug, Clone)]
+pub struct SplatBuffers {
+    pub width: u32,
+    pub height: u32,
+    pub views: usize,
+    /// (depth bits << 32 | point index), `u64::MAX` where no point landed; view-major.
+    pub packed: Vec<u64>,
+    pub timings: Vec<(String, f64)>,
+}
+
+impl SplatBuffers {
+    /// Camera-space depth per pixel, +inf where empty.
+    pub fn depth(&self) -> Vec<f32> {
+        self.packed
+            .iter()
+            .map(|&k| {
+                if k == u64::MAX {
+                    f32::INFINITY
+                } else {
+                    f32::from_bits((k >> 32) as u32)
+                }
+            })
+            .collect()
+    }
+
+    /// Point index per pixel, −1 where empty.
+    pub fn index(&self) -> Vec<i32> {
+        self.packed
+            .iter()
+            .map(|&k| {
+                if k == u64::MAX {
+                    -1
+                } else {
+                    (k & 0xffff_ffff) as u32 as i32
+                }
+            })
+            .collect()
+    }
+}
+
+/// Splat `points` (which sample `scene`) into one buffer per camera; all cameras share one
+/// resolution and the points' bit strings describe exactly these views.
+pub fn splat(
+    scene: &Scene,
+    points: &Points,
+    cameras: &[Camera],
+    clip_to_triangle: bool,
+) -> Result<SplatBuffers> {
+    let total = Instant::now();
+    let Some(first) = cameras.first() else {
+        return input_err!("splat needs at least one view");
+    };
+    if let Some(c) = cameras
+        .iter()
+        .find(|c| (c.width, c.height) != (first.width, first.height))
+    {
+        return input_err!(
+            "every view must have one resolution: {}x{} and {}x{} given (pass resolution= to \
+             resize them)",
+            first.width,
+            first.height,
+            c.width,
+            c.height
+        );
+    }
+    if points.view_count != cameras.len() {
+        return input_err!(
+            "the points' visibility strings describe {} views, but {} views were given",
+            points.view_count,
+            cameras.len()
+        );
+    }
+    points.validate(scene)?;
+    if points.len() >= u32::MAX as usize {
+        return input_err!(
+            "{} points: a splat key holds a 32-bit point index, so at most {} points",
+            points.len(),
+            u32::MAX - 1
+        );
+    }
+    let start = Instant::now();
+    let ctx = gpu::context()?;
+    let device_seconds = start.elapsed().as_secs_f64();
+    let start = Instant::now();
+    let c = scene.center();
+    let centers: Vec<[f32; 4]> = points
+        .center
+        .iter()
+        .zip(&points.length)
+        .map(|(p, &l)| {
+            [
+                (p[0] as f64 - c.x) as f32,
+                (p[1] as f64 - c.y) as f32,
+                (p[2] as f64 - c.z) as f32,
+                l,
+            ]
+        })
+        .collect();
+    let triangles: Vec<u32> = points.triangle.iter().map(|&t| t as u32).collect();
+    let prepare_seconds = start.elapsed().as_secs_f64();
+    let input = gpu::splat::PointBuffersIn {
+        centers: &centers,
+        triangles: &triangles,
+        bits: &points.views,
+        words: points.words(),
+    };
+    let (packed, stats) = gpu::splat::splat(&ctx, scene, &input, cameras, clip_to_triangle)?;
+    Ok(SplatBuffers {
+        width: first.width,
+        height: first.height,
+        views: cameras.len(),
+        packed,
+        timings: vec![
+            ("device".into(), device_seconds),
+            ("prepare".into(), prepare_seconds),
+            ("upload".into(), stats.upload_seconds),
+            ("splat".into(), stats.splat_seconds),
+            ("readback".into(), stats.readback_seconds),
+            ("total".into(), total.elapsed().as_secs_f64()),
+        ],
+    })
+}
