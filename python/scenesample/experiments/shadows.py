@@ -128,9 +128,9 @@ def main(argv: Optional[list[str]] = None) -> None:
     p = argparse.ArgumentParser(prog="python -m scenesample.experiments shadows")
     p.add_argument(
         "--scenes",
-        nargs="+",
+        nargs="*",
         default=["grass", "urban", "cornell_box", "pine_tree"],
-        help="procedural names or names of ../shared/scenes folders",
+        help="procedural names or names of ../shared/scenes folders; none: Fig. 9 only",
     )
     p.add_argument("--resolutions", type=int, nargs="+", default=[256, 512, 768])
     p.add_argument("--sizes", type=float, nargs="+", default=[0.25, 0.5, 1.0, 2.0, 4.0])
@@ -184,14 +184,18 @@ def main(argv: Optional[list[str]] = None) -> None:
             if table == "resolution" and value == args.resolutions[len(args.resolutions) // 2]:
                 fig8(out / f"fig8_{name}.png", refs, r)
             print(f"{name} {table}={value}: {time.perf_counter() - t:.1f} s", flush=True)
-    with open(out / "shadows.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
-    md = markdown(rows, args)
+    md = ""
+    if rows:
+        with open(out / "shadows.csv", "w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=list(rows[0]))
+            w.writeheader()
+            w.writerows(rows)
+        md = markdown(rows, args)
     if args.fig9_blades:
         md += fig9(out, args.fig9_blades, args)
-    (out / "shadows.md").write_text(md)
+    if not md:
+        raise SystemExit("nothing to do: give --scenes, --fig9-blades or both")
+    (out / "shadows.md" if rows else out / "fig9.md").write_text(md)
     print(md)
     print(f"wrote {out}")
 
