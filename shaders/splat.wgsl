@@ -1,5 +1,7 @@
 // EPR splatting (eye-based-point-rendering.txt §3.5): every point is scattered into every view
-// whose bit its visibility string sets. The point is a world-space square of side `length`
+// whose bit its visibility string sets. The host turns the bit strings into a list of
+// (point, view) pairs, grouped by view, so that every invocation does real work and the lanes of
+// a SIMD group mostly share one view. The point is a world-space square of side `length`
 // centred on the point, in its triangle's plane, its edges along and across the triangle's
 // longest edge. The square's four corners are projected into the view and the pixels of their
 // 2D bounding box receive the point through one 64-bit atomic per pixel on the key
@@ -16,18 +18,12 @@
 // atomicMax statements (no result used), which is all SHADER_INT64_ATOMIC_MIN_MAX allows.
 
 struct Params {
-    // Points in this dispatch and the index of the first, so that large point sets go in chunks.
+    // Pairs in this dispatch and the index of the first, so that long pair lists go in chunks.
     count: u32,
     first: u32,
-    // u64 words per point in the visibility strings (`views` below holds them as u32 pairs).
-    words: u32,
     // Non-zero: keep only pixels overlapping the point's triangle.
     clip: u32,
-    width: u32,
-    height: u32,
-    // Views in this dispatch and the index of the first among all views (for the bit test).
-    view_count: u32,
-    first_view: u32,
+    _pad: u32,
 };
 
 struct View {
@@ -36,6 +32,11 @@ struct View {
     // Camera-space depth of p: dot(p - scene_centre, forward) - eye_depth, with
     // forward_depth = (forward.xyz, eye_depth), forward the unit viewing direction.
     forward_depth: vec4<f32>,
+    // x: the near plane's depth; points nearer than it are not splatted into this view (a cube
+    // map's near plane on its reflector's bounding sphere keeps the reflector out of it).
+    near: vec4<f32>,
+    // Width, height, and the view's first pixel in `packed` (views may differ in size).
+    size_offset: vec4<u32>,
 };
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -44,12 +45,13 @@ struct View {
 @group(0) @binding(2) var<storage, read> centers: array<vec4<f32>>;
 // Per point: its triangle (index into `faces`, as u32 bits).
 @group(0) @binding(3) var<storage, read> triangles: array<u32>;
-// Per point: `words` visibility words, each as (low, high) u32s; bit v = view v.
-@group(0) @binding(4) var<storage, read> bits: array<u32>;
+// (point, view within this submission) pairs to splat.
+@group(0) @binding(4) var<storage, read> pairs: array<vec2<u32>>;
 // Scene vertex positions relative to the scene centre, three floats each, and faces.
 @group(0) @binding(5) var<storage, read> positions: array<f32>;
 @group(0) @binding(6) var<storage, read> faces: array<u32>;
-// The off-screen buffers, view after view, row-major: complemented keys, 0 where empty.
+// The off-screen buffers, view after view (each at its `size_offset`), row-major: complemented
+// keys, 0 where empty.
 @group(0) @binding(7) var<storage, read_write> packed: array<atomic<u64>>;
 
 fn vertex(i: u32) -> vec3<f32> {
@@ -88,19 +90,13 @@ fn overlaps(a: vec2<f32>, b: vec2<f32>, c: vec2<f32>, px: vec2<f32>) -> bool {
 
 @compute @workgroup_size(64)
 fn cs_splat(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let local = gid.x;
-    if local >= params.count || gid.y >= params.view_count {
+    let i = gid.x;
+    if i >= params.count {
         return;
     }
-    let point = params.first + local;
-    let view_index = params.first_view + gid.y;
-    let word = view_index / 64u;
-    let bit = view_index % 64u;
-    let half_word = bits[2u * (point * params.words + word) + bit / 32u];
-    if (half_word & (1u << (bit % 32u))) == 0u {
-        return;
-    }
-    let view = views[gid.y];
+    let pair = pairs[params.first + i];
+    let point = pair.x;
+    let view = views[pair.y];
     let cl = centers[point];
     let centre = cl.xyz;
     let half_side = 0.5 * cl.w;
@@ -133,7 +129,8 @@ fn cs_splat(@builtin(global_invocation_id) gid: vec3<u32>) {
     // Project the corners; a point with a corner behind the camera is skipped in this view.
     var lo = vec2<f32>(3.4e38, 3.4e38);
     var hi = vec2<f32>(-3.4e38, -3.4e38);
-    let size = vec2<f32>(f32(params.width), f32(params.height));
+    let width = view.size_offset.x;
+    let size = vec2<f32>(f32(width), f32(view.size_offset.y));
     for (var k = 0u; k < 4u; k++) {
         let su = select(-half_side, half_side, (k & 1u) != 0u);
         let sv = select(-half_side, half_side, (k & 2u) != 0u);
@@ -148,7 +145,7 @@ fn cs_splat(@builtin(global_invocation_id) gid: vec3<u32>) {
         hi = max(hi, px);
     }
     let depth = dot(centre, view.forward_depth.xyz) - view.forward_depth.w;
-    if !(depth > 0.0) {
+    if !(depth > 0.0 && depth >= view.near.x) {
         return;
     }
     // Every pixel whose square overlaps the box (a box inside one pixel still covers it).
@@ -189,13 +186,13 @@ fn cs_splat(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
 
     let key = ~((u64(bitcast<u32>(depth)) << 32u) | u64(point));
-    let base = gid.y * params.width * params.height;
+    let base = view.size_offset.z;
     for (var y = y0; y <= y1; y++) {
         for (var x = x0; x <= x1; x++) {
             if clip && !overlaps(a, b, c, vec2<f32>(f32(x), f32(y))) {
                 continue;
             }
-            atomicMax(&packed[base + u32(y) * params.width + u32(x)], key);
+            atomicMax(&packed[base + u32(y) * width + u32(x)], key);
         }
     }
 }

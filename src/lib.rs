@@ -5,6 +5,7 @@
 
 pub mod camera;
 pub mod discretize;
+pub mod effects;
 pub mod error;
 pub mod evaluate;
 pub mod gpu;

@@ -19,6 +19,7 @@ from ._core import Camera
 from ._core import __version__ as __version__
 from ._epr import Points, Reflector, SplatBuffers, cube_resolution, splat
 from ._evaluate import evaluate, intermediate_cameras
+from ._reflections import ReflectionResult, reflection_reference, reflections
 from ._scene import Scene
 from ._shadows import AreaLight, ShadowResult, soft_shadows
 from .errors import (
@@ -46,6 +47,7 @@ __all__ = [
     "Mesh",
     "Points",
     "RayHits",
+    "ReflectionResult",
     "Reflector",
     "Scene",
     "SceneError",
@@ -63,6 +65,8 @@ __all__ = [
     "intermediate_cameras",
     "reconstruct",
     "references",
+    "reflection_reference",
+    "reflections",
     "splat",
     "scenes",
     "soft_shadows",

@@ -17,6 +17,7 @@ __all__ = [
     "discretize_peeling",
     "epr_points",
     "read_exr",
+    "reflections",
     "reconstruct",
     "sampling_metrics",
     "soft_shadows",
@@ -38,6 +39,10 @@ class Scene:
         faces: ArrayLike,
         normals: Optional[ArrayLike] = None,
         colors: Optional[ArrayLike] = None,
+        material_ids: Optional[ArrayLike] = None,
+        materials: Optional[Sequence[dict[str, Any]]] = None,
+        object_ids: Optional[ArrayLike] = None,
+        objects: Optional[Sequence[str]] = None,
     ) -> Scene: ...
     @property
     def vertices(self) -> np.ndarray: ...
@@ -203,6 +208,19 @@ def splat(
     views: ArrayLike,
     cameras: Sequence[Camera],
     clip_to_triangle: bool,
+) -> dict[str, Any]: ...
+def reflections(
+    scene: Scene,
+    eye: Camera,
+    centers: ArrayLike,
+    radii: Sequence[float],
+    triangles: Sequence[ArrayLike],
+    resolutions: Sequence[int],
+    method: str,
+    bounces: int,
+    supersample: int,
+    rho_scale: float,
+    seed: int,
 ) -> dict[str, Any]: ...
 def cast_rays(
     scene: Scene,

@@ -24,6 +24,13 @@ REFLECTOR_ROUGHNESS = 0.1
 # when the needed size moves by at least this many pixels.
 RESIZE_STEP = 32
 MIN_CUBE_RESOLUTION = 8
+# The paper's largest cube-map face (§4.2: "a maximum adaptive resolution of 512²").
+MAX_CUBE_RESOLUTION = 512
+
+
+def max_cube_resolution(eye: Camera) -> int:
+    """Half the eye's resolution (§3.5), at most 512 and at least 8."""
+    return max(MIN_CUBE_RESOLUTION, min(MAX_CUBE_RESOLUTION, max(eye.width, eye.height) // 2))
 
 
 @dataclass(eq=False)
@@ -125,9 +132,9 @@ def reflectors_of(scene: Scene, spec: Any = None) -> list[Reflector]:
 
 def cube_resolution(eye: Camera, reflector: Reflector, previous: Optional[int] = None) -> int:
     """The cube-map resolution a reflector needs (§4.1.1): the diameter in eye pixels of its
-    bounding sphere's projection, at most half the eye's resolution and at least 8; with
-    ``previous`` (last frame's), kept unless the need moved by >= 32 pixels (§3.5)."""
-    limit = max(MIN_CUBE_RESOLUTION, max(eye.width, eye.height) // 2)
+    bounding sphere's projection, at most half the eye's resolution (and 512) and at least 8;
+    with ``previous`` (last frame's), kept unless the need moved by >= 32 pixels (§3.5)."""
+    limit = max_cube_resolution(eye)
     d = float(np.linalg.norm(reflector.center - np.asarray(eye.eye)))
     if eye.yfov is not None:
         pixel = 2 * math.tan(eye.yfov / 2) / eye.height

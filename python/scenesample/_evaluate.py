@@ -14,7 +14,7 @@ from .results import DepthImages, Mesh
 
 __all__ = ["evaluate", "intermediate_cameras"]
 
-METRICS = ("sampling", "shadow", "geometry")
+METRICS = ("sampling", "shadow", "geometry", "image")
 
 
 def intermediate_cameras(region: Sequence[Any], count: int, seed: int = 0) -> list[Any]:
@@ -60,7 +60,13 @@ def evaluate(
 ) -> dict[str, Any]:
     """Measure a result's accuracy. The metric defaults from the first argument's type:
     ``DepthImages`` -> ``"sampling"``, ``ShadowResult`` -> ``"shadow"``, ``Mesh`` ->
-    ``"geometry"``.
+    ``"geometry"``, ``ReflectionResult`` -> ``"image"``.
+
+    ``evaluate(result, reference, "image")`` compares two images (``ReflectionResult`` or
+    (H, W, 3) arrays, linear RGB) on the 0-255 scale of their 8-bit sRGB display
+    (eye-based-point-rendering.txt §4.2): ``rmse``, ``psnr``, ``max_abs`` over all pixels, the
+    same with ``_reflective`` over the reference's reflective pixels, and that ``mask``. The
+    reflections' reference is :func:`scenesample.reflection_reference` (MVR at 4x, downsampled).
 
     ``evaluate(shadows, reference, "shadow")`` compares two :class:`ShadowResult` of one view
     (non-redundant-rendering.txt §6.2) over the pixels both see a surface at, on a 0-255 scale:
@@ -122,12 +128,17 @@ def evaluate(
     InputError
         Unknown metric or redundancy, images without reference cameras, bad ``intermediate``.
     """
+    from ._reflections import ReflectionResult, image_metrics
     from ._shadows import ShadowResult
 
     if metric is None:
-        metric = {ShadowResult: "shadow", Mesh: "geometry"}.get(type(images), "sampling")
+        metric = {ShadowResult: "shadow", Mesh: "geometry", ReflectionResult: "image"}.get(
+            type(images), "sampling"
+        )
     if metric not in METRICS:
         raise InputError(f"metric must be one of {list(METRICS)}, got {metric!r}")
+    if metric == "image":
+        return image_metrics(images, scene)
     if metric == "shadow":
         return _shadow_error(images, scene)
     if metric == "geometry":

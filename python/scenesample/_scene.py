@@ -90,6 +90,10 @@ class Scene:
         *,
         normals: Optional[Any] = None,
         colors: Optional[Any] = None,
+        material_ids: Optional[Any] = None,
+        materials: Optional[list[dict[str, Any]]] = None,
+        object_ids: Optional[Any] = None,
+        objects: Optional[list[str]] = None,
     ) -> Scene:
         """A scene from plain arrays; face order is kept, so triangle ids are face indices.
 
@@ -103,8 +107,21 @@ class Scene:
             Per-vertex normals, kept as given (depth images use geometric normals).
         colors : (N, 3) array_like of float, optional
             Per-vertex linear RGB base colour; white when omitted.
+        material_ids : (M,) array_like of int, optional
+            Per-face index into ``materials``, -1 for none (the default for every face).
+        materials : list of dict, optional
+            Each with any of ``name``, ``base_color`` (RGB/RGBA), ``metallic``, ``roughness``,
+            ``emissive``, ``double_sided`` (glTF's defaults for the rest).
+        object_ids : (M,) array_like of int, optional
+            Per-face index into ``objects`` (default: one object, "mesh").
+        objects : list of str, optional
+            Object names.
         """
-        return cls(_core.Scene.from_arrays(vertices, faces, normals, colors))
+        return cls(
+            _core.Scene.from_arrays(
+                vertices, faces, normals, colors, material_ids, materials, object_ids, objects
+            )
+        )
 
     @classmethod
     def from_trimesh(cls, obj: Any) -> Scene:

@@ -164,6 +164,84 @@ def report_nonredundant(r: dict[str, Any], device: str) -> str:
     )
 
 
+EPR_SPEED_TARGET = 3.0
+EPR_SHADING_TARGET = 30.0
+EPR_POINTS_TARGET = 3.0
+EPR_RMSE_TARGET = 0.0005  # (RMSE_epr - RMSE_mvr) / 255, Table 2's normalised difference
+
+
+def bench_epr(size: int, spheres: int, repeats: int) -> dict[str, Any]:
+    """Reflections of ``spheres`` mirror spheres in ``scenes.reflective_room`` seen by a
+    size^2 eye, by EPR, MVR and iVIR in interleaved rounds (best seconds, median per-round
+    ratios), with shading operations, points and the RMSE against the 4x MVR reference."""
+    scene = ss.scenes.reflective_room(spheres=spheres, detail=3)
+    eye = ss.scenes.reflective_room_eye(size)
+    methods = ("epr", "mvr", "ivir")
+    last: dict[str, Any] = {}
+    for m in methods:  # device, pipelines, first uploads outside the timing
+        ss.reflections(scene, eye, method=m)
+    rounds: dict[str, list[float]] = {m: [] for m in methods}
+    for _ in range(max(repeats, 1)):
+        for m in methods:
+            t0 = time.perf_counter()
+            last[m] = ss.reflections(scene, eye, method=m)
+            rounds[m].append(time.perf_counter() - t0)
+    ref = ss.reflection_reference(scene, eye)
+    epr = np.array(rounds["epr"])
+    out: dict[str, Any] = {
+        "size": size,
+        "spheres": spheres,
+        "triangles": scene.triangle_count,
+        "views": 6 * spheres,
+    }
+    for m in methods:
+        err = ss.evaluate(last[m], ref)
+        out[m] = {
+            "seconds": min(rounds[m]),
+            "speedup_of_epr": float(np.median(np.array(rounds[m]) / epr)),
+            "timings": last[m].timings,
+            "stats": last[m].stats,
+            "rmse": err["rmse"],
+            "rmse_reflective": err["rmse_reflective"],
+        }
+    return out
+
+
+def report_epr(r: dict[str, Any], device: str) -> str:
+    e, m, i = r["epr"], r["mvr"], r["ivir"]
+    shading = m["stats"]["shading_ops"] / max(e["stats"]["shading_ops"], 1)
+    points = i["stats"]["points"] / max(e["stats"]["points"], 1)
+    diff = (e["rmse"] - m["rmse"]) / 255
+    lines = [
+        f"device: {device}",
+        "",
+        f"reflections: {r['spheres']} mirror spheres ({r['views']} cube faces) in "
+        f"scenes.reflective_room ({r['triangles']:,} triangles), {r['size']}x{r['size']} eye",
+        "| method | seconds | EPR speedup | shading ops | points | off-screen px | "
+        "RMSE (all / mirrors) vs 4x MVR |",
+        "|---|---:|---:|---:|---:|---:|---:|",
+    ]
+    for name, x in (("EPR", e), ("MVR", m), ("iVIR", i)):
+        lines.append(
+            f"| {name} | {x['seconds']:.3f} | {x['speedup_of_epr']:.2f}x | "
+            f"{int(x['stats']['shading_ops']):,} | {int(x['stats']['points']):,} | "
+            f"{int(x['stats']['offscreen_pixels']):,} | {x['rmse']:.2f} / "
+            f"{x['rmse_reflective']:.2f} |"
+        )
+    lines += [
+        "EPR steps: "
+        + ", ".join(f"{k} {v:.3f}" for k, v in e["timings"].items())
+        + "; MVR steps: "
+        + ", ".join(f"{k} {v:.3f}" for k, v in m["timings"].items()),
+        f"EPR vs MVR time: {_verdict(m['speedup_of_epr'], EPR_SPEED_TARGET)}",
+        f"MVR / EPR shading operations: {_verdict(shading, EPR_SHADING_TARGET)}",
+        f"iVIR / EPR points: {_verdict(points, EPR_POINTS_TARGET)}",
+        f"(RMSE_epr - RMSE_mvr) / 255 = {100 * diff:.3f}% (target <= "
+        f"{100 * EPR_RMSE_TARGET:.2f}%): {'met' if diff <= EPR_RMSE_TARGET else 'NOT met'}",
+    ]
+    return "\n".join(lines)
+
+
 def _verdict(ratio: float, target: float) -> str:
     return f"{ratio:.2f}x (target >= {target}x): {'met' if ratio >= target else 'NOT met'}"
 
@@ -206,8 +284,13 @@ def main(argv: Optional[list[str]] = None) -> None:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     p.add_argument(
-        "which", nargs="?", default="all", choices=["all", "nonredundant"], help="benchmark set"
+        "which",
+        nargs="?",
+        default="all",
+        choices=["all", "nonredundant", "epr"],
+        help="benchmark set",
     )
+    p.add_argument("--spheres", type=int, default=50, help="epr: mirror spheres")
     p.add_argument("--quick", action="store_true", help="small scene and images (smoke test)")
     p.add_argument("--only", choices=["rays", "depth"], help="run one benchmark")
     p.add_argument("--repeats", type=int, default=5)
@@ -215,6 +298,13 @@ def main(argv: Optional[list[str]] = None) -> None:
     a = p.parse_args(argv)
     size = 256 if a.quick else 1024
     info = ss.device_info()
+    if a.which == "epr":
+        r = bench_epr(128 if a.quick else 512, 10 if a.quick else a.spheres, a.repeats)
+        print(report_epr(r, f"{info['name']} ({info['backend']})"))
+        if a.json:
+            with open(a.json, "w") as f:
+                json.dump({"epr": r, "device": info}, f, indent=2)
+        return
     if a.which == "nonredundant":
         r = bench_nonredundant(size, a.repeats)
         print(report_nonredundant(r, f"{info['name']} ({info['backend']})"))

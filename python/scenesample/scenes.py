@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Optional
+from typing import Any, Optional
 
 import numpy as np
 
@@ -21,6 +21,8 @@ __all__ = [
     "grass",
     "icosphere",
     "reference_cameras",
+    "reflective_room",
+    "reflective_room_eye",
     "shapes",
     "shared_scene_files",
     "shared_scenes_dir",
@@ -145,6 +147,97 @@ def shapes(seed: int = 0, detail: int = 2, offset=(0.0, 0.0, 0.0), scale: float 
         n += len(v)
     v = np.concatenate(verts) * scale + np.asarray(offset, dtype=np.float64)
     return Scene.from_arrays(v, np.concatenate(faces), colors=np.concatenate(colors))
+
+
+def reflective_room(spheres: int = 10, seed: int = 0, detail: int = 3) -> Scene:
+    """A room with mirror spheres, for reflections (eye-based-point-rendering.txt §4.2 uses
+    1, 10, 20 and 50 reflective objects): a checkered floor (4 x 4, z = 0) and three walls 2
+    high, a dozen coloured boxes, and ``spheres`` icospheres (``detail`` subdivisions, smooth
+    vertex normals) of radius 0.12-0.2 at seeded positions that do not overlap, with a mirror
+    material (metallic 1, roughness 0.05, objects ``sphere 0`` ...). Everything else is diffuse
+    (metallic 0, roughness 0.8). z is up; see :func:`reflective_room_eye`."""
+    if spheres < 0:
+        raise ValueError(f"spheres must be >= 0, got {spheres}")
+    rng = np.random.default_rng(seed)
+    verts, faces, cols, norms, mats, objs = [], [], [], [], [], []
+    names = ["room"]
+
+    def add(v, f, color, normals, material, obj):
+        base = sum(len(x) for x in verts)
+        verts.append(np.asarray(v, dtype=np.float64))
+        faces.append(np.asarray(f, dtype=np.int64) + base)
+        cols.append(np.broadcast_to(np.asarray(color, dtype=np.float64), (len(v), 3)))
+        norms.append(np.asarray(normals, dtype=np.float64))
+        mats.append(np.full(len(f), material))
+        objs.append(np.full(len(f), obj))
+
+    # Floor: 8 x 8 checker tiles, each its own quad so colours stay flat.
+    for i in range(8):
+        for j in range(8):
+            x0, y0 = -2 + 0.5 * i, -2 + 0.5 * j
+            v = [[x0, y0, 0], [x0 + 0.5, y0, 0], [x0 + 0.5, y0 + 0.5, 0], [x0, y0 + 0.5, 0]]
+            c = (0.8, 0.78, 0.7) if (i + j) % 2 == 0 else (0.25, 0.25, 0.3)
+            add(v, [[0, 1, 2], [0, 2, 3]], c, [[0, 0, 1]] * 4, 0, 0)
+    walls = [  # corners, inward normal, colour
+        ([[-2, 2, 0], [2, 2, 0], [2, 2, 2], [-2, 2, 2]], [0, -1, 0], (0.7, 0.3, 0.25)),
+        ([[-2, -2, 0], [-2, 2, 0], [-2, 2, 2], [-2, -2, 2]], [1, 0, 0], (0.3, 0.55, 0.35)),
+        ([[2, 2, 0], [2, -2, 0], [2, -2, 2], [2, 2, 2]], [-1, 0, 0], (0.3, 0.4, 0.7)),
+    ]
+    for v, n, c in walls:
+        add(v, [[0, 2, 1], [0, 3, 2]], c, [n] * 4, 0, 0)
+    occupied: list[tuple[np.ndarray, float]] = []
+    for k in range(12):
+        lo = np.array([rng.uniform(-1.8, 1.5), rng.uniform(-1.8, 1.5), 0.0])
+        size = np.array([rng.uniform(0.15, 0.35), rng.uniform(0.15, 0.35), rng.uniform(0.2, 0.9)])
+        v, f = _box(lo, lo + size, 1)
+        normals = np.zeros_like(v)
+        for q in range(6):  # four vertices per box face, in _box's order
+            axis, side = q // 2, q % 2
+            normals[4 * q : 4 * q + 4, axis] = 1 if side else -1
+        names.append(f"box {k}")
+        add(v, f, rng.uniform(0.2, 0.9, 3), normals, 0, len(names) - 1)
+        occupied.append((lo + size / 2, float(np.linalg.norm(size[:2]) / 2)))
+    unit_v, unit_f = _icosphere_arrays(detail)
+    placed = 0
+    tries = 0
+    while placed < spheres:
+        tries += 1
+        if tries > 20000:
+            raise ValueError(f"could not place {spheres} spheres without overlap")
+        r = rng.uniform(0.12, 0.2)
+        c = np.array([rng.uniform(-1.7, 1.7), rng.uniform(-1.7, 1.7), rng.uniform(0.3, 1.6)])
+        if any(np.linalg.norm(c[:2] - o[:2]) < r + orad + 0.02 for o, orad in occupied):
+            continue
+        occupied.append((c, r))
+        names.append(f"sphere {placed}")
+        tint = (0.95, 0.93, 0.88) if placed % 3 else (0.95, 0.75, 0.45)
+        add(unit_v * r + c, unit_f, tint, unit_v, 1, len(names) - 1)
+        placed += 1
+    v = np.concatenate(verts)
+    return Scene.from_arrays(
+        v,
+        np.concatenate(faces),
+        normals=np.concatenate(norms),
+        colors=np.concatenate(cols),
+        material_ids=np.concatenate(mats),
+        materials=[
+            {"name": "diffuse", "metallic": 0.0, "roughness": 0.8},
+            {"name": "mirror", "metallic": 1.0, "roughness": 0.05},
+        ],
+        object_ids=np.concatenate(objs),
+        objects=names,
+    )
+
+
+def reflective_room_eye(resolution: int = 512, angle: float = 0.0, distance: float = 3.2) -> Any:
+    """The eye for :func:`reflective_room`: ``distance`` from the room's centre axis, 1.6 high,
+    turned ``angle`` radians about z (0: looking along +y), looking at (0, 0, 0.7)."""
+    from ._core import Camera
+
+    eye = (distance * np.sin(angle), -distance * np.cos(angle), 1.6)
+    return Camera.look_at(
+        eye, (0.0, 0.0, 0.7), (0.0, 0.0, 1.0), yfov=0.9, width=resolution, height=resolution
+    )
 
 
 def shared_scenes_dir() -> Optional[Path]:

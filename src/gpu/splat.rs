@@ -21,12 +21,8 @@ const SHADER: &str = include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/shaders/
 struct Params {
     count: u32,
     first: u32,
-    words: u32,
     clip: u32,
-    width: u32,
-    height: u32,
-    view_count: u32,
-    first_view: u32,
+    _pad: u32,
 }
 const PARAMS_SIZE: u64 = std::mem::size_of::<Params>() as u64;
 
@@ -36,6 +32,8 @@ const PARAMS_SIZE: u64 = std::mem::size_of::<Params>() as u64;
 struct ViewUniform {
     view_proj: [[f32; 4]; 4],
     forward_depth: [f32; 4],
+    near: [f32; 4],
+    size_offset: [u32; 4],
 }
 
 /// Workgroups per dispatch dimension (wgpu's default limit) and threads per workgroup.
@@ -110,7 +108,7 @@ pub struct SplatStats {
     pub readback_seconds: f64,
 }
 
-/// Splat the points into one buffer per camera (all of one resolution); returns the keys
+/// Splat the points into one buffer per camera (each at its own resolution); returns the keys
 /// (depth bits << 32 | point index, `u64::MAX` empty), view after view, row-major.
 pub fn splat(
     ctx: &GpuContext,
@@ -127,17 +125,20 @@ pub fn splat(
             ctx.info.name
         )));
     }
-    let (w, h) = (cameras[0].width, cameras[0].height);
-    let pixels = w as u64 * h as u64;
     let binding = ctx
         .limits
         .max_storage_buffer_binding_size
         .min(ctx.limits.max_buffer_size);
-    let view_bytes = pixels * 8;
-    if view_bytes > binding {
+    let view_bytes: Vec<u64> = cameras
+        .iter()
+        .map(|c| c.width as u64 * c.height as u64 * 8)
+        .collect();
+    if let Some((i, b)) = view_bytes.iter().enumerate().find(|(_, &b)| b > binding) {
+        let c = &cameras[i];
         return Err(Error::GpuLimit(format!(
-            "one {w}x{h} splat buffer takes {view_bytes} bytes, more than this device's storage \
-             limit of {binding} bytes; use smaller views"
+            "one {}x{} splat buffer takes {b} bytes, more than this device's storage limit of \
+             {binding} bytes; use smaller views",
+            c.width, c.height
         )));
     }
     let n = points.triangles.len();
@@ -183,7 +184,6 @@ pub fn splat(
     };
     let centers = storage("splat centres", bytemuck::cast_slice(points.centers));
     let triangles = storage("splat triangles", bytemuck::cast_slice(points.triangles));
-    let bits = storage("splat visibility", bytemuck::cast_slice(points.bits));
     // The clip range only shapes the projection's depth row, unused here (a splat's depth comes
     // from `forward_depth`).
     let bounds = scene.bounds();
@@ -197,46 +197,74 @@ pub fn splat(
             ViewUniform {
                 view_proj: m.as_mat4().to_cols_array_2d(),
                 forward_depth: [f.x as f32, f.y as f32, f.z as f32, eye.dot(f) as f32],
+                near: [cam.znear.unwrap_or(0.0) as f32, 0.0, 0.0, 0.0],
+                size_offset: [0; 4],
             }
         })
         .collect();
     stats.upload_seconds = start.elapsed().as_secs_f64();
 
-    // Views per chunk: as many whole buffers as one binding holds.
-    let chunk = ((binding / view_bytes) as usize).clamp(1, MAX_GROUPS as usize);
-    let point_dispatches = (n as u64).div_ceil((MAX_GROUPS * GROUP) as u64).max(1) as usize;
+    // Chunks of consecutive views whose buffers fit one binding together.
+    let mut chunks: Vec<std::ops::Range<usize>> = Vec::new();
+    let mut start_view = 0;
+    let mut bytes = 0;
+    for (i, &b) in view_bytes.iter().enumerate() {
+        if i > start_view && (bytes + b > binding || i - start_view == MAX_GROUPS as usize) {
+            chunks.push(start_view..i);
+            start_view = i;
+            bytes = 0;
+        }
+        bytes += b;
+    }
+    chunks.push(start_view..cameras.len());
     let param_stride = align(
         PARAMS_SIZE,
         ctx.limits.min_uniform_buffer_offset_alignment as u64,
     );
-    let mut out = vec![0u64; cameras.len() * pixels as usize];
-    let mut pending: Option<(usize, usize, wgpu::Buffer, wgpu::SubmissionIndex)> = None;
-    for (c, cams) in view_data.chunks(chunk).enumerate() {
+    let total_pixels: u64 = view_bytes.iter().sum::<u64>() / 8;
+    let mut out = vec![0u64; total_pixels as usize];
+    let mut pending: Option<Pending> = None;
+    let mut at_pixel = 0usize;
+    for range in chunks {
         let start = Instant::now();
-        let first_view = c * chunk;
-        let mut params = vec![0u8; param_stride as usize * point_dispatches];
-        for d in 0..point_dispatches {
-            let first = d * (MAX_GROUPS * GROUP) as usize;
+        let mut cams = view_data[range.clone()].to_vec();
+        let mut offset = 0u32;
+        for (v, cam) in cams.iter_mut().zip(&cameras[range.clone()]) {
+            v.size_offset = [cam.width, cam.height, offset, 0];
+            offset += cam.width * cam.height;
+        }
+        // The chunk's (point, view) pairs, grouped by view.
+        let pairs = pairs_by_view(points, range.clone());
+        if pairs.len() as u64 * 8 > binding {
+            return Err(Error::GpuLimit(format!(
+                "{} (point, view) pairs take {} bytes, more than this device's storage limit \
+                 of {binding} bytes; splat fewer points or views per call",
+                pairs.len(),
+                pairs.len() * 8
+            )));
+        }
+        let per_dispatch = (MAX_GROUPS * GROUP) as usize;
+        let dispatches = pairs.len().div_ceil(per_dispatch).max(1);
+        let mut params = vec![0u8; param_stride as usize * dispatches];
+        for d in 0..dispatches {
+            let first = d * per_dispatch;
             let p = Params {
-                count: (n - first.min(n)).min((MAX_GROUPS * GROUP) as usize) as u32,
+                count: (pairs.len() - first.min(pairs.len())).min(per_dispatch) as u32,
                 first: first as u32,
-                words: words as u32,
                 clip: clip_to_triangle as u32,
-                width: w,
-                height: h,
-                view_count: cams.len() as u32,
-                first_view: first_view as u32,
+                _pad: 0,
             };
             let at = d * param_stride as usize;
             params[at..at + PARAMS_SIZE as usize].copy_from_slice(bytemuck::bytes_of(&p));
         }
+        let pairs_buf = storage("splat pairs", bytemuck::cast_slice(&pairs));
         let params_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("splat params"),
             contents: &params,
             usage: wgpu::BufferUsages::UNIFORM,
         });
-        let views_buf = storage("splat views", bytemuck::cast_slice(cams));
-        let bytes = view_bytes * cams.len() as u64;
+        let views_buf = storage("splat views", bytemuck::cast_slice(&cams));
+        let bytes = offset as u64 * 8;
         let target = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("splat buffers"),
             size: bytes,
@@ -277,7 +305,7 @@ pub fn splat(
                 },
                 wgpu::BindGroupEntry {
                     binding: 4,
-                    resource: bits.as_entire_binding(),
+                    resource: pairs_buf.as_entire_binding(),
                 },
                 wgpu::BindGroupEntry {
                     binding: 5,
@@ -299,38 +327,90 @@ pub fn splat(
         {
             let mut pass = encoder.begin_compute_pass(&Default::default());
             pass.set_pipeline(&ctx.splat_pipeline().pipeline);
-            for d in 0..point_dispatches {
-                let first = d * (MAX_GROUPS * GROUP) as usize;
-                let count = (n - first.min(n)).min((MAX_GROUPS * GROUP) as usize) as u32;
+            for d in 0..dispatches {
+                let first = d * per_dispatch;
+                let count = (pairs.len() - first.min(pairs.len())).min(per_dispatch) as u32;
                 if count == 0 {
                     continue;
                 }
                 pass.set_bind_group(0, &bind, &[(d as u64 * param_stride) as u32]);
-                pass.dispatch_workgroups(count.div_ceil(GROUP), cams.len() as u32, 1);
+                pass.dispatch_workgroups(count.div_ceil(GROUP), 1, 1);
             }
         }
         encoder.copy_buffer_to_buffer(&target, 0, &readback, 0, bytes);
         let submission = ctx.queue.submit([encoder.finish()]);
         readback.slice(..).map_async(wgpu::MapMode::Read, |_| {});
         stats.splat_seconds += start.elapsed().as_secs_f64();
-        if let Some(done) = pending.replace((first_view, cams.len(), readback, submission)) {
-            finish(ctx, done, pixels as usize, &mut out, &mut stats)?;
+        let next = Pending {
+            at: at_pixel,
+            pixels: offset as usize,
+            readback,
+            submission,
+        };
+        at_pixel += offset as usize;
+        if let Some(done) = pending.replace(next) {
+            finish(ctx, done, &mut out, &mut stats)?;
         }
     }
     if let Some(done) = pending {
-        finish(ctx, done, pixels as usize, &mut out, &mut stats)?;
+        finish(ctx, done, &mut out, &mut stats)?;
     }
     Ok((out, stats))
 }
 
-/// Wait for one chunk of views and copy its keys, un-complemented, into `out`.
-fn finish(
-    ctx: &GpuContext,
-    (first_view, views, readback, submission): (usize, usize, wgpu::Buffer, wgpu::SubmissionIndex),
+/// A submitted chunk of views whose readback is not yet consumed.
+struct Pending {
+    /// Its first pixel in the output, and its pixel count.
+    at: usize,
     pixels: usize,
-    out: &mut [u64],
-    stats: &mut SplatStats,
-) -> Result<()> {
+    readback: wgpu::Buffer,
+    submission: wgpu::SubmissionIndex,
+}
+
+/// The (point, view − first view) pairs of the views in `views` whose bits are set, grouped by
+/// view (a counting sort over the set bits).
+fn pairs_by_view(points: &PointBuffersIn, views: std::ops::Range<usize>) -> Vec<[u32; 2]> {
+    let words = points.words;
+    let n = points.triangles.len();
+    let (lo, hi) = (views.start, views.end);
+    let mut count = vec![0usize; hi - lo + 1];
+    let set_bits = |p: usize, f: &mut dyn FnMut(usize)| {
+        for w in (lo / 64)..hi.div_ceil(64) {
+            let mut word = points.bits[p * words + w];
+            while word != 0 {
+                let b = word.trailing_zeros() as usize;
+                word &= word - 1;
+                let v = 64 * w + b;
+                if v >= lo && v < hi {
+                    f(v - lo);
+                }
+            }
+        }
+    };
+    for p in 0..n {
+        set_bits(p, &mut |v| count[v + 1] += 1);
+    }
+    for v in 1..count.len() {
+        count[v] += count[v - 1];
+    }
+    let mut out = vec![[0u32; 2]; count[hi - lo]];
+    for p in 0..n {
+        set_bits(p, &mut |v| {
+            out[count[v]] = [p as u32, v as u32];
+            count[v] += 1;
+        });
+    }
+    out
+}
+
+/// Wait for one chunk of views and copy its keys, un-complemented, into `out`.
+fn finish(ctx: &GpuContext, p: Pending, out: &mut [u64], stats: &mut SplatStats) -> Result<()> {
+    let Pending {
+        at,
+        pixels,
+        readback,
+        submission,
+    } = p;
     let start = Instant::now();
     super::raster::wait(ctx, submission)?;
     stats.splat_seconds += start.elapsed().as_secs_f64();
@@ -341,7 +421,7 @@ fn finish(
             .get_mapped_range()
             .map_err(|e| Error::Gpu(format!("mapping the splat readback failed: {e}")))?;
         let keys: &[u64] = bytemuck::cast_slice(&data);
-        let dst = &mut out[first_view * pixels..(first_view + views) * pixels];
+        let dst = &mut out[at..at + pixels];
         for (d, k) in dst.iter_mut().zip(keys) {
             *d = !*k;
         }

@@ -4,6 +4,7 @@
 
 mod camera;
 mod convert;
+mod effects;
 mod errors;
 mod evaluate;
 mod reconstruct;
@@ -27,6 +28,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(shadows::soft_shadows, m)?)?;
     m.add_function(wrap_pyfunction!(splat::epr_points, m)?)?;
     m.add_function(wrap_pyfunction!(splat::splat, m)?)?;
+    m.add_function(wrap_pyfunction!(effects::reflections, m)?)?;
     m.add_function(wrap_pyfunction!(render::device_info, m)?)?;
     m.add_function(wrap_pyfunction!(render::write_exr, m)?)?;
     m.add_function(wrap_pyfunction!(render::read_exr, m)?)?;

@@ -7,9 +7,9 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
 use super::camera::PyCamera;
-use super::convert::{array, faces, rows_array, rows_f32};
+use super::convert::{array, faces, flat_i32, rows_array, rows_f32};
 use super::errors::IntoPy;
-use crate::scene::{LightKind, Scene};
+use crate::scene::{LightKind, Material, Scene, SceneParts};
 
 #[pyclass(name = "Scene", module = "scenesample._core", frozen)]
 pub struct PyScene {
@@ -28,19 +28,47 @@ impl PyScene {
     }
 
     #[staticmethod]
-    #[pyo3(signature = (vertices, faces, normals=None, colors=None))]
+    #[pyo3(signature = (vertices, faces, normals=None, colors=None, material_ids=None, materials=None, object_ids=None, objects=None))]
+    #[allow(clippy::too_many_arguments)]
     fn from_arrays(
         py: Python<'_>,
         vertices: &Bound<'_, PyAny>,
         faces: &Bound<'_, PyAny>,
         normals: Option<&Bound<'_, PyAny>>,
         colors: Option<&Bound<'_, PyAny>>,
+        material_ids: Option<&Bound<'_, PyAny>>,
+        materials: Option<Vec<Bound<'_, PyDict>>>,
+        object_ids: Option<&Bound<'_, PyAny>>,
+        objects: Option<Vec<String>>,
     ) -> PyResult<Self> {
         let v = rows_f32::<3>(vertices, "vertices")?;
         let f = self::faces(faces, "faces", v.len())?;
         let n = normals.map(|n| rows_f32::<3>(n, "normals")).transpose()?;
         let c = colors.map(|c| rows_f32::<3>(c, "colors")).transpose()?;
-        let scene = Scene::from_arrays(v, f, n, c).py_err(py)?;
+        let m = f.len();
+        let mut parts = SceneParts {
+            vertices: v,
+            faces: f,
+            normals: n,
+            colors: c,
+            material_ids: vec![-1; m],
+            object_ids: vec![0; m],
+            objects: vec!["mesh".to_string()],
+            ..Default::default()
+        };
+        if let Some(ids) = material_ids {
+            parts.material_ids = flat_i32(ids, "material_ids")?;
+        }
+        if let Some(ms) = materials {
+            parts.materials = ms.iter().map(material).collect::<PyResult<_>>()?;
+        }
+        if let Some(ids) = object_ids {
+            parts.object_ids = flat_i32(ids, "object_ids")?;
+        }
+        if let Some(names) = objects {
+            parts.objects = names;
+        }
+        let scene = Scene::new(parts).py_err(py)?;
         Ok(Self {
             inner: Arc::new(scene),
         })
@@ -160,4 +188,48 @@ impl PyScene {
             b[1]
         )
     }
+}
+
+/// A material from a dict: `base_color` (RGB or RGBA, linear), `metallic`, `roughness`,
+/// `emissive`, `name`, `double_sided`; glTF's defaults for what is missing.
+fn material(d: &Bound<'_, PyDict>) -> PyResult<Material> {
+    let get = |k: &str| d.get_item(k);
+    let color: Vec<f32> = match get("base_color")? {
+        Some(v) => v.extract()?,
+        None => vec![1.0, 1.0, 1.0, 1.0],
+    };
+    let mut rgba = [1.0f32; 4];
+    for (dst, src) in rgba.iter_mut().zip(&color) {
+        *dst = *src;
+    }
+    let emissive: Vec<f32> = match get("emissive")? {
+        Some(v) => v.extract()?,
+        None => vec![0.0; 3],
+    };
+    let mut em = [0.0f32; 3];
+    for (dst, src) in em.iter_mut().zip(&emissive) {
+        *dst = *src;
+    }
+    Ok(Material {
+        name: match get("name")? {
+            Some(v) => v.extract()?,
+            None => String::new(),
+        },
+        base_color: rgba,
+        base_color_factor: rgba,
+        base_color_textured: false,
+        metallic: match get("metallic")? {
+            Some(v) => v.extract()?,
+            None => 1.0,
+        },
+        roughness: match get("roughness")? {
+            Some(v) => v.extract()?,
+            None => 1.0,
+        },
+        emissive: em,
+        double_sided: match get("double_sided")? {
+            Some(v) => v.extract()?,
+            None => false,
+        },
+    })
 }

@@ -5,10 +5,10 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use super::camera::PyCamera;
-use super::convert::{array, flat_i32, rows_f32, rows_f64, rows_owned};
+use super::convert::{array, flat_i32, rows_f32, rows_owned};
 use super::errors::{input, IntoPy};
 use super::scene::PyScene;
-use crate::discretize::epr::{self, Density, Reflector};
+use crate::discretize::epr::{self, Density};
 use crate::splat::Points;
 
 fn timings<'py>(py: Python<'py>, items: Vec<(String, f64)>) -> PyResult<Bound<'py, PyDict>> {
@@ -37,34 +37,7 @@ pub fn epr_points<'py>(
     rho_scale: f64,
     seed: u64,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let centers = rows_f64::<3>(centers, "reflector centres")?;
-    if centers.len() != radii.len() || centers.len() != triangles.len() {
-        return Err(input(
-            py,
-            format!(
-                "{} reflector centres, {} radii and {} triangle lists: one of each per reflector",
-                centers.len(),
-                radii.len(),
-                triangles.len()
-            ),
-        ));
-    }
-    let mut reflectors = Vec::with_capacity(centers.len());
-    for (k, ((c, r), t)) in centers.iter().zip(&radii).zip(&triangles).enumerate() {
-        let ids = flat_i32(t, &format!("reflector {k}'s triangles"))?;
-        let n = scene.inner.triangle_count();
-        if let Some(bad) = ids.iter().find(|&&i| i < 0 || i as usize >= n) {
-            return Err(input(
-                py,
-                format!("reflector {k} names triangle {bad}, but the scene has {n} triangles"),
-            ));
-        }
-        reflectors.push(Reflector {
-            center: glam::DVec3::from_array(*c),
-            radius: *r,
-            triangles: ids.into_iter().map(|i| i as u32).collect(),
-        });
-    }
+    let reflectors = super::effects::reflectors(py, scene, centers, &radii, &triangles)?;
     let density = match density {
         "eye" => Density::Eye { rho_scale },
         "offscreen" => Density::OffScreen,

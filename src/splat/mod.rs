@@ -16,6 +16,9 @@ use crate::gpu;
 use crate::input_err;
 use crate::scene::Scene;
 
+/// (step, seconds) in the order the steps ran.
+pub type Timings = Vec<(String, f64)>;
+
 /// A point set, as `discretize(method="epr")` makes it or a caller builds it.
 #[derive(Debug, Clone, Default)]
 pub struct Points {
@@ -149,7 +152,6 @@ pub fn splat(
     cameras: &[Camera],
     clip_to_triangle: bool,
 ) -> Result<SplatBuffers> {
-    let total = Instant::now();
     let Some(first) = cameras.first() else {
         return input_err!("splat needs at least one view");
     };
@@ -165,6 +167,28 @@ pub fn splat(
             c.width,
             c.height
         );
+    }
+    let (packed, timings) = splat_views(scene, points, cameras, clip_to_triangle)?;
+    Ok(SplatBuffers {
+        width: first.width,
+        height: first.height,
+        views: cameras.len(),
+        packed,
+        timings,
+    })
+}
+
+/// Like `splat`, for views of any sizes: the keys of every view, one after another (each
+/// row-major at its own resolution), and the timings.
+pub fn splat_views(
+    scene: &Scene,
+    points: &Points,
+    cameras: &[Camera],
+    clip_to_triangle: bool,
+) -> Result<(Vec<u64>, Timings)> {
+    let total = Instant::now();
+    if cameras.is_empty() {
+        return input_err!("splat needs at least one view");
     }
     if points.view_count != cameras.len() {
         return input_err!(
@@ -208,12 +232,9 @@ pub fn splat(
         words: points.words(),
     };
     let (packed, stats) = gpu::splat::splat(&ctx, scene, &input, cameras, clip_to_triangle)?;
-    Ok(SplatBuffers {
-        width: first.width,
-        height: first.height,
-        views: cameras.len(),
+    Ok((
         packed,
-        timings: vec![
+        vec![
             ("device".into(), device_seconds),
             ("prepare".into(), prepare_seconds),
             ("upload".into(), stats.upload_seconds),
@@ -221,5 +242,5 @@ pub fn splat(
             ("readback".into(), stats.readback_seconds),
             ("total".into(), total.elapsed().as_secs_f64()),
         ],
-    })
+    ))
 }
