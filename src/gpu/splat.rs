@@ -5,11 +5,14 @@
 
 use std::time::Instant;
 
+use glam::DVec3;
+use rayon::prelude::*;
+
 use bytemuck::{Pod, Zeroable};
 
 use super::raster::align;
 use super::{GpuContext, SceneBuffers};
-use crate::camera::Camera;
+use crate::camera::{Camera, Projection};
 use crate::error::{Error, Result};
 use crate::scene::Scene;
 
@@ -142,17 +145,14 @@ pub fn splat(
         )));
     }
     let n = points.triangles.len();
-    let words = points.words;
-    for (name, bytes) in [
-        ("centres", n as u64 * 16),
-        ("visibility strings", n as u64 * words as u64 * 8),
-    ] {
-        if bytes > binding {
-            return Err(Error::GpuLimit(format!(
-                "the points' {name} take {bytes} bytes, more than this device's storage limit \
-                 of {binding} bytes; splat fewer points per call"
-            )));
-        }
+    // The visibility strings stay on the host (they become the pair lists); the centres and
+    // triangles go up whole.
+    if n as u64 * 16 > binding {
+        return Err(Error::GpuLimit(format!(
+            "{n} points' centres take {} bytes, more than this device's storage limit of \
+             {binding} bytes; splat fewer points per call",
+            n as u64 * 16
+        )));
     }
     if n > u32::MAX as usize {
         return Err(Error::GpuLimit(format!(
@@ -204,17 +204,29 @@ pub fn splat(
         .collect();
     stats.upload_seconds = start.elapsed().as_secs_f64();
 
-    // Chunks of consecutive views whose buffers fit one binding together.
+    // Chunks of consecutive views whose buffers, and whose (point, view) pairs, each fit one
+    // binding together.
+    let lists = points_per_view(points, cameras, centre);
+    let pair_counts: Vec<usize> = lists.iter().map(Vec::len).collect();
     let mut chunks: Vec<std::ops::Range<usize>> = Vec::new();
     let mut start_view = 0;
-    let mut bytes = 0;
-    for (i, &b) in view_bytes.iter().enumerate() {
-        if i > start_view && (bytes + b > binding || i - start_view == MAX_GROUPS as usize) {
+    let (mut bytes, mut pair_bytes) = (0, 0);
+    for (i, (&b, &c)) in view_bytes.iter().zip(&pair_counts).enumerate() {
+        let pb = c as u64 * 8;
+        if pb > binding {
+            return Err(Error::GpuLimit(format!(
+                "view {i} alone receives {c} points, whose (point, view) pairs take {pb} bytes, \
+                 more than this device's storage limit of {binding} bytes; splat fewer points"
+            )));
+        }
+        let full = bytes + b > binding || pair_bytes + pb > binding;
+        if i > start_view && (full || i - start_view == MAX_GROUPS as usize) {
             chunks.push(start_view..i);
             start_view = i;
-            bytes = 0;
+            (bytes, pair_bytes) = (0, 0);
         }
         bytes += b;
+        pair_bytes += pb;
     }
     chunks.push(start_view..cameras.len());
     let param_stride = align(
@@ -234,15 +246,11 @@ pub fn splat(
             offset += cam.width * cam.height;
         }
         // The chunk's (point, view) pairs, grouped by view.
-        let pairs = pairs_by_view(points, range.clone());
-        if pairs.len() as u64 * 8 > binding {
-            return Err(Error::GpuLimit(format!(
-                "{} (point, view) pairs take {} bytes, more than this device's storage limit \
-                 of {binding} bytes; splat fewer points or views per call",
-                pairs.len(),
-                pairs.len() * 8
-            )));
-        }
+        let pairs: Vec<[u32; 2]> = lists[range.clone()]
+            .iter()
+            .enumerate()
+            .flat_map(|(v, ps)| ps.iter().map(move |&p| [p, v as u32]))
+            .collect();
         let per_dispatch = (MAX_GROUPS * GROUP) as usize;
         let dispatches = pairs.len().div_ceil(per_dispatch).max(1);
         let mut params = vec![0u8; param_stride as usize * dispatches];
@@ -367,40 +375,64 @@ struct Pending {
     submission: wgpu::SubmissionIndex,
 }
 
-/// The (point, view − first view) pairs of the views in `views` whose bits are set, grouped by
-/// view (a counting sort over the set bits).
-fn pairs_by_view(points: &PointBuffersIn, views: std::ops::Range<usize>) -> Vec<[u32; 2]> {
+/// For each view, the points to splat into it: those whose bit for the view is set and whose
+/// square (its circumscribed sphere) reaches into the view's frustum. The bits are the paper's
+/// conservative per-triangle test (§3.1); this per-point test drops the pairs that would write
+/// no pixel, so the output is the same and the GPU does only pairs that matter.
+fn points_per_view(points: &PointBuffersIn, cameras: &[Camera], centre: DVec3) -> Vec<Vec<u32>> {
     let words = points.words;
     let n = points.triangles.len();
-    let (lo, hi) = (views.start, views.end);
-    let mut count = vec![0usize; hi - lo + 1];
-    let set_bits = |p: usize, f: &mut dyn FnMut(usize)| {
-        for w in (lo / 64)..hi.div_ceil(64) {
-            let mut word = points.bits[p * words + w];
-            while word != 0 {
-                let b = word.trailing_zeros() as usize;
-                word &= word - 1;
-                let v = 64 * w + b;
-                if v >= lo && v < hi {
-                    f(v - lo);
+    cameras
+        .par_iter()
+        .enumerate()
+        .map(|(v, cam)| {
+            let planes = frustum_planes(cam, centre);
+            let (w, bit) = (v / 64, 1u64 << (v % 64));
+            (0..n)
+                .filter(|&p| {
+                    if points.bits[p * words + w] & bit == 0 {
+                        return false;
+                    }
+                    let c = points.centers[p];
+                    let at = DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64);
+                    let r = c[3] as f64 * std::f64::consts::FRAC_1_SQRT_2;
+                    planes.iter().all(|&(nrm, d)| nrm.dot(at) + d >= -r)
+                })
+                .map(|p| p as u32)
+                .collect()
+        })
+        .collect()
+}
+
+/// A camera's frustum in the frame relative to `centre`: unit inward normals and offsets of its
+/// four side planes and its near plane (at `znear`, or the eye).
+fn frustum_planes(cam: &Camera, centre: DVec3) -> Vec<(DVec3, f64)> {
+    let e = cam.eye() - centre;
+    let r = cam.world_to_camera_rotation();
+    let (right, up, fwd) = (r.row(0), r.row(1), -r.row(2));
+    let near = cam.znear.unwrap_or(0.0);
+    let mut planes = vec![(fwd, -fwd.dot(e) - near)];
+    match cam.projection {
+        Projection::Perspective { yfov } => {
+            let ty = (yfov / 2.0).tan();
+            let tx = ty * cam.width as f64 / cam.height as f64;
+            for (axis, t) in [(right, tx), (up, ty)] {
+                for sign in [1.0, -1.0] {
+                    let n = (fwd * t - axis * sign).normalize();
+                    planes.push((n, -n.dot(e)));
                 }
             }
         }
-    };
-    for p in 0..n {
-        set_bits(p, &mut |v| count[v + 1] += 1);
+        Projection::Orthographic { xmag, ymag } => {
+            for (axis, h) in [(right, xmag), (up, ymag)] {
+                for sign in [1.0, -1.0] {
+                    let n = -axis * sign;
+                    planes.push((n, h - n.dot(e)));
+                }
+            }
+        }
     }
-    for v in 1..count.len() {
-        count[v] += count[v - 1];
-    }
-    let mut out = vec![[0u32; 2]; count[hi - lo]];
-    for p in 0..n {
-        set_bits(p, &mut |v| {
-            out[count[v]] = [p as u32, v as u32];
-            count[v] += 1;
-        });
-    }
-    out
+    planes
 }
 
 /// Wait for one chunk of views and copy its keys, un-complemented, into `out`.
