@@ -106,6 +106,8 @@ pub struct PointBuffersIn<'a> {
 /// Wall-clock seconds of the steps of one `splat` call.
 #[derive(Debug, Default, Clone)]
 pub struct SplatStats {
+    /// Host time turning the bit strings into per-view point lists.
+    pub pairs_seconds: f64,
     pub upload_seconds: f64,
     pub splat_seconds: f64,
     pub readback_seconds: f64,
@@ -206,7 +208,9 @@ pub fn splat(
 
     // Chunks of consecutive views whose buffers, and whose (point, view) pairs, each fit one
     // binding together.
+    let start = Instant::now();
     let lists = points_per_view(points, cameras, centre);
+    stats.pairs_seconds = start.elapsed().as_secs_f64();
     let pair_counts: Vec<usize> = lists.iter().map(Vec::len).collect();
     let mut chunks: Vec<std::ops::Range<usize>> = Vec::new();
     let mut start_view = 0;

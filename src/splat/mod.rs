@@ -237,6 +237,7 @@ pub fn splat_views(
         vec![
             ("device".into(), device_seconds),
             ("prepare".into(), prepare_seconds),
+            ("pairs".into(), stats.pairs_seconds),
             ("upload".into(), stats.upload_seconds),
             ("splat".into(), stats.splat_seconds),
             ("readback".into(), stats.readback_seconds),
