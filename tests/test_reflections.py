@@ -121,3 +121,17 @@ def test_bad_input(room):
         ss.reflections(scene, eye, reflectors=["teapot"])
     with pytest.raises(ss.InputError, match="shape"):
         ss.evaluate(np.zeros((4, 4, 3)), np.zeros((5, 4, 3)), "image")
+
+
+def test_epr_experiment_writes_tables_and_figures(tmp_path):
+    from scenesample.experiments import epr
+
+    epr.main(
+        ["--spheres", "1", "2", "--resolution", "48", "--rho", "0.5", "--distances", "3.2"]
+        + ["--figure-spheres", "2", "--out", str(tmp_path)]
+    )
+    md = (tmp_path / "epr.md").read_text()
+    assert "| 2 | " in md and "| epr |" in md and "| mvr |" in md and "| ivir |" in md
+    assert len((tmp_path / "epr.csv").read_text().splitlines()) == 1 + 2 * 3
+    assert (tmp_path / "fig6.png").stat().st_size > 1000
+    assert (tmp_path / "fig7.png").stat().st_size > 1000

@@ -1,13 +1,13 @@
-"""``python -m scenesample.experiments {sampling,shadows} [options]``; see each module."""
+"""``python -m scenesample.experiments {sampling,shadows,epr} [options]``; see each module."""
 
 from __future__ import annotations
 
 import argparse
 from typing import Optional
 
-from . import sampling, shadows
+from . import epr, sampling, shadows
 
-EXPERIMENTS = {"sampling": sampling, "shadows": shadows}
+EXPERIMENTS = {"sampling": sampling, "shadows": shadows, "epr": epr}
 
 
 def main(argv: Optional[list[str]] = None) -> None:
