@@ -659,8 +659,7 @@ struct Mip {
 impl Mip {
     fn build(base: Vec<DVec3>, n: usize) -> Self {
         let mut levels = vec![(n, base)];
-        while levels.last().map(|l| l.0).unwrap_or(1) > 1 {
-            let (m, prev) = levels.last().unwrap();
+        while let Some((m, prev)) = levels.last().filter(|l| l.0 > 1) {
             let half = m.div_ceil(2);
             let mut next = vec![DVec3::ZERO; half * half];
             for y in 0..half {
