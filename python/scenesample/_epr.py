@@ -337,7 +337,11 @@ def splat(
     triangle's longest edge) is projected into every view whose visibility bit it has set; the
     pixels of the projection's 2D bounding box receive the point through a 64-bit atomic on
     (depth bits << 32 | point index), so each pixel keeps the nearest point whatever order the
-    GPU runs in (ties: the lower index).
+    GPU runs in (ties: the lower index). A point is skipped in a view when a corner of its
+    square lies behind the camera or its centre is nearer than the view's ``znear`` (cube maps
+    from ``discretize(method="epr")`` put it on the reflector's bounding sphere). Before the GPU
+    pass the host drops (point, view) pairs whose square lies outside the view's frustum, which
+    changes no pixel.
 
     Parameters
     ----------
