@@ -5,6 +5,7 @@
 use glam::DMat4;
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::prelude::*;
+use pyo3::types::PyDict;
 
 use super::errors::input;
 
@@ -214,4 +215,13 @@ pub fn redundancy(py: Python<'_>, name: &str) -> PyResult<crate::discretize::Red
             format!("redundancy must be 'pixel' or 'visibility', got {name:?}"),
         )
     })
+}
+
+/// (name, value) pairs (timings, stats) as a dict, in their order.
+pub fn named<'py>(py: Python<'py>, items: Vec<(String, f64)>) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    for (k, v) in items {
+        d.set_item(k, v)?;
+    }
+    Ok(d)
 }

@@ -4,7 +4,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use super::camera::PyCamera;
-use super::convert::{array, flat_i32, rows_f64, rows_owned};
+use super::convert::{array, flat_i32, named, rows_f64, rows_owned};
 use super::errors::{input, IntoPy};
 use super::scene::PyScene;
 use crate::discretize::epr::Reflector;
@@ -49,14 +49,6 @@ pub fn reflectors(
     Ok(out)
 }
 
-fn pairs<'py>(py: Python<'py>, items: Vec<(String, f64)>) -> PyResult<Bound<'py, PyDict>> {
-    let d = PyDict::new(py);
-    for (k, v) in items {
-        d.set_item(k, v)?;
-    }
-    Ok(d)
-}
-
 #[pyfunction]
 #[pyo3(signature = (scene, eye, centers, radii, triangles, resolutions, method, bounces, supersample, rho_scale, seed))]
 #[allow(clippy::too_many_arguments)]
@@ -98,7 +90,7 @@ pub fn reflections<'py>(
     let d = PyDict::new(py);
     d.set_item("image", rows_owned(py, r.image, &[h, w, 3])?)?;
     d.set_item("reflective", array(py, r.reflective, &[h, w])?)?;
-    d.set_item("stats", pairs(py, r.stats)?)?;
-    d.set_item("timings", pairs(py, r.timings)?)?;
+    d.set_item("stats", named(py, r.stats)?)?;
+    d.set_item("timings", named(py, r.timings)?)?;
     Ok(d)
 }

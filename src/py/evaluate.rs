@@ -4,7 +4,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use super::camera::PyCamera;
-use super::convert::{array, flat_i32, rows_f32};
+use super::convert::{array, flat_i32, named, rows_f32};
 use super::errors::{input, IntoPy};
 use super::scene::PyScene;
 use crate::discretize::DepthImages;
@@ -73,10 +73,6 @@ pub fn sampling_metrics<'py>(
     let shape = [n, height as usize, width as usize];
     d.set_item("disoccluded_mask", array(py, m.disoccluded_mask, &shape)?)?;
     d.set_item("useful_mask", array(py, m.useful_mask, &shape)?)?;
-    let t = PyDict::new(py);
-    for (k, v) in m.timings {
-        t.set_item(k, v)?;
-    }
-    d.set_item("timings", t)?;
+    d.set_item("timings", named(py, m.timings)?)?;
     Ok(d)
 }

@@ -4,7 +4,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use super::camera::PyCamera;
-use super::convert::{array, flat_i32, rows_f32, rows_owned};
+use super::convert::{array, flat_i32, named, rows_f32, rows_owned};
 use super::errors::{input, IntoPy};
 use crate::discretize::DepthImages;
 use crate::reconstruct::{reconstruct_hybrid, reconstruct_mesh, reconstruct_points, Mesh};
@@ -54,11 +54,7 @@ pub fn mesh_dict<'py>(py: Python<'py>, m: Mesh) -> PyResult<Bound<'py, PyDict>> 
     d.set_item("vertices", rows_owned(py, m.vertices, &[nv, 3])?)?;
     d.set_item("faces", rows_owned(py, m.faces, &[nf, 3])?)?;
     d.set_item("sample", array(py, m.sample, &[nf])?)?;
-    let t = PyDict::new(py);
-    for (k, v) in m.timings {
-        t.set_item(k, v)?;
-    }
-    d.set_item("timings", t)?;
+    d.set_item("timings", named(py, m.timings)?)?;
     Ok(d)
 }
 

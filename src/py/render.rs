@@ -7,7 +7,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use super::camera::PyCamera;
-use super::convert::{array, borrow_rows, flat_i32, rows_array_of, rows_f32, rows_owned};
+use super::convert::{array, borrow_rows, flat_i32, named, rows_array_of, rows_f32, rows_owned};
 use super::errors::{input, IntoPy};
 use super::scene::PyScene;
 use crate::discretize::DepthImages;
@@ -23,11 +23,7 @@ fn images_dict<'py>(py: Python<'py>, img: DepthImages) -> PyResult<Bound<'py, Py
     let cams: Vec<PyCamera> = img.cameras.into_iter().map(PyCamera::from).collect();
     d.set_item("cameras", cams)?;
     d.set_item("method", img.method)?;
-    let t = PyDict::new(py);
-    for (k, v) in img.timings {
-        t.set_item(k, v)?;
-    }
-    d.set_item("timings", t)?;
+    d.set_item("timings", named(py, img.timings)?)?;
     Ok(d)
 }
 

@@ -4,7 +4,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use super::camera::PyCamera;
-use super::convert::{array, vec3};
+use super::convert::{array, named, vec3};
 use super::errors::{input, IntoPy};
 use super::scene::PyScene;
 use crate::shadows::{self, AreaLight, Discretization, Reconstruction, ShadowOptions};
@@ -69,10 +69,6 @@ pub fn soft_shadows<'py>(
     d.set_item("visible", array(py, r.visible, &[h, w, count])?)?;
     d.set_item("mask", array(py, r.mask, &[h, w])?)?;
     d.set_item("occluder_triangles", r.occluder_triangles)?;
-    let t = PyDict::new(py);
-    for (k, v) in r.timings {
-        t.set_item(k, v)?;
-    }
-    d.set_item("timings", t)?;
+    d.set_item("timings", named(py, r.timings)?)?;
     Ok(d)
 }

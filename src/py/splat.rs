@@ -5,19 +5,11 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use super::camera::PyCamera;
-use super::convert::{array, flat_i32, rows_f32, rows_owned};
+use super::convert::{array, flat_i32, named, rows_f32, rows_owned};
 use super::errors::{input, IntoPy};
 use super::scene::PyScene;
 use crate::discretize::epr::{self, Density};
 use crate::splat::Points;
-
-fn timings<'py>(py: Python<'py>, items: Vec<(String, f64)>) -> PyResult<Bound<'py, PyDict>> {
-    let t = PyDict::new(py);
-    for (k, v) in items {
-        t.set_item(k, v)?;
-    }
-    Ok(t)
-}
 
 /// Points for the cube maps of the reflectors (centres (R, 3), radii, triangle ids per
 /// reflector, cube-map resolution per reflector); `density` is "eye" (EPR) or "offscreen"
@@ -65,8 +57,8 @@ pub fn epr_points<'py>(
     d.set_item("views", array(py, p.views, &[n, words])?)?;
     let cams: Vec<PyCamera> = views.into_iter().map(PyCamera::from).collect();
     d.set_item("cameras", cams)?;
-    d.set_item("timings", timings(py, p.timings)?)?;
-    d.set_item("stats", timings(py, p.stats)?)?;
+    d.set_item("timings", named(py, p.timings)?)?;
+    d.set_item("stats", named(py, p.stats)?)?;
     Ok(d)
 }
 
@@ -123,6 +115,6 @@ pub fn splat<'py>(
     d.set_item("depth", array(py, b.depth(), &shape)?)?;
     d.set_item("index", array(py, b.index(), &shape)?)?;
     d.set_item("packed", array(py, b.packed, &shape)?)?;
-    d.set_item("timings", timings(py, b.timings)?)?;
+    d.set_item("timings", named(py, b.timings)?)?;
     Ok(d)
 }
