@@ -273,6 +273,7 @@ pub fn reflections(
         cubes: &cubes,
         lights: &lights,
         bounces: opts.bounces,
+        later_offsets: poisson(LATER_BOUNCE_SAMPLES),
     };
     let (w, h) = (eye.width as usize, eye.height as usize);
     let pixels = eye_pixels(scene, eye, &gbuf, &owner);
@@ -364,11 +365,7 @@ fn eye_pixels(scene: &Scene, eye: &Camera, g: &DepthImages, owner: &[i32]) -> Ve
             let p = DVec3::from_array(g.position[i].map(f64::from));
             let s = shading::surface(scene, t as usize, p);
             let view = (p - e).normalize_or_zero();
-            let n = if s.normal.dot(view) > 0.0 {
-                -s.normal
-            } else {
-                s.normal
-            };
+            let n = toward(s.normal, view);
             EyePixel {
                 triangle: t,
                 position: p,
@@ -382,6 +379,21 @@ fn eye_pixels(scene: &Scene, eye: &Camera, g: &DepthImages, owner: &[i32]) -> Ve
 
 fn reflect(d: DVec3, n: DVec3) -> DVec3 {
     d - 2.0 * d.dot(n) * n
+}
+
+/// `n`, flipped if need be to face against the viewing direction `view`.
+fn toward(n: DVec3, view: DVec3) -> DVec3 {
+    if n.dot(view) > 0.0 {
+        -n
+    } else {
+        n
+    }
+}
+
+/// The mirror direction at surface `s` seen from `from` (a cube map's centre).
+fn reflected(s: &shading::Surface, from: DVec3) -> DVec3 {
+    let view = (s.position - from).normalize_or_zero();
+    reflect(view, toward(s.normal, view))
 }
 
 /// The normal offsets of a pixel: half the difference to the neighbouring pixels of the same
@@ -445,6 +457,8 @@ struct Shader<'a> {
     cubes: &'a [Cube],
     lights: &'a [ShadeLight],
     bounces: u32,
+    /// The lookups of bounces after the first (`poisson(LATER_BOUNCE_SAMPLES)`, made once).
+    later_offsets: Vec<DVec2>,
 }
 
 impl Shader<'_> {
@@ -460,26 +474,19 @@ impl Shader<'_> {
         let k = self.owner[tri];
         if k >= 0 && depth < self.bounces {
             // A reflector seen in a reflector: follow its own cube map (§4.1.4).
-            let view = (p - cube.center).normalize_or_zero();
-            let n = if s.normal.dot(view) > 0.0 {
-                -s.normal
-            } else {
-                s.normal
-            };
-            let r = reflect(view, n);
+            let r = reflected(&s, cube.center);
             let next = &self.cubes[k as usize];
             let mut sum = DVec3::ZERO;
-            let offsets = poisson(LATER_BOUNCE_SAMPLES);
-            for o in &offsets {
-                // Spread the later bounce over about one texel of the current cube.
-                let spread = 2.0 / cube.res as f64;
-                let (u, v) = r.any_orthonormal_pair();
+            // Spread the later bounce over about one texel of the current cube.
+            let spread = 2.0 / cube.res as f64;
+            let (u, v) = r.any_orthonormal_pair();
+            for o in &self.later_offsets {
                 let d = (r + (u * o.x + v * o.y) * spread).normalize_or(r);
                 let tt = next.texel(d);
                 sum += self.texel_radiance(k as usize, tt, depth + 1, ops);
             }
             *ops += 1;
-            return s.albedo * sum / offsets.len() as f64;
+            return s.albedo * sum / self.later_offsets.len() as f64;
         }
         *ops += 1;
         shading::shade(&s, cube.center, self.lights)
@@ -526,7 +533,27 @@ impl Shader<'_> {
             })
             .collect();
         let ops = shaded.iter().map(|s| s.1).sum();
-        let image = (0..px.len())
+        let image = self.eye_image(px, |i, _| {
+            let sum: DVec3 = lookups[i]
+                .iter()
+                .map(|key| {
+                    let j = unique.binary_search(key).unwrap_or(0);
+                    shaded[j].0
+                })
+                .sum();
+            sum / lookups[i].len().max(1) as f64
+        });
+        (image, ops)
+    }
+
+    /// The eye image: the sky where the eye sees nothing, direct shading where it sees no
+    /// reflector, and the albedo times `reflected(i, pixel)` on the reflectors' pixels.
+    fn eye_image(
+        &self,
+        px: &[EyePixel],
+        reflected: impl Fn(usize, &EyePixel) -> DVec3 + Sync,
+    ) -> Vec<DVec3> {
+        (0..px.len())
             .into_par_iter()
             .map(|i| {
                 let p = &px[i];
@@ -537,17 +564,9 @@ impl Shader<'_> {
                 if p.reflector < 0 {
                     return shading::shade(&s, p.position - p.view, self.lights);
                 }
-                let sum: DVec3 = lookups[i]
-                    .iter()
-                    .map(|key| {
-                        let j = unique.binary_search(key).unwrap_or(0);
-                        shaded[j].0
-                    })
-                    .sum();
-                s.albedo * sum / lookups[i].len().max(1) as f64
+                s.albedo * reflected(i, p)
             })
-            .collect();
-        (image, ops)
+            .collect()
     }
 
     /// MVR / iVIR: shade every covered texel of every cube, `bounces` times (each later bounce
@@ -590,14 +609,8 @@ impl Shader<'_> {
                         }
                         let p = DVec3::from_array(cube.position[t].map(f64::from));
                         let s = shading::surface(self.scene, tri, p);
-                        let view = (p - cube.center).normalize_or_zero();
-                        let n = if s.normal.dot(view) > 0.0 {
-                            -s.normal
-                        } else {
-                            s.normal
-                        };
                         let next = &self.cubes[k as usize];
-                        let r = next.texel(reflect(view, n));
+                        let r = next.texel(reflected(&s, cube.center));
                         Some((t, s.albedo * previous[k as usize][r]))
                     })
                     .collect();
@@ -624,30 +637,19 @@ impl Shader<'_> {
     /// The eye image from shaded, mip-mapped cube maps: each reflective pixel samples the
     /// level whose texels match its reflection footprint.
     fn eye_mipmapped(&self, px: &[EyePixel], w: usize, h: usize, maps: &[Vec<Mip>]) -> Vec<DVec3> {
-        (0..px.len())
-            .into_par_iter()
-            .map(|i| {
-                let p = &px[i];
-                if p.triangle < 0 {
-                    return DVec3::from_array(BACKGROUND);
-                }
-                let s = shading::surface(self.scene, p.triangle as usize, p.position);
-                if p.reflector < 0 {
-                    return shading::shade(&s, p.position - p.view, self.lights);
-                }
-                let (gx, gy) = normal_gradient(px, w, h, i);
-                let r = reflect(p.view, p.normal);
-                let rx = reflect(p.view, (p.normal + gx).normalize_or(p.normal));
-                let ry = reflect(p.view, (p.normal + gy).normalize_or(p.normal));
-                let cube = &self.cubes[p.reflector as usize];
-                // Footprint in texels: angle spanned × texels per radian at the face centre.
-                let spread = (rx - r).length().max((ry - r).length());
-                let texels = spread * cube.res as f64 / 2.0;
-                let level = texels.max(1.0).log2();
-                let (face, at) = cube.coords(r);
-                s.albedo * maps[p.reflector as usize][face].sample(at, level)
-            })
-            .collect()
+        self.eye_image(px, |i, p| {
+            let (gx, gy) = normal_gradient(px, w, h, i);
+            let r = reflect(p.view, p.normal);
+            let rx = reflect(p.view, (p.normal + gx).normalize_or(p.normal));
+            let ry = reflect(p.view, (p.normal + gy).normalize_or(p.normal));
+            let cube = &self.cubes[p.reflector as usize];
+            // Footprint in texels: angle spanned × texels per radian at the face centre.
+            let spread = (rx - r).length().max((ry - r).length());
+            let texels = spread * cube.res as f64 / 2.0;
+            let level = texels.max(1.0).log2();
+            let (face, at) = cube.coords(r);
+            maps[p.reflector as usize][face].sample(at, level)
+        })
     }
 }
 
