@@ -229,6 +229,39 @@ impl Camera {
         (px, depth)
     }
 
+    /// The view volume as planes (unit inward normal, offset), inside meaning `n·p + d >= 0`
+    /// for points `p` relative to `origin`: the near plane at camera depth `near` (0: the eye's
+    /// plane) and the four sides, their extents scaled by `margin` (1: the exact frustum).
+    pub fn frustum_planes(&self, margin: f64, near: f64, origin: DVec3) -> Vec<(DVec3, f64)> {
+        let e = self.eye() - origin;
+        let r = self.world_to_camera_rotation();
+        // Camera axes in world space: rows of the world-to-camera rotation.
+        let (right, up, fwd) = (r.row(0), r.row(1), -r.row(2));
+        let mut planes = vec![(fwd, -fwd.dot(e) - near)];
+        match self.projection {
+            Projection::Perspective { yfov } => {
+                let ty = (yfov / 2.0).tan() * margin;
+                let tx = ty * self.width as f64 / self.height as f64;
+                // Inside: |x| <= tx·z, |y| <= ty·z in camera space, z along fwd.
+                for (axis, t) in [(right, tx), (up, ty)] {
+                    for sign in [1.0, -1.0] {
+                        let n = (fwd * t - axis * sign).normalize();
+                        planes.push((n, -n.dot(e)));
+                    }
+                }
+            }
+            Projection::Orthographic { xmag, ymag } => {
+                for (axis, h) in [(right, xmag * margin), (up, ymag * margin)] {
+                    for sign in [1.0, -1.0] {
+                        let n = -axis * sign;
+                        planes.push((n, h - n.dot(e)));
+                    }
+                }
+            }
+        }
+        planes
+    }
+
     /// Pixel position and depth (camera z) → world point; the inverse of `project`.
     pub fn unproject(&self, pixel: DVec2, depth: f64) -> DVec3 {
         let (origin, dir) = self.ray_z1(pixel);

@@ -252,14 +252,18 @@ fn normal(scene: &Scene, t: usize) -> [f32; 3] {
 
 /// A uniform number in [0, 1) from (seed, i): SplitMix64's finaliser.
 fn unit_hash(seed: u64, i: u64) -> f64 {
-    let mut z = seed
+    let z = seed
         .wrapping_mul(0x9e37_79b9_7f4a_7c15)
         .wrapping_add(i)
         .wrapping_add(0x9e37_79b9_7f4a_7c15);
+    (mix64(z) >> 11) as f64 / (1u64 << 53) as f64
+}
+
+/// SplitMix64's finaliser: a well-mixed 64-bit hash of `z`.
+pub fn mix64(mut z: u64) -> u64 {
     z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^= z >> 31;
-    (z >> 11) as f64 / (1u64 << 53) as f64
+    z ^ (z >> 31)
 }
 
 /// The circumcentre of a triangle; its centroid when the triangle is degenerate.
@@ -307,36 +311,9 @@ struct Frustum {
 
 impl Frustum {
     fn of(cam: &Camera) -> Self {
-        let e = cam.eye();
-        let r = cam.world_to_camera_rotation();
-        // Camera axes in world space: rows of the world-to-camera rotation.
-        let right = r.row(0);
-        let up = r.row(1);
-        let fwd = -r.row(2);
-        let mut planes = vec![(fwd, -fwd.dot(e))];
-        match cam.projection {
-            Projection::Perspective { yfov } => {
-                let ty = (yfov / 2.0).tan() * FRUSTUM_MARGIN;
-                let tx = ty * cam.width as f64 / cam.height as f64;
-                // Inside: |x| <= tx·z, |y| <= ty·z in camera space, z along fwd.
-                for (axis, t) in [(right, tx), (up, ty)] {
-                    for sign in [1.0, -1.0] {
-                        let n = fwd * t - axis * sign;
-                        planes.push((n, -n.dot(e)));
-                    }
-                }
-            }
-            Projection::Orthographic { xmag, ymag } => {
-                let (hx, hy) = (xmag * FRUSTUM_MARGIN, ymag * FRUSTUM_MARGIN);
-                for (axis, h) in [(right, hx), (up, hy)] {
-                    for sign in [1.0, -1.0] {
-                        let n = -axis * sign;
-                        planes.push((n, h - n.dot(e)));
-                    }
-                }
-            }
+        Self {
+            planes: cam.frustum_planes(FRUSTUM_MARGIN, 0.0, DVec3::ZERO),
         }
-        Self { planes }
     }
 
     /// False only when all three vertices lie outside one plane.

@@ -423,10 +423,7 @@ fn poisson(n: usize) -> Vec<DVec2> {
     let mut state = 0x5eed_u64;
     let mut next = || {
         state = state.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = state;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        (epr::mix64(state) >> 11) as f64 / (1u64 << 53) as f64 - 0.5
     };
     let mut pts: Vec<DVec2> = Vec::with_capacity(n);
     if n == 1 {

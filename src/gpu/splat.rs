@@ -12,7 +12,7 @@ use bytemuck::{Pod, Zeroable};
 
 use super::raster::align;
 use super::{GpuContext, SceneBuffers};
-use crate::camera::{Camera, Projection};
+use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::scene::Scene;
 
@@ -390,7 +390,7 @@ fn points_per_view(points: &PointBuffersIn, cameras: &[Camera], centre: DVec3) -
         .par_iter()
         .enumerate()
         .map(|(v, cam)| {
-            let planes = frustum_planes(cam, centre);
+            let planes = cam.frustum_planes(1.0, cam.znear.unwrap_or(0.0), centre);
             let (w, bit) = (v / 64, 1u64 << (v % 64));
             (0..n)
                 .filter(|&p| {
@@ -406,37 +406,6 @@ fn points_per_view(points: &PointBuffersIn, cameras: &[Camera], centre: DVec3) -
                 .collect()
         })
         .collect()
-}
-
-/// A camera's frustum in the frame relative to `centre`: unit inward normals and offsets of its
-/// four side planes and its near plane (at `znear`, or the eye).
-fn frustum_planes(cam: &Camera, centre: DVec3) -> Vec<(DVec3, f64)> {
-    let e = cam.eye() - centre;
-    let r = cam.world_to_camera_rotation();
-    let (right, up, fwd) = (r.row(0), r.row(1), -r.row(2));
-    let near = cam.znear.unwrap_or(0.0);
-    let mut planes = vec![(fwd, -fwd.dot(e) - near)];
-    match cam.projection {
-        Projection::Perspective { yfov } => {
-            let ty = (yfov / 2.0).tan();
-            let tx = ty * cam.width as f64 / cam.height as f64;
-            for (axis, t) in [(right, tx), (up, ty)] {
-                for sign in [1.0, -1.0] {
-                    let n = (fwd * t - axis * sign).normalize();
-                    planes.push((n, -n.dot(e)));
-                }
-            }
-        }
-        Projection::Orthographic { xmag, ymag } => {
-            for (axis, h) in [(right, xmag), (up, ymag)] {
-                for sign in [1.0, -1.0] {
-                    let n = -axis * sign;
-                    planes.push((n, h - n.dot(e)));
-                }
-            }
-        }
-    }
-    planes
 }
 
 /// Wait for one chunk of views and copy its keys, un-complemented, into `out`.
