@@ -270,6 +270,47 @@ class SplatBuffers:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
+def cube_maps(
+    scene: Scene,
+    eye: Camera,
+    reflectors: Any,
+    resolution: Union[None, int, Sequence[int]],
+    largest: bool = False,
+) -> tuple[list[Reflector], list[int]]:
+    """The reflectors (see :func:`reflectors_of`) and their cube-map resolutions: the given
+    one(s), or by default the adaptive size of §4.1.1 (``largest``: half the eye's, at most
+    512, for every reflector). Checks the scene, the eye and the resolutions."""
+    if not isinstance(scene, Scene):
+        raise InputError(f"scene must be a scenesample.Scene, got {type(scene).__name__}")
+    if not isinstance(eye, Camera):
+        raise InputError(f"eye must be a scenesample.Camera, got {type(eye).__name__}")
+    refl = reflectors_of(scene, reflectors)
+    if resolution is None and largest:
+        res = [max_cube_resolution(eye)] * len(refl)
+    elif resolution is None:
+        res = [cube_resolution(eye, r) for r in refl]
+    elif isinstance(resolution, (int, np.integer)):
+        res = [int(resolution)] * len(refl)
+    else:
+        res = [int(x) for x in resolution]
+    if len(res) != len(refl) or min(res) < 1:
+        raise InputError(
+            f"resolution must be a positive int or one per reflector ({len(refl)}), "
+            f"got {resolution!r}"
+        )
+    return refl, res
+
+
+def reflector_arrays(refl: list[Reflector]) -> tuple[np.ndarray, list[float], list[np.ndarray]]:
+    """Centres (R, 3), radii and triangle ids of the reflectors, as the native module takes
+    them."""
+    return (
+        np.array([r.center for r in refl], dtype=np.float64).reshape(-1, 3),
+        [float(r.radius) for r in refl],
+        [np.asarray(r.triangles, dtype=np.int64) for r in refl],
+    )
+
+
 def epr_points(
     scene: Scene,
     eye: Camera,
@@ -281,28 +322,11 @@ def epr_points(
     density: str = "eye",
 ) -> Points:
     """Points for the reflectors' cube maps (see :func:`scenesample.discretize`)."""
-    if not isinstance(scene, Scene):
-        raise InputError(f"scene must be a scenesample.Scene, got {type(scene).__name__}")
-    if not isinstance(eye, Camera):
-        raise InputError(f"eye must be a scenesample.Camera, got {type(eye).__name__}")
-    refl = reflectors_of(scene, reflectors)
-    if resolution is None:
-        res = [cube_resolution(eye, r) for r in refl]
-    elif isinstance(resolution, (int, np.integer)):
-        res = [int(resolution)] * len(refl)
-    else:
-        res = [int(x) for x in resolution]
-    if len(res) != len(refl) or min(res) < 1:
-        raise InputError(
-            f"resolution must be a positive int or one per reflector ({len(refl)}), "
-            f"got {resolution!r}"
-        )
+    refl, res = cube_maps(scene, eye, reflectors, resolution)
     d = _core.epr_points(
         scene._core,
         eye,
-        np.array([r.center for r in refl], dtype=np.float64).reshape(-1, 3),
-        [float(r.radius) for r in refl],
-        [np.asarray(r.triangles, dtype=np.int64) for r in refl],
+        *reflector_arrays(refl),
         res,
         density,
         float(rho_scale),

@@ -9,7 +9,13 @@ from typing import Any, Optional, Union
 import numpy as np
 
 from . import _core
-from ._epr import cube_resolution, max_cube_resolution, reflectors_of
+from ._epr import (
+    cube_maps,
+    cube_resolution,
+    max_cube_resolution,
+    reflector_arrays,
+    reflectors_of,
+)
 from ._scene import Scene
 from .errors import InputError
 
@@ -123,30 +129,11 @@ def reflections(
     """
     if method not in REFLECTION_METHODS:
         raise InputError(f"method must be one of {list(REFLECTION_METHODS)}, got {method!r}")
-    if not isinstance(scene, Scene):
-        raise InputError(f"scene must be a scenesample.Scene, got {type(scene).__name__}")
-    if not isinstance(eye, Camera):
-        raise InputError(f"eye must be a scenesample.Camera, got {type(eye).__name__}")
-    refl = reflectors_of(scene, reflectors)
-    if resolution is None and method in ("mvr", "ivir"):
-        res = [max_cube_resolution(eye)] * len(refl)
-    elif resolution is None:
-        res = [cube_resolution(eye, r) for r in refl]
-    elif isinstance(resolution, (int, np.integer)):
-        res = [int(resolution)] * len(refl)
-    else:
-        res = [int(x) for x in resolution]
-    if len(res) != len(refl) or min(res) < 1:
-        raise InputError(
-            f"resolution must be a positive int or one per reflector ({len(refl)}), "
-            f"got {resolution!r}"
-        )
+    refl, res = cube_maps(scene, eye, reflectors, resolution, largest=method in ("mvr", "ivir"))
     d = _core.reflections(
         scene._core,
         eye,
-        np.array([r.center for r in refl], dtype=np.float64).reshape(-1, 3),
-        [float(r.radius) for r in refl],
-        [np.asarray(r.triangles, dtype=np.int64) for r in refl],
+        *reflector_arrays(refl),
         res,
         method,
         int(bounces),
