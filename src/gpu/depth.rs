@@ -6,8 +6,8 @@ use std::time::Instant;
 use bytemuck::{Pod, Zeroable};
 
 use super::raster::{
-    align, check_image_size, copy, draw_ids, id_pipeline, submit_readback, wait, IdPass,
-    Timestamps, DEPTH_FORMAT, TRI_FORMAT,
+    align, check_image_size, copy, draw_ids, id_pipeline, submit_readback, texture_2d, wait,
+    IdPass, Timestamps, DEPTH_FORMAT, TRI_FORMAT,
 };
 use super::{GpuContext, SceneBuffers};
 use crate::camera::Camera;
@@ -170,22 +170,7 @@ struct Targets {
 
 impl Targets {
     fn new(device: &wgpu::Device, w: u32, h: u32) -> Self {
-        let tex = |label, format, usage| {
-            device.create_texture(&wgpu::TextureDescriptor {
-                label: Some(label),
-                size: wgpu::Extent3d {
-                    width: w,
-                    height: h,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format,
-                usage,
-                view_formats: &[],
-            })
-        };
+        let tex = |label, format, usage| texture_2d(device, label, (w, h), format, usage);
         let color = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC;
         let tri = tex("triangle ids", TRI_FORMAT, color);
         let depth = tex(

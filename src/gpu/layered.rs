@@ -17,8 +17,8 @@ use glam::DMat4;
 
 use super::depth::RasterStats;
 use super::raster::{
-    align, check_image_size, copy, draw_ids, id_pipeline, submit_readback, wait, IdPass,
-    Timestamps, DEPTH_FORMAT, TRI_FORMAT,
+    align, check_image_size, copy, draw_ids, id_pipeline, submit_readback, texture_2d, wait,
+    IdPass, Timestamps, DEPTH_FORMAT, TRI_FORMAT,
 };
 use super::{GpuContext, SceneBuffers};
 use crate::camera::Camera;
@@ -263,22 +263,7 @@ pub fn render(
         usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     });
-    let texture = |label, format, usage| {
-        device.create_texture(&wgpu::TextureDescriptor {
-            label: Some(label),
-            size: wgpu::Extent3d {
-                width: w,
-                height: h,
-                depth_or_array_layers: 1,
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format,
-            usage,
-            view_formats: &[],
-        })
-    };
+    let texture = |label, format, usage| texture_2d(device, label, (w, h), format, usage);
     let tri = texture(
         "layered triangle ids",
         TRI_FORMAT,

@@ -1,4 +1,4 @@
-//! Pieces shared by the triangle-id raster passes (`depth`, `layered`): the pipeline state,
+//! Pieces shared by the raster passes (`depth`, `layered`, `shadow`): the pipeline state,
 //! one pass per image, per-pass GPU timestamps, and texture-to-buffer copies.
 
 use super::{GpuContext, SceneBuffers};
@@ -19,6 +19,49 @@ pub fn check_image_size(ctx: &GpuContext, w: u32, h: u32) -> Result<()> {
         )));
     }
     Ok(())
+}
+
+/// The vertex input of every scene raster pass: one float3 position per vertex.
+const POSITION_ATTRIBUTES: [wgpu::VertexAttribute; 1] = wgpu::vertex_attr_array![0 => Float32x3];
+pub const POSITIONS: wgpu::VertexBufferLayout<'static> = wgpu::VertexBufferLayout {
+    array_stride: 12,
+    step_mode: wgpu::VertexStepMode::Vertex,
+    attributes: &POSITION_ATTRIBUTES,
+};
+
+/// The depth test of every scene raster pass: reversed depth (larger is nearer), written.
+pub fn reversed_depth() -> wgpu::DepthStencilState {
+    wgpu::DepthStencilState {
+        format: DEPTH_FORMAT,
+        depth_write_enabled: Some(true),
+        depth_compare: Some(wgpu::CompareFunction::Greater),
+        stencil: Default::default(),
+        bias: Default::default(),
+    }
+}
+
+/// A single-sampled w×h 2D texture without mip levels.
+pub fn texture_2d(
+    device: &wgpu::Device,
+    label: &str,
+    (w, h): (u32, u32),
+    format: wgpu::TextureFormat,
+    usage: wgpu::TextureUsages,
+) -> wgpu::Texture {
+    device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size: wgpu::Extent3d {
+            width: w,
+            height: h,
+            depth_or_array_layers: 1,
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format,
+        usage,
+        view_formats: &[],
+    })
 }
 
 pub fn align(x: u64, a: u64) -> u64 {
@@ -44,11 +87,7 @@ pub fn id_pipeline(
             module,
             entry_point: Some("vs_main"),
             compilation_options: Default::default(),
-            buffers: &[Some(wgpu::VertexBufferLayout {
-                array_stride: 12,
-                step_mode: wgpu::VertexStepMode::Vertex,
-                attributes: &wgpu::vertex_attr_array![0 => Float32x3],
-            })],
+            buffers: &[Some(POSITIONS)],
         },
         primitive: wgpu::PrimitiveState {
             topology: wgpu::PrimitiveTopology::TriangleList,
@@ -56,13 +95,7 @@ pub fn id_pipeline(
             cull_mode: cull,
             ..Default::default()
         },
-        depth_stencil: Some(wgpu::DepthStencilState {
-            format: DEPTH_FORMAT,
-            depth_write_enabled: Some(true),
-            depth_compare: Some(wgpu::CompareFunction::Greater),
-            stencil: Default::default(),
-            bias: Default::default(),
-        }),
+        depth_stencil: Some(reversed_depth()),
         multisample: Default::default(),
         fragment: Some(wgpu::FragmentState {
             module,

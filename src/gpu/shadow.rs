@@ -8,7 +8,9 @@ use std::time::Instant;
 use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
 
-use super::raster::{align, submit_readback, wait, Timestamps, DEPTH_FORMAT};
+use super::raster::{
+    align, reversed_depth, submit_readback, texture_2d, wait, Timestamps, DEPTH_FORMAT, POSITIONS,
+};
 use super::{GpuContext, SceneBuffers};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
@@ -121,24 +123,14 @@ impl ShadowPipeline {
                 module: &module,
                 entry_point: Some("vs_depth"),
                 compilation_options: Default::default(),
-                buffers: &[Some(wgpu::VertexBufferLayout {
-                    array_stride: 12,
-                    step_mode: wgpu::VertexStepMode::Vertex,
-                    attributes: &wgpu::vertex_attr_array![0 => Float32x3],
-                })],
+                buffers: &[Some(POSITIONS)],
             },
             primitive: wgpu::PrimitiveState {
                 topology: wgpu::PrimitiveTopology::TriangleList,
                 cull_mode: None,
                 ..Default::default()
             },
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: DEPTH_FORMAT,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::Greater),
-                stencil: Default::default(),
-                bias: Default::default(),
-            }),
+            depth_stencil: Some(reversed_depth()),
             multisample: Default::default(),
             fragment: None,
             multiview_mask: None,
@@ -296,20 +288,13 @@ pub fn visibility(
         usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     });
-    let map = device.create_texture(&wgpu::TextureDescriptor {
-        label: Some("shadow map"),
-        size: wgpu::Extent3d {
-            width: res,
-            height: res,
-            depth_or_array_layers: 1,
-        },
-        mip_level_count: 1,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D2,
-        format: DEPTH_FORMAT,
-        usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
-        view_formats: &[],
-    });
+    let map = texture_2d(
+        device,
+        "shadow map",
+        (res, res),
+        DEPTH_FORMAT,
+        wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+    );
     let map_view = map.create_view(&Default::default());
     let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
         label: Some("shadow.wgsl bindings"),
