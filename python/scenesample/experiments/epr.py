@@ -12,7 +12,6 @@ shadows) is not produced: ``omni_shadows`` is not built yet.
 from __future__ import annotations
 
 import argparse
-import csv
 import datetime
 import platform
 import time
@@ -24,6 +23,7 @@ import numpy as np
 import scenesample as ss
 
 from ..imageio import write_png
+from ._tables import write_csv
 
 METHODS = ("epr", "mvr", "ivir")
 
@@ -67,10 +67,7 @@ def tables(args: Any, out: Path) -> tuple[list[dict[str, Any]], Optional[dict[st
             fig7_run = r
         print(f"epr tables: {n} spheres: {time.perf_counter() - t:.1f} s", flush=True)
     keys = sorted({k for r in rows for k in r})
-    with open(out / "epr.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=keys)
-        w.writeheader()
-        w.writerows(rows)
+    write_csv(out / "epr.csv", rows, keys)
     return rows, fig7_run
 
 
@@ -102,10 +99,7 @@ def fig6(args: Any, out: Path) -> list[dict[str, Any]]:
                 }
             )
         print(f"epr fig6: distance {d}", flush=True)
-    with open(out / "fig6.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    write_csv(out / "fig6.csv", rows)
     fig, ax = plt.subplots(figsize=(6, 4))
     for rho in args.rho:
         sel = [r for r in rows if r["rho_scale"] == rho]

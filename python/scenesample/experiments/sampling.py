@@ -10,7 +10,6 @@ to ``--out``.
 from __future__ import annotations
 
 import argparse
-import csv
 import datetime
 import os
 import platform
@@ -24,6 +23,7 @@ import numpy as np
 import scenesample as ss
 
 from ..imageio import linear_to_srgb, write_png
+from ._tables import write_csv
 
 METHODS = ("conventional", "nonredundant", "peeling")
 #: Closed objects are sampled with back faces culled, as in the paper; thin sheets (blades,
@@ -152,10 +152,7 @@ def fig7(out: Path, scene_name: str, resolutions: list[int], frames: int) -> Non
                 }
             )
             print(f"fig7 {scene_name} {res} {mode}: {rows[-1]}", flush=True)
-    with open(out / "fig7.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    write_csv(out / "fig7.csv", rows)
     fig, ax = plt.subplots(figsize=(6, 4))
     for key, color in (("redundant", "C0"), ("disoccluded", "C1"), ("useful", "C2")):
         for mode, style in (("pixel", "-o"), ("visibility", "--s")):
@@ -235,10 +232,7 @@ def main(argv: Optional[list[str]] = None) -> None:
             if m != "conventional":
                 write_png(out / f"fig6_{name}_{m}.png", fig6(r[m]["images"], mm))
         print(f"{name}: {time.perf_counter() - t:.1f} s", flush=True)
-    with open(out / "sampling.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    write_csv(out / "sampling.csv", rows)
     md = markdown(results, args)
     (out / "sampling.md").write_text(md)
     print(md)

@@ -23,7 +23,6 @@ Writes ``shadows.csv``, ``shadows.md``, ``fig8_<scene>.png``, ``fig9.csv`` and `
 from __future__ import annotations
 
 import argparse
-import csv
 import datetime
 import platform
 import time
@@ -36,6 +35,7 @@ import numpy as np
 import scenesample as ss
 
 from ..imageio import write_png
+from ._tables import write_csv
 
 METHODS = ("nonredundant", "conventional", "peeling")
 REFERENCES = ("geometry", "raytraced")
@@ -186,10 +186,7 @@ def main(argv: Optional[list[str]] = None) -> None:
             print(f"{name} {table}={value}: {time.perf_counter() - t:.1f} s", flush=True)
     md = ""
     if rows:
-        with open(out / "shadows.csv", "w", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=list(rows[0]))
-            w.writeheader()
-            w.writerows(rows)
+        write_csv(out / "shadows.csv", rows)
         md = markdown(rows, args)
     if args.fig9_blades:
         md += fig9(out, args.fig9_blades, args)
@@ -263,10 +260,7 @@ def fig9(out: Path, blades: list[int], args: Any) -> str:
                 }
             )
             print(f"fig9 {scene.triangle_count:,} triangles {m}: {t['total']:.2f} s", flush=True)
-    with open(out / "fig9.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    write_csv(out / "fig9.csv", rows)
 
     modelled = f"modelled_total_{PAPER_SAMPLES}x{PAPER_SAMPLES}_s"
     series = {m: [r for r in rows if r["method"] == m] for m in FIG9_METHODS}
