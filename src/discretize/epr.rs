@@ -61,7 +61,7 @@ pub enum Density {
 }
 
 /// The reflectors' cube-map views, six per reflector in `Camera::cube` order, each at its own
-/// resolution.
+/// resolution, with the near plane on the reflector's bounding sphere.
 pub fn cube_views(reflectors: &[Reflector], resolutions: &[u32]) -> Result<Vec<Camera>> {
     let mut out = Vec::with_capacity(6 * reflectors.len());
     for (r, &res) in reflectors.iter().zip(resolutions) {

@@ -173,7 +173,7 @@ pub fn reflections(
     let mut point_count = 0usize;
     match opts.method {
         Method::Mvr => {
-            let views = cube_cameras(reflectors, &opts.resolutions)?;
+            let views = epr::cube_views(reflectors, &opts.resolutions)?;
             // One raster call per resolution (a call needs one size): usually one in all.
             let mut images: Vec<Option<TexelSamples>> = vec![None; reflectors.len()];
             let mut sizes: Vec<u32> = opts.resolutions.clone();
@@ -183,7 +183,10 @@ pub fn reflections(
                 let ks: Vec<usize> = (0..reflectors.len())
                     .filter(|&k| opts.resolutions[k] == size)
                     .collect();
-                let cams: Vec<Camera> = ks.iter().flat_map(|&k| views[k].clone()).collect();
+                let cams: Vec<Camera> = ks
+                    .iter()
+                    .flat_map(|&k| views[6 * k..6 * k + 6].iter().cloned())
+                    .collect();
                 let img = discretize_conventional(scene, &cams, false)?;
                 let per = 6 * size as usize * size as usize;
                 for (j, &k) in ks.iter().enumerate() {
@@ -193,7 +196,8 @@ pub fn reflections(
                     ));
                 }
             }
-            for ((r, faces), img) in reflectors.iter().zip(views).zip(images) {
+            for ((r, faces), img) in reflectors.iter().zip(views.chunks(6)).zip(images) {
+                let faces = faces.to_vec();
                 let (triangle, position) = img.unwrap_or_default();
                 cubes.push(Cube {
                     res: faces[0].width,
@@ -321,15 +325,6 @@ pub fn reflections(
         stats,
         timings,
     })
-}
-
-/// Six cube faces per reflector, near plane on its bounding sphere.
-fn cube_cameras(reflectors: &[Reflector], res: &[u32]) -> Result<Vec<Vec<Camera>>> {
-    reflectors
-        .iter()
-        .zip(res)
-        .map(|(r, &n)| Camera::cube(r.center, n, Some(r.radius.max(1e-9)), None))
-        .collect()
 }
 
 fn eye_up(eye: &Camera) -> DVec3 {
