@@ -84,7 +84,9 @@ def test_second_bounce_changes_only_mirror_pixels_seeing_mirrors(room):
     two = ss.reflections(scene, eye, method="epr", bounces=2)
     changed = np.any(one.image != two.image, axis=2)
     assert not changed[~one.reflective].any()
-    assert two.stats["shading_ops"] >= one.stats["shading_ops"]
+    # Some mirror pixels see another sphere: the second bounce changes them and costs shading.
+    assert changed.sum() > 10
+    assert two.stats["shading_ops"] > one.stats["shading_ops"]
     mvr2 = ss.reflections(scene, eye, method="mvr", bounces=2)
     assert mvr2.stats["shading_ops"] > ss.reflections(scene, eye, method="mvr").stats["shading_ops"]
 
