@@ -141,6 +141,20 @@ impl Camera {
             .collect()
     }
 
+    /// Which face of `Camera::cube` a direction from the cube's centre lands on: the face of
+    /// its largest axis (ties go to x, then y).
+    pub fn cube_face(dir: DVec3) -> usize {
+        let a = dir.abs();
+        let (axis, positive) = if a.x >= a.y && a.x >= a.z {
+            (0, dir.x >= 0.0)
+        } else if a.y >= a.z {
+            (1, dir.y >= 0.0)
+        } else {
+            (2, dir.z >= 0.0)
+        };
+        2 * axis + usize::from(!positive)
+    }
+
     pub fn eye(&self) -> DVec3 {
         self.pose.w_axis.truncate()
     }

@@ -19,6 +19,7 @@ from ._core import Camera
 from ._core import __version__ as __version__
 from ._epr import Points, Reflector, SplatBuffers, cube_resolution, splat
 from ._evaluate import evaluate, intermediate_cameras
+from ._omni import OmniShadowResult, omni_shadows
 from ._reflections import ReflectionResult, reflection_reference, reflections
 from ._scene import Scene
 from ._shadows import AreaLight, ShadowResult, soft_shadows
@@ -45,6 +46,7 @@ __all__ = [
     "GpuUnavailableError",
     "InputError",
     "Mesh",
+    "OmniShadowResult",
     "Points",
     "RayHits",
     "ReflectionResult",
@@ -63,6 +65,7 @@ __all__ = [
     "errors",
     "evaluate",
     "intermediate_cameras",
+    "omni_shadows",
     "reconstruct",
     "references",
     "reflection_reference",

@@ -10,6 +10,7 @@ import numpy as np
 
 from . import _core
 from ._epr import Points, epr_points
+from ._omni import shadow_points
 from ._scene import Scene
 from .errors import InputError
 from .results import DepthImages, Mesh, RayHits
@@ -50,6 +51,8 @@ def discretize(
     rho_scale: float = 0.5,
     seed: int = 0,
     resolution: Union[None, int, Sequence[int]] = None,
+    light: Any = None,
+    light_samples: int = 20,
 ) -> Union[DepthImages, Points]:
     """Sample a scene with depth images (non-redundant-rendering.txt §3, §6.1) or with points
     for many off-screen views (eye-based-point-rendering.txt §3).
@@ -98,7 +101,18 @@ def discretize(
         For ``epr`` / ``ivir``: seeds the stochastic culling of sub-1/10-pixel triangles.
     resolution : int or sequence of int, optional
         For ``epr`` / ``ivir``: cube-map face resolution (one, or one per reflector); by
-        default the adaptive size of §4.1.1 (see :func:`scenesample.cube_resolution`).
+        default the adaptive size of §4.1.1 (see :func:`scenesample.cube_resolution`), or for
+        shadow points Eq. 6 (see :func:`scenesample.omni_shadows`).
+    light : (center, radius), optional
+        For ``epr`` / ``ivir``: points for the shadow cube maps of this spherical light
+        (eye-based-point-rendering.txt §5.1) instead of reflections: six views per light
+        sample, in ``Camera.cube`` order, sample after sample. EPR spacing: the eye's pixel
+        footprint at the nearest of the triangle's shadow volumes over ``rho_scale`` (Eq. 5),
+        never finer than the iVIR spacing, the cube-map texel at the triangle's distance from
+        the nearest light sample (so an eye inside a shadow volume gets a finite density).
+    light_samples : int
+        With ``light``: samples on the light (its centre for 1, else a Fibonacci lattice on its
+        sphere).
 
     ``"epr"`` (§3.1-3.4, Eq. 2-4): per triangle, one visibility bit per cube-map view
     (conservative: dropped only when all vertices lie outside one plane of the 20%-enlarged
@@ -136,6 +150,21 @@ def discretize(
             raise InputError(f"method={method!r} needs eye=, the camera the points serve")
         if cameras is not None:
             raise InputError(f"method={method!r} makes its own cube-map views; pass no cameras")
+        if light is not None:
+            if reflectors is not None:
+                raise InputError("pass reflectors= (reflections) or light= (shadows), not both")
+            if resolution is not None and not isinstance(resolution, (int, np.integer)):
+                raise InputError(f"shadow cube maps share one resolution; got {resolution!r}")
+            return shadow_points(
+                scene,
+                eye,
+                light,
+                light_samples=light_samples,
+                rho_scale=rho_scale,
+                seed=seed,
+                resolution=resolution,
+                density="eye" if method == "epr" else "offscreen",
+            )
         return epr_points(
             scene,
             eye,
@@ -145,8 +174,10 @@ def discretize(
             resolution=resolution,
             density="eye" if method == "epr" else "offscreen",
         )
-    if eye is not None or reflectors is not None or resolution is not None:
-        raise InputError(f"eye, reflectors and resolution apply to method='epr', not {method!r}")
+    if eye is not None or reflectors is not None or resolution is not None or light is not None:
+        raise InputError(
+            f"eye, reflectors, light and resolution apply to method='epr', not {method!r}"
+        )
     if cameras is None:
         raise InputError(f"method={method!r} needs cameras")
     cams = _camera_list(cameras)

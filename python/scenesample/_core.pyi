@@ -16,6 +16,8 @@ __all__ = [
     "discretize_nonredundant",
     "discretize_peeling",
     "epr_points",
+    "epr_shadow_points",
+    "omni_shadows",
     "read_exr",
     "reflections",
     "reconstruct",
@@ -198,6 +200,30 @@ def epr_points(
     resolutions: Sequence[int],
     density: str,
     rho_scale: float,
+    seed: int,
+) -> dict[str, Any]: ...
+def epr_shadow_points(
+    scene: Scene,
+    eye: Camera,
+    center: ArrayLike,
+    radius: float,
+    samples: int,
+    resolution: int,
+    max_resolution: int,
+    density: str,
+    rho_scale: float,
+    seed: int,
+) -> dict[str, Any]: ...
+def omni_shadows(
+    scene: Scene,
+    eye: Camera,
+    center: ArrayLike,
+    radius: float,
+    samples: int,
+    method: str,
+    rho_scale: float,
+    resolution: int,
+    max_resolution: int,
     seed: int,
 ) -> dict[str, Any]: ...
 def splat(

@@ -59,8 +59,8 @@ def evaluate(
     tolerance: float = 0.01,
 ) -> dict[str, Any]:
     """Measure a result's accuracy. The metric defaults from the first argument's type:
-    ``DepthImages`` -> ``"sampling"``, ``ShadowResult`` -> ``"shadow"``, ``Mesh`` ->
-    ``"geometry"``, ``ReflectionResult`` -> ``"image"``.
+    ``DepthImages`` -> ``"sampling"``, ``ShadowResult`` and ``OmniShadowResult`` ->
+    ``"shadow"``, ``Mesh`` -> ``"geometry"``, ``ReflectionResult`` -> ``"image"``.
 
     ``evaluate(result, reference, "image")`` compares two images (``ReflectionResult`` or
     (H, W, 3) arrays, linear RGB) on the 0-255 scale of their 8-bit sRGB display
@@ -68,11 +68,13 @@ def evaluate(
     same with ``_reflective`` over the reference's reflective pixels, and that ``mask``. The
     reflections' reference is :func:`scenesample.reflection_reference` (MVR at 4x, downsampled).
 
-    ``evaluate(shadows, reference, "shadow")`` compares two :class:`ShadowResult` of one view
+    ``evaluate(shadows, reference, "shadow")`` compares two :class:`ShadowResult` (or two
+    :class:`OmniShadowResult`) of one view and one set of light samples
     (non-redundant-rendering.txt §6.2) over the pixels both see a surface at, on a 0-255 scale:
     ``intensity_error`` (mean absolute difference of the visible fraction: opposite errors at
     a pixel cancel), ``visibility_error`` (mean share of light samples resolved differently),
-    ``max_intensity_error``, and ``pixels``. Intensity error never exceeds visibility error.
+    ``max_intensity_error``, ``rmse`` (of the visible fraction), ``pixels`` and that ``mask``.
+    Intensity error never exceeds visibility error.
 
     ``evaluate(mesh, scene, "geometry", cameras=...)`` renders the scene and the mesh from each
     camera and compares, over all cameras' pixels: ``coverage`` (fraction of the true surface's
@@ -128,13 +130,17 @@ def evaluate(
     InputError
         Unknown metric or redundancy, images without reference cameras, bad ``intermediate``.
     """
+    from ._omni import OmniShadowResult
     from ._reflections import ReflectionResult, image_metrics
     from ._shadows import ShadowResult
 
     if metric is None:
-        metric = {ShadowResult: "shadow", Mesh: "geometry", ReflectionResult: "image"}.get(
-            type(images), "sampling"
-        )
+        metric = {
+            ShadowResult: "shadow",
+            OmniShadowResult: "shadow",
+            Mesh: "geometry",
+            ReflectionResult: "image",
+        }.get(type(images), "sampling")
     if metric not in METRICS:
         raise InputError(f"metric must be one of {list(METRICS)}, got {metric!r}")
     if metric == "image":
@@ -172,12 +178,15 @@ def evaluate(
 
 
 def _shadow_error(result: Any, reference: Any) -> dict[str, Any]:
+    from ._omni import OmniShadowResult
     from ._shadows import ShadowResult
 
+    kinds = (ShadowResult, OmniShadowResult)
     for name, r in (("result", result), ("reference", reference)):
-        if not isinstance(r, ShadowResult):
+        if not isinstance(r, kinds):
             raise InputError(
-                f"metric='shadow' compares ShadowResults; {name} is {type(r).__name__}"
+                f"metric='shadow' compares ShadowResults or OmniShadowResults; {name} is "
+                f"{type(r).__name__}"
             )
     if result.visible.shape != reference.visible.shape:
         raise InputError(
@@ -193,7 +202,9 @@ def _shadow_error(result: Any, reference: Any) -> dict[str, Any]:
         "intensity_error": float(255 * diff.mean()),
         "visibility_error": float(255 * wrong.mean()),
         "max_intensity_error": float(255 * diff.max()),
+        "rmse": float(255 * np.sqrt(np.mean(diff**2))),
         "pixels": int(both.sum()),
+        "mask": both,
     }
 
 

@@ -117,9 +117,6 @@ pub fn generate(
         }
     }
     let views = cube_views(reflectors, resolutions)?;
-    let words = views.len().div_ceil(64).max(1);
-    let start = Instant::now();
-    let frusta: Vec<Frustum> = views.iter().map(Frustum::of).collect();
     // Which reflector, if any, each triangle belongs to.
     let mut owner = vec![u32::MAX; scene.triangle_count()];
     for (k, r) in reflectors.iter().enumerate() {
@@ -131,11 +128,227 @@ pub fn generate(
     }
     let (pixel, perspective) = eye_pixel(eye);
     let e = eye.eye();
-    let diag = {
-        let [lo, hi] = scene.bounds();
-        (DVec3::from(hi.map(f64::from)) - DVec3::from(lo.map(f64::from))).length()
+    let floor = scene.diagonal() * 1e-9;
+    let skip = |t: usize, v: usize| owner[t] == (v / 6) as u32;
+    let spacing = |t: usize, p: &[DVec3; 3], bits: &[u64]| {
+        let cc = circumcentre(p);
+        // The finest spacing any cube map that sees the triangle can show.
+        let mut cap = f64::INFINITY;
+        let mut via = f64::INFINITY;
+        for (k, r) in reflectors.iter().enumerate() {
+            if owner[t] == k as u32 || (0..6).all(|f| !bit(bits, 6 * k + f)) {
+                continue;
+            }
+            let d_rt = ((cc - r.center).length() - r.radius).max(floor);
+            cap = cap.min(d_rt * 2.0 / resolutions[k] as f64);
+            let cp = closest_on_sphere_to_segment(r.center, r.radius, cc, e);
+            via = via.min((e - cp).length() + (cp - cc).length());
+        }
+        match density {
+            Density::Eye { rho_scale } => {
+                let eye_s = if perspective {
+                    via.max(floor) * pixel
+                } else {
+                    pixel
+                };
+                (eye_s / rho_scale).max(cap)
+            }
+            Density::OffScreen => cap,
+        }
     };
-    let floor = diag * 1e-9;
+    let mut out = sample_triangles(scene, &views, skip, spacing, seed);
+    out.timings
+        .push(("total".into(), total.elapsed().as_secs_f64()));
+    Ok(out)
+}
+
+/// The six cube-map views of each omnidirectional light sample (§5), in `Camera::cube` order,
+/// sample after sample, with the near plane at `near`.
+pub fn shadow_views(samples: &[DVec3], resolution: u32, near: f64) -> Result<Vec<Camera>> {
+    let mut out = Vec::with_capacity(6 * samples.len());
+    for &l in samples {
+        out.extend(Camera::cube(l, resolution, Some(near), None)?);
+    }
+    Ok(out)
+}
+
+/// Points for the shadow cube maps of omnidirectional light `samples` (all faces of one
+/// `resolution`), seen by `eye` (§5.1, Eq. 5). The views are `shadow_views(samples,
+/// resolution, near)`.
+///
+/// EPR spacing: the eye's pixel footprint at `d_ev`, the distance from the eye to the nearest
+/// of the triangle's shadow volumes (one per light sample), divided by ρ_scale, and never finer
+/// than the iVIR spacing, the cube-map texel at the triangle's distance from the nearest light
+/// sample (`d_lt · 2 / resolution`; the paper's cap at `s_ortho`). The shadow volumes are taken
+/// semi-infinite rather than cut at the light's far plane, which can only shorten `d_ev` (denser
+/// points); an eye inside one gets `d_ev = 0` and so the capped iVIR spacing.
+pub fn generate_shadow(
+    scene: &Scene,
+    eye: &Camera,
+    samples: &[DVec3],
+    resolution: u32,
+    near: f64,
+    density: Density,
+    seed: u64,
+) -> Result<Points> {
+    let total = Instant::now();
+    if samples.is_empty() {
+        return input_err!("shadow points need at least one light sample");
+    }
+    if let Some(l) = samples.iter().find(|l| !l.is_finite()) {
+        return input_err!("light sample {l:?} is not finite");
+    }
+    if resolution == 0 {
+        return input_err!("the shadow cube maps need a resolution of at least 1");
+    }
+    if let Density::Eye { rho_scale } = density {
+        if !(rho_scale.is_finite() && rho_scale > 0.0) {
+            return input_err!("rho_scale must be finite and > 0, got {rho_scale}");
+        }
+    }
+    let views = shadow_views(samples, resolution, near)?;
+    let (pixel, perspective) = eye_pixel(eye);
+    let e = eye.eye();
+    let floor = scene.diagonal() * 1e-9;
+    let spacing = |_t: usize, p: &[DVec3; 3], _bits: &[u64]| {
+        let d_lt = samples
+            .iter()
+            .map(|&l| point_triangle_distance(l, p))
+            .fold(f64::INFINITY, f64::min);
+        let cap = d_lt.max(floor) * 2.0 / resolution as f64;
+        match density {
+            Density::Eye { rho_scale } => {
+                let eye_s = if perspective {
+                    let d_ev = samples
+                        .iter()
+                        .map(|&l| shadow_volume_distance(e, l, p))
+                        .fold(f64::INFINITY, f64::min);
+                    d_ev * pixel
+                } else {
+                    pixel
+                };
+                (eye_s / rho_scale).max(cap)
+            }
+            Density::OffScreen => cap,
+        }
+    };
+    let mut out = sample_triangles(scene, &views, |_, _| false, spacing, seed);
+    out.timings
+        .push(("total".into(), total.elapsed().as_secs_f64()));
+    Ok(out)
+}
+
+/// Distance from `q` to the segment a-b.
+fn point_segment_distance(q: DVec3, a: DVec3, b: DVec3) -> f64 {
+    let ab = b - a;
+    let t = if ab.length_squared() > 0.0 {
+        ((q - a).dot(ab) / ab.length_squared()).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (q - (a + ab * t)).length()
+}
+
+/// Distance from `q` to the triangle `p` (its closed surface): to the plane where `q` projects
+/// inside the triangle, otherwise to the nearest edge.
+pub fn point_triangle_distance(q: DVec3, p: &[DVec3; 3]) -> f64 {
+    let edges = (0..3).map(|k| point_segment_distance(q, p[k], p[(k + 1) % 3]));
+    let nearest_edge = edges.fold(f64::INFINITY, f64::min);
+    let n = (p[1] - p[0]).cross(p[2] - p[0]);
+    let len = n.length();
+    if len.is_nan() || len <= 0.0 {
+        return nearest_edge;
+    }
+    let n = n / len;
+    let h = n.dot(q - p[0]);
+    let r = q - n * h;
+    let inside = (0..3).all(|k| (p[(k + 1) % 3] - p[k]).cross(r - p[k]).dot(n) >= 0.0);
+    if inside {
+        h.abs()
+    } else {
+        nearest_edge
+    }
+}
+
+/// Distance from `e` to the shadow volume that triangle `p` casts from a point light at `l`
+/// (Fig. 9): the region behind the triangle as seen from `l`, unbounded. 0 when `e` is inside it
+/// or a vertex touches the light. Otherwise the nearest of its boundary faces: the triangle
+/// itself and three side wedges (each spanned from its edge away from the light, with the two
+/// rays through the edge's ends as its other borders).
+pub fn shadow_volume_distance(e: DVec3, l: DVec3, p: &[DVec3; 3]) -> f64 {
+    let scale = (p[1] - p[0])
+        .length()
+        .max((p[2] - p[0]).length())
+        .max((e - l).length());
+    if p.iter().any(|&v| (v - l).length() <= 1e-12 * scale) {
+        return 0.0;
+    }
+    // Inside: the segment from the light to the eye crosses the triangle.
+    let n = (p[1] - p[0]).cross(p[2] - p[0]);
+    let denom = n.dot(e - l);
+    if denom != 0.0 {
+        let t = n.dot(p[0] - l) / denom;
+        if (0.0..=1.0).contains(&t) {
+            let x = l + (e - l) * t;
+            let sign = |k: usize| (p[(k + 1) % 3] - p[k]).cross(x - p[k]).dot(n);
+            let (s0, s1, s2) = (sign(0), sign(1), sign(2));
+            if (s0 >= 0.0 && s1 >= 0.0 && s2 >= 0.0) || (s0 <= 0.0 && s1 <= 0.0 && s2 <= 0.0) {
+                return 0.0;
+            }
+        }
+    }
+    let mut d = point_triangle_distance(e, p);
+    for k in 0..3 {
+        let (a, b) = (p[k], p[(k + 1) % 3]);
+        // The ray from a away from the light.
+        let dir = (a - l).normalize();
+        let t = (e - a).dot(dir).max(0.0);
+        d = d.min((e - (a + dir * t)).length());
+        // The wedge's interior: l + α(a − l) + β(b − l) with α, β >= 0 and α + β >= 1.
+        let (u, v) = (a - l, b - l);
+        let m = u.cross(v);
+        if m.length_squared() <= 0.0 {
+            continue;
+        }
+        let m = m.normalize();
+        let w = e - l;
+        let h = m.dot(w);
+        let r = w - m * h;
+        let (uu, uv, vv) = (u.dot(u), u.dot(v), v.dot(v));
+        let det = uu * vv - uv * uv;
+        if det.is_nan() || det <= 0.0 {
+            continue;
+        }
+        let (ru, rv) = (r.dot(u), r.dot(v));
+        let alpha = (ru * vv - rv * uv) / det;
+        let beta = (rv * uu - ru * uv) / det;
+        if alpha >= 0.0 && beta >= 0.0 && alpha + beta >= 1.0 {
+            d = d.min(h.abs());
+        }
+    }
+    d
+}
+
+/// Is bit `v` of a visibility string set?
+fn bit(bits: &[u64], v: usize) -> bool {
+    bits[v / 64] >> (v % 64) & 1 == 1
+}
+
+/// The shared part of point generation (§3.1-3.3) for any off-screen `views`: per triangle, its
+/// visibility bits (view v left out when `skip(t, v)`), its spacing `spacing(t, vertices, bits)`
+/// (floored so that one triangle gives at most `MAX_PER_TRIANGLE` points), stochastic culling of
+/// sub-1/10-cell triangles and the exact conservative lattice coverage. Timings: `points`.
+fn sample_triangles(
+    scene: &Scene,
+    views: &[Camera],
+    skip: impl Fn(usize, usize) -> bool + Sync,
+    spacing: impl Fn(usize, &[DVec3; 3], &[u64]) -> f64 + Sync,
+    seed: u64,
+) -> Points {
+    let start = Instant::now();
+    let words = views.len().div_ceil(64).max(1);
+    let frusta: Vec<Frustum> = views.iter().map(Frustum::of).collect();
+    let floor = scene.diagonal() * 1e-9;
     let verts = scene.vertices();
     let faces = scene.faces();
     let per_triangle: Vec<TrianglePoints> = faces
@@ -145,43 +358,16 @@ pub fn generate(
             let p = f.map(|i| DVec3::from(verts[i as usize].map(f64::from)));
             let mut bits = vec![0u64; words];
             for (v, fr) in frusta.iter().enumerate() {
-                if owner[t] == (v / 6) as u32 {
-                    continue;
-                }
-                if fr.may_see(&p) {
+                if !skip(t, v) && fr.may_see(&p) {
                     bits[v / 64] |= 1 << (v % 64);
                 }
             }
             if bits.iter().all(|&b| b == 0) {
                 return TrianglePoints::Invisible;
             }
-            let cc = circumcentre(&p);
             let area = 0.5 * (p[1] - p[0]).cross(p[2] - p[0]).length();
-            // The finest spacing any cube map that sees the triangle can show.
-            let mut cap = f64::INFINITY;
-            let mut via = f64::INFINITY;
-            for (k, r) in reflectors.iter().enumerate() {
-                if owner[t] == k as u32
-                    || (0..6).all(|f| bits[(6 * k + f) / 64] >> ((6 * k + f) % 64) & 1 == 0)
-                {
-                    continue;
-                }
-                let d_rt = ((cc - r.center).length() - r.radius).max(floor);
-                cap = cap.min(d_rt * 2.0 / resolutions[k] as f64);
-                let cp = closest_on_sphere_to_segment(r.center, r.radius, cc, e);
-                via = via.min((e - cp).length() + (cp - cc).length());
-            }
-            let s = match density {
-                Density::Eye { rho_scale } => {
-                    let eye_s = if perspective {
-                        via.max(floor) * pixel
-                    } else {
-                        pixel
-                    };
-                    (eye_s / rho_scale).max(cap)
-                }
-                Density::OffScreen => cap,
-            };
+            let s = spacing(t, &p, &bits);
+            let s = if s.is_nan() { floor } else { s };
             let s = s.max((area / MAX_PER_TRIANGLE).sqrt()).max(floor);
             let epr_area = area / (s * s);
             if epr_area <= 0.1 && unit_hash(seed, t as u64) >= 10.0 * epr_area {
@@ -220,18 +406,14 @@ pub fn generate(
             out.views.extend_from_slice(&bits);
         }
     }
-    let generate_seconds = start.elapsed().as_secs_f64();
-    out.timings = vec![
-        ("points".into(), generate_seconds),
-        ("total".into(), total.elapsed().as_secs_f64()),
-    ];
+    out.timings = vec![("points".into(), start.elapsed().as_secs_f64())];
     out.stats = vec![
         ("points".into(), out.len() as f64),
         ("triangles_sampled".into(), sampled as f64),
         ("triangles_culled".into(), culled as f64),
         ("triangles_outside_views".into(), invisible as f64),
     ];
-    Ok(out)
+    out
 }
 
 enum TrianglePoints {
@@ -439,6 +621,56 @@ mod tests {
         assert!(xs.iter().all(|x| (0.0..1.0).contains(x)));
         assert_eq!(unit_hash(7, 3), unit_hash(7, 3));
         assert_ne!(unit_hash(7, 3), unit_hash(8, 3));
+    }
+
+    #[test]
+    fn shadow_volume_distances() {
+        let p = [
+            DVec3::new(-1.0, -1.0, 0.0),
+            DVec3::new(1.0, -1.0, 0.0),
+            DVec3::new(0.0, 1.0, 0.0),
+        ];
+        let l = DVec3::new(0.0, 0.0, 2.0);
+        // Straight behind the triangle: inside.
+        assert_eq!(
+            shadow_volume_distance(DVec3::new(0.0, 0.0, -5.0), l, &p),
+            0.0
+        );
+        // Between the light and the triangle: the triangle is the nearest face.
+        let d = shadow_volume_distance(DVec3::new(0.0, 0.0, 1.0), l, &p);
+        assert!((d - 1.0).abs() < 1e-12, "{d}");
+        // Beside the volume, level with the triangle's far side: the side wedge through the
+        // edge y = -1 widens by 1/2 per unit of depth below the triangle.
+        let e = DVec3::new(0.0, -3.0, -2.0);
+        let d = shadow_volume_distance(e, l, &p);
+        // The wedge's plane passes through l = (0, 0, 2) and the edge y = -1, z = 0: y = -(2 - z)/2.
+        let plane_n = DVec3::new(0.0, 2.0, -1.0).normalize();
+        let expect = (e - l).dot(plane_n).abs();
+        assert!((d - expect).abs() < 1e-12, "{d} vs {expect}");
+        // Brute force: the nearest of many points of the volume is never nearer than d.
+        let mut best = f64::INFINITY;
+        for i in 0..=40 {
+            for j in 0..=(40 - i) {
+                let a = i as f64 / 40.0;
+                let b = j as f64 / 40.0;
+                let q = p[0] * (1.0 - a - b) + p[1] * a + p[2] * b;
+                for k in 0..200 {
+                    let x = l + (q - l) * (1.0 + k as f64 * 0.05);
+                    best = best.min((x - e).length());
+                }
+            }
+        }
+        assert!(best >= d - 1e-9 && best <= d + 0.1, "{best} vs {d}");
+        // A vertex on the light.
+        assert_eq!(shadow_volume_distance(e, p[0], &p), 0.0);
+    }
+
+    #[test]
+    fn point_triangle_distance_inside_and_beside() {
+        let p = [DVec3::ZERO, DVec3::X, DVec3::Y];
+        assert!((point_triangle_distance(DVec3::new(0.2, 0.2, 3.0), &p) - 3.0).abs() < 1e-12);
+        assert!((point_triangle_distance(DVec3::new(-1.0, 0.5, 0.0), &p) - 1.0).abs() < 1e-12);
+        assert!((point_triangle_distance(DVec3::new(2.0, 0.0, 0.0), &p) - 1.0).abs() < 1e-12);
     }
 
     #[test]

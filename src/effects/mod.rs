@@ -1,5 +1,7 @@
 //! Multiview effects built on the samples (eye-based-point-rendering.txt §4-5): cube-mapped
-//! reflections by EPR, MVR and iVIR, and the shading model they share.
+//! reflections and omnidirectional soft shadows, each by EPR, MVR and iVIR, and the shading
+//! model the reflections share.
 
+pub mod omni_shadows;
 pub mod reflections;
 pub mod shading;

@@ -93,24 +93,7 @@ struct Cube {
 impl Cube {
     /// The face and texel a direction from the centre lands on.
     fn texel(&self, dir: DVec3) -> usize {
-        let a = dir.abs();
-        let face = if a.x >= a.y && a.x >= a.z {
-            if dir.x >= 0.0 {
-                0
-            } else {
-                1
-            }
-        } else if a.y >= a.z {
-            if dir.y >= 0.0 {
-                2
-            } else {
-                3
-            }
-        } else if dir.z >= 0.0 {
-            4
-        } else {
-            5
-        };
+        let face = Camera::cube_face(dir);
         let (px, _) = self.faces[face].project(self.center + dir);
         let r = self.res as f64;
         let x = px.x.clamp(0.0, r - 1.0) as usize;

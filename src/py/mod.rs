@@ -27,7 +27,9 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(reconstruct::reconstruct, m)?)?;
     m.add_function(wrap_pyfunction!(shadows::soft_shadows, m)?)?;
     m.add_function(wrap_pyfunction!(splat::epr_points, m)?)?;
+    m.add_function(wrap_pyfunction!(splat::epr_shadow_points, m)?)?;
     m.add_function(wrap_pyfunction!(splat::splat, m)?)?;
+    m.add_function(wrap_pyfunction!(shadows::omni_shadows, m)?)?;
     m.add_function(wrap_pyfunction!(effects::reflections, m)?)?;
     m.add_function(wrap_pyfunction!(render::device_info, m)?)?;
     m.add_function(wrap_pyfunction!(render::write_exr, m)?)?;

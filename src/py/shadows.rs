@@ -1,4 +1,5 @@
-//! Soft shadows (Algorithm 5) from Python arguments.
+//! Soft shadows (non-redundant-rendering.txt Algorithm 5) and omnidirectional soft shadows
+//! (eye-based-point-rendering.txt §5) from Python arguments.
 
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -7,6 +8,7 @@ use super::camera::PyCamera;
 use super::convert::{array, named, vec3};
 use super::errors::{input, IntoPy};
 use super::scene::PyScene;
+use crate::effects::omni_shadows::{OmniMethod, OmniOptions};
 use crate::shadows::{self, AreaLight, Discretization, Reconstruction, ShadowOptions};
 
 #[pyfunction]
@@ -69,6 +71,60 @@ pub fn soft_shadows<'py>(
     d.set_item("visible", array(py, r.visible, &[h, w, count])?)?;
     d.set_item("mask", array(py, r.mask, &[h, w])?)?;
     d.set_item("occluder_triangles", r.occluder_triangles)?;
+    d.set_item("timings", named(py, r.timings)?)?;
+    Ok(d)
+}
+
+/// Omnidirectional soft shadows of a spherical light; `resolution` 0 picks Eq. 6's.
+#[pyfunction]
+#[pyo3(signature = (scene, eye, center, radius, samples, method, rho_scale, resolution, max_resolution, seed))]
+#[allow(clippy::too_many_arguments)]
+pub fn omni_shadows<'py>(
+    py: Python<'py>,
+    scene: &PyScene,
+    eye: &PyCamera,
+    center: &Bound<'py, PyAny>,
+    radius: f64,
+    samples: u32,
+    method: &str,
+    rho_scale: f64,
+    resolution: u32,
+    max_resolution: u32,
+    seed: u64,
+) -> PyResult<Bound<'py, PyDict>> {
+    let Some(m) = OmniMethod::parse(method) else {
+        return Err(input(
+            py,
+            format!("method must be 'epr', 'mvr', 'ivir' or 'raytraced', got {method:?}"),
+        ));
+    };
+    let opts = OmniOptions {
+        samples,
+        method: m,
+        rho_scale,
+        resolution: (resolution > 0).then_some(resolution),
+        max_resolution,
+        seed,
+    };
+    let center = vec3(center, "light_center")?;
+    let s = scene.inner.clone();
+    let cam = eye.inner.clone();
+    let r = py
+        .detach(|| crate::effects::omni_shadows::omni_shadows(&s, &cam, center, radius, &opts))
+        .py_err(py)?;
+    let (h, w) = (r.height as usize, r.width as usize);
+    let count = r.samples.len();
+    let d = PyDict::new(py);
+    d.set_item("visibility", array(py, r.visibility, &[h, w])?)?;
+    d.set_item("visible", array(py, r.visible, &[h, w, count])?)?;
+    d.set_item("mask", array(py, r.mask, &[h, w])?)?;
+    let pts: Vec<[f64; 3]> = r.samples.iter().map(|p| p.to_array()).collect();
+    d.set_item(
+        "light_samples",
+        super::convert::rows_owned(py, pts, &[count, 3])?,
+    )?;
+    d.set_item("resolution", r.resolution)?;
+    d.set_item("stats", named(py, r.stats)?)?;
     d.set_item("timings", named(py, r.timings)?)?;
     Ok(d)
 }

@@ -5,10 +5,11 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use super::camera::PyCamera;
-use super::convert::{array, flat_i32, named, rows_f32, rows_owned};
+use super::convert::{array, flat_i32, named, rows_f32, rows_owned, vec3};
 use super::errors::{input, IntoPy};
 use super::scene::PyScene;
 use crate::discretize::epr::{self, Density};
+use crate::effects::omni_shadows::{eye_resolution, light_samples, NEAR};
 use crate::splat::Points;
 
 /// Points for the cube maps of the reflectors (centres (R, 3), radii, triangle ids per
@@ -30,22 +31,80 @@ pub fn epr_points<'py>(
     seed: u64,
 ) -> PyResult<Bound<'py, PyDict>> {
     let reflectors = super::effects::reflectors(py, scene, centers, &radii, &triangles)?;
-    let density = match density {
-        "eye" => Density::Eye { rho_scale },
-        "offscreen" => Density::OffScreen,
-        other => {
-            return Err(input(
-                py,
-                format!("density must be 'eye' or 'offscreen', got {other:?}"),
-            ))
-        }
-    };
+    let density = parse_density(py, density, rho_scale)?;
     let s = scene.inner.clone();
     let cam = eye.inner.clone();
     let p = py
         .detach(|| epr::generate(&s, &cam, &reflectors, &resolutions, density, seed))
         .py_err(py)?;
     let views = epr::cube_views(&reflectors, &resolutions).py_err(py)?;
+    points_dict(py, p, views)
+}
+
+/// Points for the shadow cube maps of a spherical light's samples (§5.1, Eq. 5), all faces at
+/// `resolution` (0: Eq. 6 for what the eye sees, at most `max_resolution`); `density` as for
+/// `epr_points`.
+#[pyfunction]
+#[pyo3(signature = (scene, eye, center, radius, samples, resolution, max_resolution, density, rho_scale, seed))]
+#[allow(clippy::too_many_arguments)]
+pub fn epr_shadow_points<'py>(
+    py: Python<'py>,
+    scene: &PyScene,
+    eye: &PyCamera,
+    center: &Bound<'py, PyAny>,
+    radius: f64,
+    samples: u32,
+    resolution: u32,
+    max_resolution: u32,
+    density: &str,
+    rho_scale: f64,
+    seed: u64,
+) -> PyResult<Bound<'py, PyDict>> {
+    let density = parse_density(py, density, rho_scale)?;
+    let center = vec3(center, "center")?;
+    if !(center.is_finite() && radius.is_finite() && radius >= 0.0) || samples == 0 {
+        return Err(input(
+            py,
+            format!(
+                "the light needs a finite centre, a finite radius >= 0 and at least one sample; \
+                 got {center:?}, {radius}, {samples}"
+            ),
+        ));
+    }
+    let lights = light_samples(center, radius, samples);
+    let near = NEAR * scene.inner.diagonal();
+    let s = scene.inner.clone();
+    let cam = eye.inner.clone();
+    let (p, resolution) = py
+        .detach(|| {
+            let res = match resolution {
+                0 => eye_resolution(&s, &cam, center, radius, max_resolution)?,
+                r => r,
+            };
+            epr::generate_shadow(&s, &cam, &lights, res, near, density, seed).map(|p| (p, res))
+        })
+        .py_err(py)?;
+    let views = epr::shadow_views(&lights, resolution, near).py_err(py)?;
+    points_dict(py, p, views)
+}
+
+fn parse_density(py: Python<'_>, density: &str, rho_scale: f64) -> PyResult<Density> {
+    match density {
+        "eye" => Ok(Density::Eye { rho_scale }),
+        "offscreen" => Ok(Density::OffScreen),
+        other => Err(input(
+            py,
+            format!("density must be 'eye' or 'offscreen', got {other:?}"),
+        )),
+    }
+}
+
+/// The point arrays, the views they were made for, timings and stats.
+fn points_dict<'py>(
+    py: Python<'py>,
+    p: Points,
+    views: Vec<crate::camera::Camera>,
+) -> PyResult<Bound<'py, PyDict>> {
     let n = p.len();
     let words = p.words();
     let d = PyDict::new(py);

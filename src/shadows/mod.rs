@@ -282,7 +282,7 @@ pub fn soft_shadows(
 
 /// World points and eye-facing unit normals of the covered pixels (in pixel order), and the
 /// coverage mask.
-fn eye_points(seen: &DepthImages, eye: &Camera) -> (Vec<DVec3>, Vec<DVec3>, Vec<bool>) {
+pub(crate) fn eye_points(seen: &DepthImages, eye: &Camera) -> (Vec<DVec3>, Vec<DVec3>, Vec<bool>) {
     let mut points = Vec::new();
     let mut normals = Vec::new();
     let mut mask = Vec::with_capacity(seen.triangle.len());
@@ -392,10 +392,12 @@ fn shadow_maps(
     Ok(bits)
 }
 
-/// Exact visibility: a ray from each light sample toward each point, stopped
-/// `ABS_BIAS · diagonal` short of it; a hit before that blocks the sample. A point facing away
-/// from a sample does not see it.
-fn raytraced(
+/// Exact visibility: a ray from each light sample toward each point, started
+/// `ABS_BIAS · diagonal` after the sample and stopped as far short of the point (so that
+/// neither the point's own surface nor a surface through the sample blocks it); a hit between
+/// blocks the sample. A point facing away from a sample, or within twice that distance of it,
+/// does not see it.
+pub(crate) fn raytraced(
     scene: &Scene,
     samples: &[DVec3],
     points: &[DVec3],
@@ -406,28 +408,28 @@ fn raytraced(
     let mut bits = vec![0u32; words * samples.len()];
     let eps = gpu::shadow::ABS_BIAS * diagonal;
     for (s, &l) in samples.iter().enumerate() {
-        let origins = vec![l.as_vec3().to_array(); points.len()];
-        let dirs: Vec<[f32; 3]> = points
-            .iter()
-            .map(|&p| {
-                let r = p - l;
-                let len = r.length();
-                (r * ((len - eps).max(0.0) / len.max(f64::MIN_POSITIVE)))
-                    .as_vec3()
-                    .to_array()
-            })
-            .collect();
         let usable: Vec<bool> = points
             .iter()
             .zip(normals)
-            .map(|(&p, &n)| n.dot(l - p) > 0.0 && (p - l).length() > eps)
+            .map(|(&p, &n)| n.dot(l - p) > 0.0 && (p - l).length() > 2.0 * eps)
             .collect();
         // Rays of points facing away are never traced: give them a harmless direction.
-        let dirs: Vec<[f32; 3]> = dirs
-            .into_iter()
+        let (origins, dirs): (Vec<[f32; 3]>, Vec<[f32; 3]>) = points
+            .iter()
             .zip(&usable)
-            .map(|(d, &u)| if u { d } else { [0.0, 0.0, 1.0] })
-            .collect();
+            .map(|(&p, &u)| {
+                let r = p - l;
+                let len = r.length();
+                if !u {
+                    return (l.as_vec3().to_array(), [0.0, 0.0, 1.0]);
+                }
+                let unit = r / len;
+                (
+                    (l + unit * eps).as_vec3().to_array(),
+                    (unit * (len - 2.0 * eps)).as_vec3().to_array(),
+                )
+            })
+            .unzip();
         let hits = crate::trace::cast_rays(scene, &origins, &dirs, 0.0, 1.0)?;
         for (k, &u) in usable.iter().enumerate() {
             if u && hits.triangle[k] < 0 {
