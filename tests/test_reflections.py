@@ -131,9 +131,13 @@ def test_epr_experiment_writes_tables_and_figures(tmp_path):
     epr.main(
         ["--spheres", "1", "2", "--resolution", "48", "--rho", "0.5", "--distances", "3.2"]
         + ["--figure-spheres", "2", "--out", str(tmp_path)]
+        + ["--light-samples", "1", "3", "--shadow-spheres", "2", "--shadow-max-resolution", "64"]
     )
     md = (tmp_path / "epr.md").read_text()
     assert "| 2 | " in md and "| epr |" in md and "| mvr |" in md and "| ivir |" in md
     assert len((tmp_path / "epr.csv").read_text().splitlines()) == 1 + 2 * 3
     assert (tmp_path / "fig6.png").stat().st_size > 1000
     assert (tmp_path / "fig7.png").stat().st_size > 1000
+    assert "Table 3 analogue" in md
+    assert len((tmp_path / "table3.csv").read_text().splitlines()) == 1 + 2 * 3
+    assert (tmp_path / "fig10.png").stat().st_size > 300

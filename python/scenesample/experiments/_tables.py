@@ -11,8 +11,10 @@ from typing import Any, Optional
 def write_csv(
     path: Path, rows: list[dict[str, Any]], fieldnames: Optional[Sequence[str]] = None
 ) -> None:
-    """``rows`` as CSV with a header: ``fieldnames``, or the first row's keys."""
+    """``rows`` as CSV with a header: ``fieldnames``, or every key of the rows in the order
+    they first appear (a row without a key leaves its cell empty)."""
+    names = list(fieldnames or dict.fromkeys(k for r in rows for k in r))
     with open(path, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(fieldnames or rows[0]))
+        w = csv.DictWriter(f, fieldnames=names, restval="")
         w.writeheader()
         w.writerows(rows)
