@@ -17,13 +17,21 @@ struct View {
 
 @group(0) @binding(0) var<uniform> view: View;
 
+struct VsOut {
+    @builtin(position) position: vec4<f32>,
+    // The index of the draw's first triangle: a draw of a range of faces (the visibility
+    // field's marked cells) passes it as its first instance, since the primitive index counts
+    // from 0 in every draw.
+    @location(0) @interpolate(flat) first: u32,
+};
+
 // Vertex positions relative to the scene centre.
 @vertex
-fn vs_main(@location(0) p: vec3<f32>) -> @builtin(position) vec4<f32> {
-    return view.view_proj * vec4<f32>(p, 1.0);
+fn vs_main(@location(0) p: vec3<f32>, @builtin(instance_index) first: u32) -> VsOut {
+    return VsOut(view.view_proj * vec4<f32>(p, 1.0), first);
 }
 
 @fragment
-fn fs_main(@builtin(primitive_index) prim: u32) -> @location(0) i32 {
-    return i32(prim);
+fn fs_main(@builtin(primitive_index) prim: u32, @location(0) @interpolate(flat) first: u32) -> @location(0) i32 {
+    return i32(prim + first);
 }

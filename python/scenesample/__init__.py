@@ -19,6 +19,7 @@ from ._core import Camera
 from ._core import __version__ as __version__
 from ._epr import Points, Reflector, SplatBuffers, cube_resolution, splat
 from ._evaluate import evaluate, intermediate_cameras
+from ._field import FieldView, Slab, VisibilityField
 from ._omni import OmniShadowResult, omni_shadows
 from ._reflections import ReflectionResult, reflection_reference, reflections
 from ._scene import Scene
@@ -41,6 +42,7 @@ __all__ = [
     "Camera",
     "DepthImages",
     "ExrError",
+    "FieldView",
     "GpuError",
     "GpuLimitError",
     "GpuUnavailableError",
@@ -55,8 +57,10 @@ __all__ = [
     "SceneError",
     "SceneFileError",
     "SceneWarning",
+    "Slab",
     "ShadowResult",
     "SplatBuffers",
+    "VisibilityField",
     "ScenesampleError",
     "cast_rays",
     "cube_resolution",

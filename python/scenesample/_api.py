@@ -10,6 +10,7 @@ import numpy as np
 
 from . import _core
 from ._epr import Points, epr_points
+from ._field import FieldView, Slab, VisibilityField, field_view, visibility_field
 from ._omni import shadow_points
 from ._scene import Scene
 from .errors import InputError
@@ -18,7 +19,7 @@ from .results import DepthImages, Mesh, RayHits
 __all__ = ["discretize", "reconstruct", "cast_rays", "device_info"]
 
 Camera = _core.Camera
-DISCRETIZE_METHODS = ("conventional", "nonredundant", "peeling", "epr", "ivir")
+DISCRETIZE_METHODS = ("conventional", "nonredundant", "peeling", "epr", "ivir", "visibility_field")
 
 
 def _scene_core(scene: Any) -> _core.Scene:
@@ -53,7 +54,13 @@ def discretize(
     resolution: Union[None, int, Sequence[int]] = None,
     light: Any = None,
     light_samples: int = 20,
-) -> Union[DepthImages, Points]:
+    slab: Union[None, Slab, Sequence[Slab]] = None,
+    uv: Any = (16, 16),
+    st: Any = (16, 16),
+    grid: Any = (16, 16, 16),
+    ids_per_sample: int = 1,
+    supersample: int = 3,
+) -> Union[DepthImages, Points, VisibilityField, list[VisibilityField]]:
     """Sample a scene with depth images (non-redundant-rendering.txt §3, §6.1) or with points
     for many off-screen views (eye-based-point-rendering.txt §3).
 
@@ -113,6 +120,23 @@ def discretize(
     light_samples : int
         With ``light``: samples on the light (its centre for 1, else a Fibonacci lattice on its
         sphere).
+    slab : Slab or list of Slab, optional
+        For ``visibility_field``: the two-plane parameterization (default
+        :meth:`Slab.around`: planes before and beyond the scene's bounds along their longest
+        axis). Several slabs give one field each (a list), sharing the cells.
+    uv, st : (int, int)
+        For ``visibility_field``: samples on each plane (default 16 x 16).
+    grid : (int, int, int) or "scene"
+        For ``visibility_field``: cells along x, y, z of each object's bounding box (objects:
+        the scene's meshes/nodes, or its connected components when it has one object);
+        ``"scene"``: one 16^3 grid over the whole scene. A triangle belongs to the cell holding
+        its centroid.
+    ids_per_sample : int
+        For ``visibility_field``: cell ids kept per sample (the most frequent).
+    supersample : int
+        For ``visibility_field``: rays per axis of each plane's sample cell (3: 3 x 3 on each
+        plane, 81 rays per sample, §3.3). ``seed`` 0 puts them at sub-cell centres (the
+        paper's regular grid); any other seed jitters each within its sub-cell.
 
     ``"epr"`` (§3.1-3.4, Eq. 2-4): per triangle, one visibility bit per cube-map view
     (conservative: dropped only when all vertices lie outside one plane of the 20%-enlarged
@@ -124,10 +148,15 @@ def discretize(
     rasterization, on the CPU, since wgpu here has none). ``"ivir"``: the same, spaced by the
     cube-map texel at the triangle's distance from the reflector.
 
+    ``"visibility_field"`` (visibility-field.txt §3): for every sample (iu, iv, is, it) of the
+    slab, ``supersample^4`` BVH rays from its uv cell to its st cell; the ``ids_per_sample``
+    cells hit most often are kept (§3.3). See :class:`VisibilityField`.
+
     Returns
     -------
-    DepthImages or Points
-        For ``epr`` / ``ivir``: :class:`Points`. Otherwise :class:`DepthImages`:
+    DepthImages, Points or VisibilityField
+        For ``visibility_field``: :class:`VisibilityField` (a list for several slabs). For
+        ``epr`` / ``ivir``: :class:`Points`. Otherwise :class:`DepthImages`:
         ``depth`` (n, H, W) float32 camera-space z (+inf empty), ``triangle`` (n, H, W) int32
         (-1 empty), ``normal``/``position``/``color`` (n, H, W, 3) float32, ``cameras``,
         ``method``, ``reference`` (= ``cameras``), ``timings``. n is ``len(cameras)``, or
@@ -145,6 +174,19 @@ def discretize(
     """
     if method not in DISCRETIZE_METHODS:
         raise InputError(f"method must be one of {list(DISCRETIZE_METHODS)}, got {method!r}")
+    if method == "visibility_field":
+        if cameras is not None or eye is not None:
+            raise InputError("method='visibility_field' samples lines through a slab: no cameras")
+        return visibility_field(
+            scene,
+            slab=slab,
+            uv=uv,
+            st=st,
+            grid=grid,
+            ids_per_sample=ids_per_sample,
+            supersample=supersample,
+            seed=seed if seed else None,
+        )
     if method in ("epr", "ivir"):
         if eye is None:
             raise InputError(f"method={method!r} needs eye=, the camera the points serve")
@@ -218,13 +260,28 @@ RECONSTRUCT_METHODS = ("mesh", "hybrid", "points")
 
 
 def reconstruct(
-    images: DepthImages,
-    method: str = "hybrid",
+    images: Union[DepthImages, VisibilityField, Sequence[VisibilityField]],
+    method: Union[str, Camera] = "hybrid",
     *,
     scene: Optional[Scene] = None,
     offset: Optional[DepthImages] = None,
-) -> Mesh:
-    """Rebuild surfaces from depth-image samples (non-redundant-rendering.txt §4).
+    interpolate: str = "none",
+    subsample: int = 1,
+) -> Union[Mesh, FieldView]:
+    """Rebuild surfaces from depth-image samples (non-redundant-rendering.txt §4), or a view
+    from the visibility field (visibility-field.txt §4).
+
+    ``reconstruct(field, camera, interpolate="none", subsample=1)`` with a
+    :class:`VisibilityField` (or a list of them, one per slab, from one ``discretize`` call)
+    renders ``camera``'s view from the field (Fig. 4): one pixel in every ``subsample x
+    subsample`` block (the block's middle pixel) gives a line; where it crosses the slab's uv
+    and st rectangles gives (u, v, s, t); the cells stored at that sample are marked
+    (``interpolate="uv"``: also the 2 x 2 samples around (u, v); ``"st"``: around (s, t);
+    ``"uv+st"``: the 16 around both, §4.1). A pixel whose line misses either rectangle, runs
+    parallel to a plane, or crosses st before uv marks nothing. Then only the marked cells'
+    triangles are rasterized on the GPU (faces are kept sorted by cell: one draw per run of
+    marked cells). Returns a :class:`FieldView` (``marked`` (C,) bool, ``image`` a
+    :class:`DepthImages`, ``stats``, ``timings`` ``resample`` and ``render``).
 
     Parameters
     ----------
@@ -262,8 +319,19 @@ def reconstruct(
         column) of the sample each face came from, ``timings`` (``offset`` for rendering H,
         then the method's own step).
     """
+    fields = images if isinstance(images, (list, tuple)) else [images]
+    if fields and all(isinstance(f, VisibilityField) for f in fields):
+        if not isinstance(method, Camera):
+            raise InputError("reconstruct(field, camera): the second argument must be a Camera")
+        if scene is not None or offset is not None:
+            raise InputError("scene and offset apply to depth images, not a visibility field")
+        return field_view(fields, method, interpolate=interpolate, subsample=subsample)
     if not isinstance(images, DepthImages):
-        raise InputError(f"images must be a DepthImages, got {type(images).__name__}")
+        raise InputError(
+            f"images must be a DepthImages or a VisibilityField, got {type(images).__name__}"
+        )
+    if interpolate != "none" or subsample != 1:
+        raise InputError("interpolate and subsample apply to a visibility field")
     if method not in RECONSTRUCT_METHODS:
         raise InputError(f"method must be one of {list(RECONSTRUCT_METHODS)}, got {method!r}")
     timings: dict[str, float] = {}

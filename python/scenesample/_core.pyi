@@ -11,19 +11,23 @@ __all__ = [
     "Camera",
     "Scene",
     "cast_rays",
+    "default_slab",
     "device_info",
     "discretize_conventional",
     "discretize_nonredundant",
     "discretize_peeling",
     "epr_points",
     "epr_shadow_points",
+    "field_view",
     "omni_shadows",
     "read_exr",
     "reflections",
     "reconstruct",
+    "render_cells",
     "sampling_metrics",
     "soft_shadows",
     "splat",
+    "visibility_field",
     "write_exr",
     "__version__",
 ]
@@ -248,6 +252,35 @@ def reflections(
     rho_scale: float,
     seed: int,
 ) -> dict[str, Any]: ...
+def default_slab(scene: Scene, axis: Optional[int], margin: float, widen: float) -> np.ndarray: ...
+def visibility_field(
+    scene: Scene,
+    slabs: Sequence[ArrayLike],
+    uv: tuple[int, int],
+    st: tuple[int, int],
+    grid: tuple[int, int, int],
+    grouping: str,
+    ids_per_sample: int,
+    supersample: int,
+    jitter: Optional[int],
+) -> dict[str, Any]: ...
+def field_view(
+    sorted_scene: Scene,
+    triangles: np.ndarray,
+    offsets: np.ndarray,
+    slabs: Sequence[ArrayLike],
+    ids: Sequence[np.ndarray],
+    camera: Camera,
+    interpolate: str,
+    subsample: int,
+) -> dict[str, Any]: ...
+def render_cells(
+    sorted_scene: Scene,
+    triangles: np.ndarray,
+    offsets: np.ndarray,
+    marked: np.ndarray,
+    camera: Camera,
+) -> tuple[dict[str, Any], int]: ...
 def cast_rays(
     scene: Scene,
     origins: ArrayLike,

@@ -14,7 +14,7 @@ from .results import DepthImages, Mesh
 
 __all__ = ["evaluate", "intermediate_cameras"]
 
-METRICS = ("sampling", "shadow", "geometry", "image")
+METRICS = ("sampling", "shadow", "geometry", "image", "cells")
 
 
 def intermediate_cameras(region: Sequence[Any], count: int, seed: int = 0) -> list[Any]:
@@ -57,6 +57,7 @@ def evaluate(
     seed: int = 0,
     cameras: Optional[Sequence[Any]] = None,
     tolerance: float = 0.01,
+    camera: Optional[Any] = None,
 ) -> dict[str, Any]:
     """Measure a result's accuracy. The metric defaults from the first argument's type:
     ``DepthImages`` -> ``"sampling"``, ``ShadowResult`` and ``OmniShadowResult`` ->
@@ -83,6 +84,19 @@ def evaluate(
     as a fraction of the true surface's pixels), ``mean_depth_error`` and ``max_depth_error``
     (world units, where both have a surface), and ``timings``. The tolerance at depth d is
     ``tolerance * d`` plus one pixel footprint.
+
+    ``evaluate(view, scene, "cells", camera=None)`` measures a :class:`FieldView`
+    (visibility-field.txt §6) against a full rasterization of ``scene`` from its camera (or
+    ``camera``, for which the view is re-rendered): ``cells_rendered`` (marked),
+    ``cells_fraction`` (of the non-empty cells), ``cells_visible`` (holding a triangle some
+    pixel of the full rasterization sees), ``missed_cells`` (visible, not marked) and
+    ``missed_fraction`` (of the visible), ``hole_pixels`` (pixels whose true triangle is in an
+    unmarked cell) and ``hole_mask`` (H, W), ``extra_cells`` (marked, not visible),
+    ``triangles_drawn``; and the seconds of the three strategies: ``time_zbuffer`` (all
+    geometry), ``time_field`` (resample + render the marked cells), ``time_tracing``
+    (visibility tracing: BVH rays from the camera through the same subsampled pixels, then
+    render the cells they hit), with ``tracing_cells``, ``tracing_missed_cells`` and
+    ``tracing_triangles``.
 
     The rest of this docstring describes ``"sampling"``: how well a set of depth images
     samples a scene (non-redundant-rendering.txt §6.1.2).
@@ -130,6 +144,7 @@ def evaluate(
     InputError
         Unknown metric or redundancy, images without reference cameras, bad ``intermediate``.
     """
+    from ._field import FieldView, cells_metric
     from ._omni import OmniShadowResult
     from ._reflections import ReflectionResult, image_metrics
     from ._shadows import ShadowResult
@@ -140,6 +155,7 @@ def evaluate(
             OmniShadowResult: "shadow",
             Mesh: "geometry",
             ReflectionResult: "image",
+            FieldView: "cells",
         }.get(type(images), "sampling")
     if metric not in METRICS:
         raise InputError(f"metric must be one of {list(METRICS)}, got {metric!r}")
@@ -147,6 +163,8 @@ def evaluate(
         return image_metrics(images, scene)
     if metric == "shadow":
         return _shadow_error(images, scene)
+    if metric == "cells":
+        return cells_metric(images, scene, camera)
     if metric == "geometry":
         return _geometry_error(images, scene, cameras, tolerance)
     if not isinstance(images, DepthImages):

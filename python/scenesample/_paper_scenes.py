@@ -9,7 +9,7 @@ all vectorised over the copies of a primitive.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Optional
 
 import numpy as np
 
@@ -18,19 +18,29 @@ from ._scene import Scene
 __all__ = ["grass", "urban", "bird_nest", "tree", "turtles", "reference_cameras", "PAPER_SCENES"]
 
 
-def _merge(parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> Scene:
-    """(vertices (k, n, 3), faces (f, 3) shared by the k copies, colour (k, 3)) parts -> Scene."""
-    verts, faces, colors = [], [], []
+def _merge(
+    parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]], labels: Optional[list[str]] = None
+) -> Scene:
+    """(vertices (k, n, 3), faces (f, 3) shared by the k copies, colour (k, 3)) parts -> Scene.
+    With ``labels`` (one per part), every copy is its own object, named "label i" ("label"
+    for a part with one copy); otherwise the scene is one object."""
+    verts, faces, colors, objs, names = [], [], [], [], []
     base = 0
-    for v, f, c in parts:
+    for p, (v, f, c) in enumerate(parts):
         k, n, _ = v.shape
         offsets = base + n * np.arange(k)[:, None, None]
         faces.append((f[None] + offsets).reshape(-1, 3))
         verts.append(v.reshape(-1, 3))
         colors.append(np.repeat(c, n, axis=0))
         base += k * n
+        if labels is not None:
+            objs.append(len(names) + np.repeat(np.arange(k), len(f)))
+            names += [labels[p] if k == 1 else f"{labels[p]} {i}" for i in range(k)]
+    extra: dict = {}
+    if labels is not None:
+        extra = {"object_ids": np.concatenate(objs), "objects": names}
     return Scene.from_arrays(
-        np.concatenate(verts), np.concatenate(faces), colors=np.concatenate(colors)
+        np.concatenate(verts), np.concatenate(faces), colors=np.concatenate(colors), **extra
     )
 
 
@@ -238,7 +248,8 @@ def tree(seed: int = 0, leaves: int = 50000) -> Scene:
 
 def turtles(seed: int = 0, count: int = 16) -> Scene:
     """``count`` copies of one turtle (a shell, a head and four legs: closed ellipsoids) on a
-    grid, each turned and shifted at random: several copies of one object. z is up."""
+    grid, each turned and shifted at random, on a ground square: several copies of one object.
+    Each turtle is its own object ("turtle 0", ...), as is the "ground". z is up."""
     rng = np.random.default_rng(seed)
     parts_c = np.array(
         [
@@ -275,7 +286,7 @@ def turtles(seed: int = 0, count: int = 16) -> Scene:
     verts = np.einsum("kij,nj->kni", rot, one_v)
     verts[..., :2] += offset[:, None]
     green = np.tile([[0.3, 0.5, 0.25]], (count, 1))
-    return _merge([(verts, one_f, green), _ground(0.8 * side + 0.6)])
+    return _merge([(verts, one_f, green), _ground(0.8 * side + 0.6)], ["turtle", "ground"])
 
 
 def reference_cameras(

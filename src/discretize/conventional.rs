@@ -48,8 +48,25 @@ pub fn discretize_conventional(
     cameras: &[Camera],
     cull_backfaces: bool,
 ) -> Result<DepthImages> {
+    discretize_ranges(scene, cameras, cull_backfaces, None)
+}
+
+/// Like `discretize_conventional`, drawing only the triangles in `ranges` (`[a, b)` index
+/// ranges of the scene's faces, e.g. the visibility field's marked cells) when given.
+pub fn discretize_ranges(
+    scene: &Scene,
+    cameras: &[Camera],
+    cull_backfaces: bool,
+    ranges: Option<&[(u32, u32)]>,
+) -> Result<DepthImages> {
     let total = Instant::now();
     check_cameras(cameras)?;
+    if let Some(rs) = ranges {
+        let n = scene.triangle_count() as u32;
+        if let Some(&(a, b)) = rs.iter().find(|&&(a, b)| a > b || b > n) {
+            return input_err!("triangle range [{a}, {b}) is not within the scene's {n} faces");
+        }
+    }
     let first = &cameras[0];
     let start = Instant::now();
     let ctx = gpu::context()?;
@@ -61,7 +78,7 @@ pub fn discretize_conventional(
     let rays: Vec<PixelRays> = cameras.iter().map(PixelRays::new).collect();
     let npx = first.width as usize * first.height as usize;
     // Each chunk of ids is resolved as it arrives, while the GPU renders the next chunk.
-    let raw = gpu::depth::rasterize(&ctx, scene, cameras, cull_backfaces, |at, ids| {
+    let raw = gpu::depth::rasterize(&ctx, scene, cameras, cull_backfaces, ranges, |at, ids| {
         let range = at * npx..at * npx + ids.len();
         img.triangle[range.clone()].copy_from_slice(ids);
         resolve_into(&mut img, range, &rays, planes);

@@ -1,13 +1,16 @@
 //! Discretizations of a scene into samples (non-redundant-rendering.txt): `conventional` depth
 //! images (one per camera, the baseline of §3), `nonredundant` images (§3.2, Algorithm 1 with
 //! pixel or visibility redundancy) and depth `peeling` layers, and the `redundancy` tests
-//! (§3.1) they and the sampling metrics share.
+//! (§3.1) they and the sampling metrics share; eye-based points for many off-screen views
+//! (`epr`, eye-based-point-rendering.txt §3) and the `visibility_field` of grid cells first hit
+//! along the lines of a two-plane slab (visibility-field.txt §3).
 
 pub mod conventional;
 pub mod epr;
 pub mod nonredundant;
 pub mod redundancy;
+pub mod visibility_field;
 
-pub use conventional::{discretize_conventional, DepthImages};
+pub use conventional::{discretize_conventional, discretize_ranges, DepthImages};
 pub use nonredundant::{centroid_camera, discretize_nonredundant, discretize_peeling};
 pub use redundancy::Redundancy;

@@ -232,7 +232,7 @@ pub fn sampling_metrics(
     if !frames.is_empty() {
         let ctx = gpu::context()?;
         let mut failure = None;
-        gpu::depth::rasterize(&ctx, scene, frames, cull_backfaces, |first, ids| {
+        gpu::depth::rasterize(&ctx, scene, frames, cull_backfaces, None, |first, ids| {
             if failure.is_some() {
                 return;
             }

@@ -85,12 +85,14 @@ const PIXELS_PER_CHUNK: u64 = 1 << 20;
 
 /// Rasterise `scene` from every camera (all of one resolution). Images are rendered in chunks;
 /// `on_chunk(first, ids)` receives the triangle ids of images `first..first + k` (row-major,
-/// −1 where empty) while the GPU already renders the next chunk.
+/// −1 where empty) while the GPU already renders the next chunk. With `ranges`, only the
+/// triangles in those ranges `[a, b)` are drawn (ids stay the scene's).
 pub fn rasterize(
     ctx: &GpuContext,
     scene: &Scene,
     cameras: &[Camera],
     cull_backfaces: bool,
+    ranges: Option<&[(u32, u32)]>,
     mut on_chunk: impl FnMut(usize, &[i32]),
 ) -> Result<RasterStats> {
     let (w, h) = (cameras[0].width, cameras[0].height);
@@ -133,6 +135,7 @@ pub fn rasterize(
             &targets,
             cams,
             cull_backfaces,
+            ranges,
             row_tri,
             c * chunk,
         );
@@ -197,6 +200,7 @@ fn submit_chunk(
     targets: &Targets,
     cameras: &[Camera],
     cull_backfaces: bool,
+    ranges: Option<&[(u32, u32)]>,
     row_tri: u64,
     first: usize,
 ) -> Pending {
@@ -246,6 +250,7 @@ fn submit_chunk(
     let image_bytes = row_tri * h as u64;
     for i in 0..n {
         let pass = IdPass {
+            ranges,
             tri_view: &targets.tri_view,
             depth_view: &targets.depth_view,
             store_depth: false,

@@ -323,6 +323,7 @@ pub fn render(
     let mut encoder = device.create_command_encoder(&Default::default());
     for i in 0..n {
         let pass = IdPass {
+            ranges: None,
             tri_view: &tri_view,
             depth_view: &depth_views[i as usize % 2],
             store_depth: true,

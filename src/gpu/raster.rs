@@ -121,6 +121,9 @@ pub struct IdPass<'a> {
     pub bind: &'a wgpu::BindGroup,
     /// Dynamic offsets of this image's uniforms, in binding order.
     pub offsets: &'a [u32],
+    /// Draw only these triangle ranges `[a, b)` (the shader must add the instance index to its
+    /// primitive index, as depth.wgsl does); `None`: every triangle in one draw.
+    pub ranges: Option<&'a [(u32, u32)]>,
 }
 
 /// Record pass `i`: clear ids to −1 and depth to far, draw every triangle of the scene.
@@ -167,7 +170,16 @@ pub fn draw_ids(
     rp.set_bind_group(0, pass.bind, pass.offsets);
     rp.set_vertex_buffer(0, buffers.positions.slice(..));
     rp.set_index_buffer(buffers.faces.slice(..), wgpu::IndexFormat::Uint32);
-    rp.draw_indexed(0..3 * buffers.triangle_count, 0, 0..1);
+    match pass.ranges {
+        None => rp.draw_indexed(0..3 * buffers.triangle_count, 0, 0..1),
+        // One draw per range; its first triangle rides in the instance index, which the shader
+        // adds to the primitive index (which restarts at 0 in every draw).
+        Some(ranges) => {
+            for &(a, b) in ranges {
+                rp.draw_indexed(3 * a..3 * b, 0, a..a + 1);
+            }
+        }
+    }
 }
 
 /// Begin and end timestamps of `n` passes, resolved into a mappable buffer.

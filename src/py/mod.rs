@@ -7,6 +7,7 @@ mod convert;
 mod effects;
 mod errors;
 mod evaluate;
+mod field;
 mod reconstruct;
 mod render;
 mod scene;
@@ -31,6 +32,10 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(splat::splat, m)?)?;
     m.add_function(wrap_pyfunction!(shadows::omni_shadows, m)?)?;
     m.add_function(wrap_pyfunction!(effects::reflections, m)?)?;
+    m.add_function(wrap_pyfunction!(field::default_slab, m)?)?;
+    m.add_function(wrap_pyfunction!(field::visibility_field, m)?)?;
+    m.add_function(wrap_pyfunction!(field::field_view, m)?)?;
+    m.add_function(wrap_pyfunction!(field::render_cells, m)?)?;
     m.add_function(wrap_pyfunction!(render::device_info, m)?)?;
     m.add_function(wrap_pyfunction!(render::write_exr, m)?)?;
     m.add_function(wrap_pyfunction!(render::read_exr, m)?)?;

@@ -12,7 +12,7 @@ use super::errors::{input, IntoPy};
 use super::scene::PyScene;
 use crate::discretize::DepthImages;
 
-fn images_dict<'py>(py: Python<'py>, img: DepthImages) -> PyResult<Bound<'py, PyDict>> {
+pub(super) fn images_dict<'py>(py: Python<'py>, img: DepthImages) -> PyResult<Bound<'py, PyDict>> {
     let (n, h, w) = (img.n, img.height as usize, img.width as usize);
     let d = PyDict::new(py);
     d.set_item("depth", array(py, img.depth, &[n, h, w])?)?;

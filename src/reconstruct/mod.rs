@@ -1,8 +1,10 @@
 //! Surfaces rebuilt from depth-image samples (non-redundant-rendering.txt §4): the conventional
 //! depth-image `mesh`, the `hybrid` reconstruction of Algorithm 4, and oriented square `points`.
 //! All three read the same per-sample data — world position, geometric normal, triangle id and
-//! the camera — and return one triangle soup with, per face, the sample it came from.
+//! the camera — and return one triangle soup with, per face, the sample it came from. `field`
+//! renders a view from the visibility field instead (visibility-field.txt §4).
 
+pub mod field;
 pub mod hybrid;
 pub mod mesh;
 pub mod points;

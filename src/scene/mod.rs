@@ -10,7 +10,7 @@ use glam::{DVec3, Vec3};
 
 use crate::camera::Camera;
 use crate::error::Result;
-use crate::scene_err;
+use crate::{input_err, scene_err};
 
 /// A glTF metallic-roughness material, reduced to the factors the methods use.
 #[derive(Clone, Debug, PartialEq)]
@@ -126,6 +126,31 @@ impl Scene {
             planes: OnceLock::new(),
             gpu: Mutex::new(None),
         })
+    }
+
+    /// The same scene with its faces (and their material and object ids) in `order`: face i of
+    /// the result is face `order[i]` of this one. `order` must be a permutation.
+    pub fn permuted(&self, order: &[u32]) -> Result<Self> {
+        let n = self.triangle_count();
+        let mut seen = vec![false; n];
+        if order.len() != n
+            || order
+                .iter()
+                .any(|&i| (i as usize) >= n || std::mem::replace(&mut seen[i as usize], true))
+        {
+            return input_err!("a face order must be a permutation of the {n} faces");
+        }
+        let pick = |v: &[i32]| order.iter().map(|&i| v[i as usize]).collect::<Vec<_>>();
+        let mut parts = self.parts.clone();
+        parts.faces = order
+            .iter()
+            .map(|&i| self.parts.faces[i as usize])
+            .collect();
+        parts.material_ids = pick(&self.parts.material_ids);
+        parts.object_ids = pick(&self.parts.object_ids);
+        parts.colors = Some(self.colors.clone());
+        parts.warnings.clear();
+        Self::new(parts)
     }
 
     /// A scene from plain arrays: no materials (id −1), one object, white unless `colors`.

@@ -1,0 +1,519 @@
+//! The visibility field (visibility-field.txt §3): which grid cells of the scene's geometry are
+//! first hit along the lines of a two-plane parameterization.
+//!
+//! - Cells (§3.2): every group of geometry (an object, or a connected component when the scene
+//!   has a single object, or the scene as a whole) is divided by a grid over its bounding box;
+//!   a triangle belongs to the cell holding its centroid, so each triangle is in exactly one
+//!   cell. Only non-empty cells get ids, in (group, z, y, x) order; their triangles are listed
+//!   cell after cell (CSR).
+//! - Slab (§3): a line is given by where it crosses two rectangles, the uv and st planes, in
+//!   rectangle coordinates (u, v) and (s, t) in [0, 1)². The field stores the lines running
+//!   from the uv plane toward the st plane, and what is first hit between the two planes.
+//! - Sampling with pre-filtering (§3.3): sample (iu, iv, is, it) casts `supersample⁴` rays
+//!   through a `supersample × supersample` grid of positions in its uv cell and in its st cell
+//!   (3 × 3 on each plane → 81 rays) and keeps the `n` cell ids hit most often (ties: the lower
+//!   id first), −1 for the rest. The positions are the centres of a regular sub-grid (the
+//!   paper's), or with `jitter` a seeded random point in each sub-cell (stratified).
+
+use std::collections::HashMap;
+use std::time::Instant;
+
+use glam::{DVec2, DVec3};
+use rayon::prelude::*;
+
+use crate::error::Result;
+use crate::input_err;
+use crate::scene::Scene;
+
+/// A rectangle: the points `origin + a·u + b·v` for `a, b` in [0, 1].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Rect {
+    pub origin: DVec3,
+    pub u: DVec3,
+    pub v: DVec3,
+}
+
+impl Rect {
+    pub fn new(origin: DVec3, u: DVec3, v: DVec3) -> Result<Self> {
+        if !(origin.is_finite() && u.is_finite() && v.is_finite()) {
+            return input_err!("a slab rectangle needs a finite origin and edges");
+        }
+        let n = u.cross(v).length();
+        if n.is_nan() || n <= 1e-12 * u.length() * v.length() || n == 0.0 {
+            return input_err!("a slab rectangle's edges must be non-zero and not parallel");
+        }
+        Ok(Self { origin, u, v })
+    }
+
+    pub fn point(&self, a: f64, b: f64) -> DVec3 {
+        self.origin + self.u * a + self.v * b
+    }
+
+    pub fn normal(&self) -> DVec3 {
+        self.u.cross(self.v).normalize()
+    }
+
+    /// Where the line `o + λ·d` crosses the rectangle's plane: (λ, rectangle coordinates).
+    /// `None` when the line runs parallel to the plane (within 1e-12 of its length).
+    pub fn cross(&self, o: DVec3, d: DVec3) -> Option<(f64, DVec2)> {
+        let n = self.normal();
+        let dn = d.dot(n);
+        if dn.abs() <= 1e-12 * d.length() {
+            return None;
+        }
+        let lambda = (self.origin - o).dot(n) / dn;
+        let p = o + d * lambda - self.origin;
+        // Solve p = a·u + b·v in the plane (Gram matrix).
+        let (uu, uv, vv) = (self.u.dot(self.u), self.u.dot(self.v), self.v.dot(self.v));
+        let (pu, pv) = (p.dot(self.u), p.dot(self.v));
+        let det = uu * vv - uv * uv;
+        let a = (pu * vv - pv * uv) / det;
+        let b = (pv * uu - pu * uv) / det;
+        (lambda.is_finite() && a.is_finite() && b.is_finite()).then_some((lambda, DVec2::new(a, b)))
+    }
+}
+
+/// Two rectangles parameterizing lines (§3): uv first, st second.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Slab {
+    pub uv: Rect,
+    pub st: Rect,
+}
+
+impl Slab {
+    /// The slab around `scene`: planes perpendicular to `axis` (default: the bounds' longest),
+    /// uv a `margin` (fraction of the scene's extent along the axis, at least 1e-3 of its
+    /// diagonal) before the bounds' low side, st as far beyond the high side; both rectangles
+    /// cover the bounds' cross-section widened on every side by `widen` times the bounds'
+    /// longest extent, so that oblique and perspective rays that cross the scene (even a flat
+    /// one) still cross both planes.
+    pub fn around(scene: &Scene, axis: Option<usize>, margin: f64, widen: f64) -> Result<Self> {
+        let [lo, hi] = scene.bounds().map(|b| DVec3::from_array(b.map(f64::from)));
+        let ext = hi - lo;
+        let axis = match axis {
+            Some(a) if a < 3 => a,
+            Some(a) => return input_err!("axis must be 0, 1 or 2, got {a}"),
+            None => {
+                if ext.x >= ext.y && ext.x >= ext.z {
+                    0
+                } else if ext.y >= ext.z {
+                    1
+                } else {
+                    2
+                }
+            }
+        };
+        if !(margin.is_finite() && margin >= 0.0 && widen.is_finite() && widen >= 0.0) {
+            return input_err!("margin and widen must be finite and >= 0");
+        }
+        let (a1, a2) = ((axis + 1) % 3, (axis + 2) % 3);
+        let floor = 1e-3 * scene.diagonal();
+        let gap = (margin * ext[axis]).max(floor);
+        let e = |k: usize| DVec3::AXES[k];
+        let pad = widen * ext.max_element();
+        let side = |k: usize| (ext[k] + 2.0 * pad).max(floor);
+        let corner = |along: f64| {
+            let mut c = lo - e(a1) * pad - e(a2) * pad;
+            c[axis] = along;
+            c
+        };
+        let rect = |along| Rect::new(corner(along), e(a1) * side(a1), e(a2) * side(a2));
+        Ok(Self {
+            uv: rect(lo[axis] - gap)?,
+            st: rect(hi[axis] + gap)?,
+        })
+    }
+
+    /// The line coordinates (u, v, s, t) of the ray `o + λ·d`, when it crosses the uv plane
+    /// before the st plane (so that it runs the way the field was sampled) and both inside
+    /// their rectangles; `None` otherwise (parallel to a plane, backwards, or outside).
+    pub fn line(&self, o: DVec3, d: DVec3) -> Option<[f64; 4]> {
+        let (l_uv, uv) = self.uv.cross(o, d)?;
+        let (l_st, st) = self.st.cross(o, d)?;
+        if l_st <= l_uv {
+            return None;
+        }
+        let q = [uv.x, uv.y, st.x, st.y];
+        q.iter().all(|x| (0.0..1.0).contains(x)).then_some(q)
+    }
+}
+
+/// How geometry is grouped before the grid divides it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Grouping {
+    /// Per object (glTF mesh / node); per connected component when the scene has one object.
+    Objects,
+    /// The scene as a whole.
+    Scene,
+}
+
+/// The grid cells of a scene (§3.2).
+#[derive(Debug, Clone, Default)]
+pub struct Cells {
+    /// Per triangle, its cell id.
+    pub cell_of: Vec<u32>,
+    /// Per cell: (group, x, y, z).
+    pub table: Vec<[i32; 4]>,
+    /// Per cell: the bounds of its grid box (low, high).
+    pub bounds: Vec<[[f32; 3]; 2]>,
+    /// CSR: the triangles of cell c are `triangles[offsets[c]..offsets[c + 1]]`.
+    pub offsets: Vec<u32>,
+    pub triangles: Vec<u32>,
+    pub groups: usize,
+}
+
+/// Group ids per triangle: connected components (triangles sharing a vertex position).
+fn components(scene: &Scene) -> (Vec<u32>, usize) {
+    let verts = scene.vertices();
+    // Weld vertices by exact position, so that split (flat-shaded) vertices still connect.
+    let mut weld: HashMap<[u32; 3], u32> = HashMap::with_capacity(verts.len());
+    let key: Vec<u32> = verts
+        .iter()
+        .map(|p| {
+            let n = weld.len() as u32;
+            *weld.entry(p.map(f32::to_bits)).or_insert(n)
+        })
+        .collect();
+    let mut parent: Vec<u32> = (0..weld.len() as u32).collect();
+    fn find(parent: &mut [u32], mut x: u32) -> u32 {
+        while parent[x as usize] != x {
+            parent[x as usize] = parent[parent[x as usize] as usize];
+            x = parent[x as usize];
+        }
+        x
+    }
+    for f in scene.faces() {
+        let a = find(&mut parent, key[f[0] as usize]);
+        for &i in &f[1..] {
+            let b = find(&mut parent, key[i as usize]);
+            if a != b {
+                parent[b as usize] = a;
+            }
+        }
+    }
+    let mut label: HashMap<u32, u32> = HashMap::new();
+    let groups: Vec<u32> = scene
+        .faces()
+        .iter()
+        .map(|f| {
+            let r = find(&mut parent, key[f[0] as usize]);
+            let n = label.len() as u32;
+            *label.entry(r).or_insert(n)
+        })
+        .collect();
+    let count = label.len();
+    (groups, count)
+}
+
+/// Divide the scene's geometry into cells: `grid` cells along x, y and z of each group's
+/// bounding box.
+pub fn cells(scene: &Scene, grid: [u32; 3], grouping: Grouping) -> Result<Cells> {
+    if grid.contains(&0) {
+        return input_err!("grid must be positive along every axis, got {grid:?}");
+    }
+    if grid.iter().map(|&g| g as u64).product::<u64>() > 1 << 24 {
+        return input_err!("grid {grid:?} has more than 2^24 cells per group");
+    }
+    let n = scene.triangle_count();
+    let (group, groups) = match grouping {
+        Grouping::Scene => (vec![0u32; n], usize::from(n > 0)),
+        Grouping::Objects if scene.objects().len() > 1 => {
+            let g: Vec<u32> = scene
+                .object_ids()
+                .iter()
+                .map(|&o| o.max(0) as u32)
+                .collect();
+            let count = g.iter().map(|&x| x as usize + 1).max().unwrap_or(0);
+            (g, count)
+        }
+        Grouping::Objects => components(scene),
+    };
+    let centroid = |t: usize| {
+        let p = scene.triangle(t);
+        (p[0] + p[1] + p[2]) / 3.0
+    };
+    let mut lo = vec![DVec3::splat(f64::INFINITY); groups];
+    let mut hi = vec![DVec3::splat(f64::NEG_INFINITY); groups];
+    for (t, f) in scene.faces().iter().enumerate() {
+        let g = group[t] as usize;
+        for &i in f {
+            let p = DVec3::from_array(scene.vertices()[i as usize].map(f64::from));
+            lo[g] = lo[g].min(p);
+            hi[g] = hi[g].max(p);
+        }
+    }
+    let dims = DVec3::new(grid[0] as f64, grid[1] as f64, grid[2] as f64);
+    // (group, z, y, x) key of every triangle's cell.
+    let keys: Vec<(u32, [u32; 3])> = (0..n)
+        .map(|t| {
+            let g = group[t] as usize;
+            let size = (hi[g] - lo[g]).max(DVec3::splat(f64::MIN_POSITIVE));
+            let r = ((centroid(t) - lo[g]) / size * dims).floor();
+            let c = |k: usize| (r[k].max(0.0) as u32).min(grid[k] - 1);
+            (group[t], [c(0), c(1), c(2)])
+        })
+        .collect();
+    let mut order: Vec<u32> = (0..n as u32).collect();
+    order.sort_by_key(|&t| {
+        let (g, c) = keys[t as usize];
+        (g, c[2], c[1], c[0], t)
+    });
+    let mut out = Cells {
+        cell_of: vec![0; n],
+        groups,
+        ..Default::default()
+    };
+    let mut last = None;
+    for (k, &t) in order.iter().enumerate() {
+        let key = keys[t as usize];
+        if last != Some(key) {
+            last = Some(key);
+            let (g, c) = key;
+            let size = (hi[g as usize] - lo[g as usize]) / dims;
+            let cell_lo = lo[g as usize] + size * DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64);
+            out.table
+                .push([g as i32, c[0] as i32, c[1] as i32, c[2] as i32]);
+            out.bounds.push([
+                cell_lo.as_vec3().to_array(),
+                (cell_lo + size).as_vec3().to_array(),
+            ]);
+            out.offsets.push(k as u32);
+        }
+        out.cell_of[t as usize] = (out.table.len() - 1) as u32;
+    }
+    out.offsets.push(n as u32);
+    out.triangles = order;
+    Ok(out)
+}
+
+/// A sampled visibility field of one slab.
+#[derive(Debug, Clone)]
+pub struct Field {
+    /// (U, V, S, T).
+    pub dims: [u32; 4],
+    /// Ids per sample.
+    pub n: u32,
+    /// (U, V, S, T, n) row-major cell ids, −1 empty.
+    pub ids: Vec<i32>,
+    pub rays: u64,
+    pub timings: Vec<(String, f64)>,
+}
+
+/// How a sample's rays are placed in its uv and st cells.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Supersample {
+    /// Positions per axis of each plane's cell (3 → 3 × 3 per plane, 81 rays).
+    pub per_axis: u32,
+    /// `Some(seed)`: a seeded random point in each sub-cell; `None`: sub-cell centres.
+    pub jitter: Option<u64>,
+}
+
+/// Sample the field (§3.3): `uv` and `st` samples per plane, `n` ids per sample.
+pub fn sample(
+    scene: &Scene,
+    slab: &Slab,
+    uv: [u32; 2],
+    st: [u32; 2],
+    cells: &Cells,
+    n: u32,
+    supersample: Supersample,
+) -> Result<Field> {
+    let Supersample {
+        per_axis: supersample,
+        jitter,
+    } = supersample;
+    let total = Instant::now();
+    let dims = [uv[0], uv[1], st[0], st[1]];
+    if dims.contains(&0) || n == 0 || supersample == 0 {
+        return input_err!(
+            "uv {uv:?}, st {st:?}, ids_per_sample {n} and supersample {supersample} must all be \
+             positive"
+        );
+    }
+    if cells.cell_of.len() != scene.triangle_count() {
+        return input_err!("the cells were made for another scene");
+    }
+    let samples: u64 = dims.iter().map(|&d| d as u64).product();
+    let per_sample = (supersample as u64).pow(4);
+    if samples * n as u64 > 1 << 31 || samples * per_sample > 1 << 36 {
+        return input_err!(
+            "{samples} samples x {n} ids ({per_sample} rays each) is too large a field"
+        );
+    }
+    let ss = supersample as usize;
+    // The offset of sub-position j along one axis of one plane in sample `at`.
+    let offset = |at: u64, j: usize| -> f64 {
+        let r = match jitter {
+            Some(seed) => {
+                let h = super::epr::mix64(seed ^ super::epr::mix64(at * ss as u64 + j as u64));
+                (h >> 11) as f64 / (1u64 << 53) as f64
+            }
+            None => 0.5,
+        };
+        (j as f64 + r) / ss as f64
+    };
+    let [du, dv, ds, dt] = dims.map(|d| d as usize);
+    let mut ids = vec![-1i32; samples as usize * n as usize];
+    let mut cast_seconds = 0.0;
+    let mut rank_seconds = 0.0;
+    // One uv sample at a time: its (S·T·ss⁴) rays in one batch.
+    let st_count = ds * dt;
+    let rays_per_uv = st_count * ss.pow(4);
+    for iu in 0..du {
+        for iv in 0..dv {
+            let start = Instant::now();
+            let mut origins = Vec::with_capacity(rays_per_uv);
+            let mut dirs = Vec::with_capacity(rays_per_uv);
+            for is in 0..ds {
+                for it in 0..dt {
+                    // A distinct stream of jitter per sample and axis.
+                    let at = ((((iu * dv + iv) * ds + is) * dt + it) * 4) as u64;
+                    for ou in (0..ss).map(|j| offset(at, j)) {
+                        for ov in (0..ss).map(|j| offset(at + 1, j)) {
+                            let a = slab
+                                .uv
+                                .point((iu as f64 + ou) / du as f64, (iv as f64 + ov) / dv as f64);
+                            for os in (0..ss).map(|j| offset(at + 2, j)) {
+                                for ot in (0..ss).map(|j| offset(at + 3, j)) {
+                                    let b = slab.st.point(
+                                        (is as f64 + os) / ds as f64,
+                                        (it as f64 + ot) / dt as f64,
+                                    );
+                                    origins.push(a.as_vec3().to_array());
+                                    dirs.push((b - a).as_vec3().to_array());
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+            let hits = crate::trace::cast_rays(scene, &origins, &dirs, 0.0, 1.0)?;
+            cast_seconds += start.elapsed().as_secs_f64();
+            let start = Instant::now();
+            let per = ss.pow(4);
+            let base = (iu * dv + iv) * st_count * n as usize;
+            ids[base..base + st_count * n as usize]
+                .par_chunks_mut(n as usize)
+                .zip(hits.triangle.par_chunks(per))
+                .for_each(|(out, tris)| {
+                    let mut hit: Vec<u32> = tris
+                        .iter()
+                        .filter(|&&t| t >= 0)
+                        .map(|&t| cells.cell_of[t as usize])
+                        .collect();
+                    hit.sort_unstable();
+                    let mut counts: Vec<(usize, u32)> = Vec::new();
+                    for c in hit {
+                        match counts.last_mut() {
+                            Some((k, last)) if *last == c => *k += 1,
+                            _ => counts.push((1, c)),
+                        }
+                    }
+                    counts.sort_by(|a, b| b.0.cmp(&a.0).then(a.1.cmp(&b.1)));
+                    for (slot, &(_, c)) in out.iter_mut().zip(&counts) {
+                        *slot = c as i32;
+                    }
+                });
+            rank_seconds += start.elapsed().as_secs_f64();
+        }
+    }
+    Ok(Field {
+        dims,
+        n,
+        ids,
+        rays: samples * per_sample,
+        timings: vec![
+            ("rays".into(), cast_seconds),
+            ("rank".into(), rank_seconds),
+            ("total".into(), total.elapsed().as_secs_f64()),
+        ],
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn quad(z: f32, size: f32) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+        (
+            vec![
+                [-size, -size, z],
+                [size, -size, z],
+                [size, size, z],
+                [-size, size, z],
+            ],
+            vec![[0, 1, 2], [0, 2, 3]],
+        )
+    }
+
+    #[test]
+    fn lines_cross_the_slab_one_way() {
+        let r = |z| Rect::new(DVec3::new(-1.0, -1.0, z), DVec3::X * 2.0, DVec3::Y * 2.0).unwrap();
+        let slab = Slab {
+            uv: r(0.0),
+            st: r(1.0),
+        };
+        let q = slab
+            .line(DVec3::new(0.0, 0.0, -1.0), DVec3::new(0.1, 0.0, 1.0))
+            .unwrap();
+        assert!(
+            (q[0] - 0.55).abs() < 1e-12 && (q[2] - 0.6).abs() < 1e-12,
+            "{q:?}"
+        );
+        // Backwards, parallel, outside.
+        assert!(slab
+            .line(DVec3::new(0.0, 0.0, 2.0), DVec3::new(0.0, 0.0, -1.0))
+            .is_none());
+        assert!(slab.line(DVec3::new(0.0, 0.0, 0.5), DVec3::X).is_none());
+        assert!(slab.line(DVec3::new(5.0, 0.0, -1.0), DVec3::Z).is_none());
+    }
+
+    #[test]
+    fn a_wall_hides_what_is_behind_it_from_every_line() {
+        let (mut v, mut f) = quad(0.3, 10.0);
+        let (v2, f2) = quad(0.6, 0.2);
+        f.extend(f2.iter().map(|t| t.map(|i| i + v.len() as u32)));
+        v.extend(v2);
+        let scene = Scene::from_arrays(v, f, None, None).unwrap();
+        let r = |z| Rect::new(DVec3::new(-1.0, -1.0, z), DVec3::X * 2.0, DVec3::Y * 2.0).unwrap();
+        let slab = Slab {
+            uv: r(0.0),
+            st: r(1.0),
+        };
+        let c = cells(&scene, [2, 2, 2], Grouping::Objects).unwrap();
+        assert_eq!(c.groups, 2);
+        let hidden: Vec<i32> = (0..c.table.len())
+            .filter(|&k| c.table[k][0] == c.table[c.cell_of[2] as usize][0])
+            .map(|k| k as i32)
+            .collect();
+        let ss = Supersample {
+            per_axis: 2,
+            jitter: None,
+        };
+        let field = sample(&scene, &slab, [4, 4], [4, 4], &c, 3, ss).unwrap();
+        let jittered = Supersample {
+            jitter: Some(7),
+            ..ss
+        };
+        let again = sample(&scene, &slab, [4, 4], [4, 4], &c, 3, jittered).unwrap();
+        assert!(again.ids.iter().all(|id| !hidden.contains(id)));
+        assert!(field.ids.iter().all(|id| !hidden.contains(id)));
+        assert!(field.ids.iter().any(|&id| id >= 0));
+        assert_eq!(field.rays, 4u64.pow(4) * 16);
+    }
+
+    #[test]
+    fn cells_partition_the_triangles() {
+        let (v, f) = quad(0.0, 1.0);
+        let scene = Scene::from_arrays(v, f, None, None).unwrap();
+        let c = cells(&scene, [4, 4, 1], Grouping::Scene).unwrap();
+        assert_eq!(c.offsets.last(), Some(&2));
+        let mut all = c.triangles.clone();
+        all.sort();
+        assert_eq!(all, vec![0, 1]);
+        for (t, &cell) in c.cell_of.iter().enumerate() {
+            let range = c.offsets[cell as usize]..c.offsets[cell as usize + 1];
+            assert!(c.triangles[range.start as usize..range.end as usize].contains(&(t as u32)));
+        }
+    }
+}

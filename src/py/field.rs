@@ -1,0 +1,246 @@
+//! The visibility field (visibility-field.txt §3-4) from Python arguments.
+
+use numpy::{PyReadonlyArray1, PyReadonlyArrayDyn, PyUntypedArrayMethods};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use super::camera::PyCamera;
+use super::convert::{array, named, rows_f64};
+use super::errors::{input, IntoPy};
+use super::scene::PyScene;
+use crate::discretize::visibility_field::{self as vf, Field, Grouping, Rect, Slab};
+use crate::reconstruct::field::{self as rf, Interpolate};
+
+/// A slab from a (2, 3, 3) array: uv then st, each (origin, u edge, v edge).
+fn slab(py: Python<'_>, obj: &Bound<'_, PyAny>) -> PyResult<Slab> {
+    let rows = rows_f64::<3>(obj, "slab")?;
+    if rows.len() != 6 {
+        return Err(input(
+            py,
+            "a slab is (2, 3, 3): uv then st, each (origin, u, v)".to_string(),
+        ));
+    }
+    let v = |i: usize| glam::DVec3::from_array(rows[i]);
+    let uv = Rect::new(v(0), v(1), v(2)).py_err(py)?;
+    let st = Rect::new(v(3), v(4), v(5)).py_err(py)?;
+    Ok(Slab { uv, st })
+}
+
+fn slab_array<'py>(py: Python<'py>, s: &Slab) -> PyResult<Bound<'py, PyAny>> {
+    let rows: Vec<f64> = [s.uv.origin, s.uv.u, s.uv.v, s.st.origin, s.st.u, s.st.v]
+        .iter()
+        .flat_map(|p| p.to_array())
+        .collect();
+    array(py, rows, &[2, 3, 3])
+}
+
+/// The default slab around a scene, as a (2, 3, 3) array.
+#[pyfunction]
+#[pyo3(signature = (scene, axis, margin, widen))]
+pub fn default_slab<'py>(
+    py: Python<'py>,
+    scene: &PyScene,
+    axis: Option<usize>,
+    margin: f64,
+    widen: f64,
+) -> PyResult<Bound<'py, PyAny>> {
+    let s = Slab::around(&scene.inner, axis, margin, widen).py_err(py)?;
+    slab_array(py, &s)
+}
+
+/// Cells and one sampled field per slab.
+#[pyfunction]
+#[pyo3(signature = (scene, slabs, uv, st, grid, grouping, ids_per_sample, supersample, jitter))]
+#[allow(clippy::too_many_arguments)]
+pub fn visibility_field<'py>(
+    py: Python<'py>,
+    scene: &PyScene,
+    slabs: Vec<Bound<'py, PyAny>>,
+    uv: (u32, u32),
+    st: (u32, u32),
+    grid: (u32, u32, u32),
+    grouping: &str,
+    ids_per_sample: u32,
+    supersample: u32,
+    jitter: Option<u64>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let supersample = vf::Supersample {
+        per_axis: supersample,
+        jitter,
+    };
+    let grouping = match grouping {
+        "objects" => Grouping::Objects,
+        "scene" => Grouping::Scene,
+        other => {
+            return Err(input(
+                py,
+                format!("grouping must be 'objects' or 'scene', got {other:?}"),
+            ))
+        }
+    };
+    let slabs = slabs
+        .iter()
+        .map(|s| slab(py, s))
+        .collect::<PyResult<Vec<_>>>()?;
+    if slabs.is_empty() {
+        return Err(input(py, "at least one slab is needed".to_string()));
+    }
+    let s = scene.inner.clone();
+    let (cells, fields, sorted, cell_seconds) = py
+        .detach(|| -> crate::error::Result<_> {
+            let start = std::time::Instant::now();
+            let cells = vf::cells(&s, [grid.0, grid.1, grid.2], grouping)?;
+            let sorted = s.permuted(&cells.triangles)?;
+            let cell_seconds = start.elapsed().as_secs_f64();
+            let fields = slabs
+                .iter()
+                .map(|sl| {
+                    vf::sample(
+                        &s,
+                        sl,
+                        [uv.0, uv.1],
+                        [st.0, st.1],
+                        &cells,
+                        ids_per_sample,
+                        supersample,
+                    )
+                })
+                .collect::<crate::error::Result<Vec<_>>>()?;
+            Ok((cells, fields, sorted, cell_seconds))
+        })
+        .py_err(py)?;
+    let d = PyDict::new(py);
+    let c = cells.table.len();
+    d.set_item("cell_of", array(py, cells.cell_of, &[s.triangle_count()])?)?;
+    d.set_item("cells", array(py, cells.table.into_flattened(), &[c, 4])?)?;
+    let bounds: Vec<f32> = cells.bounds.iter().flatten().flatten().copied().collect();
+    d.set_item("cell_bounds", array(py, bounds, &[c, 2, 3])?)?;
+    d.set_item("offsets", array(py, cells.offsets, &[c + 1])?)?;
+    let nt = cells.triangles.len();
+    d.set_item("triangles", array(py, cells.triangles, &[nt])?)?;
+    d.set_item("groups", cells.groups)?;
+    d.set_item(
+        "sorted_scene",
+        PyScene {
+            inner: std::sync::Arc::new(sorted),
+        },
+    )?;
+    d.set_item("cell_seconds", cell_seconds)?;
+    let mut out = Vec::new();
+    for (f, sl) in fields.into_iter().zip(&slabs) {
+        let fd = PyDict::new(py);
+        let shape = [
+            f.dims[0] as usize,
+            f.dims[1] as usize,
+            f.dims[2] as usize,
+            f.dims[3] as usize,
+            f.n as usize,
+        ];
+        fd.set_item("ids", array(py, f.ids, &shape)?)?;
+        fd.set_item("slab", slab_array(py, sl)?)?;
+        fd.set_item("rays", f.rays)?;
+        fd.set_item("timings", named(py, f.timings)?)?;
+        out.push(fd);
+    }
+    d.set_item("fields", out)?;
+    Ok(d)
+}
+
+/// Resample the fields from a camera and render the marked cells.
+#[pyfunction]
+#[pyo3(signature = (sorted_scene, triangles, offsets, slabs, ids, camera, interpolate, subsample))]
+#[allow(clippy::too_many_arguments)]
+pub fn field_view<'py>(
+    py: Python<'py>,
+    sorted_scene: &PyScene,
+    triangles: PyReadonlyArray1<'py, u32>,
+    offsets: PyReadonlyArray1<'py, u32>,
+    slabs: Vec<Bound<'py, PyAny>>,
+    ids: Vec<PyReadonlyArrayDyn<'py, i32>>,
+    camera: &PyCamera,
+    interpolate: &str,
+    subsample: u32,
+) -> PyResult<Bound<'py, PyDict>> {
+    let Some(interp) = Interpolate::parse(interpolate) else {
+        return Err(input(
+            py,
+            format!("interpolate must be 'none', 'uv', 'st' or 'uv+st', got {interpolate:?}"),
+        ));
+    };
+    if slabs.len() != ids.len() {
+        return Err(input(py, "one id array per slab".to_string()));
+    }
+    let mut fields = Vec::new();
+    for (s, a) in slabs.iter().zip(&ids) {
+        let shape = a.shape();
+        if shape.len() != 5 {
+            return Err(input(
+                py,
+                format!("field ids must be (U, V, S, T, n), got shape {shape:?}"),
+            ));
+        }
+        let f = Field {
+            dims: [shape[0], shape[1], shape[2], shape[3]].map(|d| d as u32),
+            n: shape[4] as u32,
+            ids: a.as_array().iter().copied().collect(),
+            rays: 0,
+            timings: Vec::new(),
+        };
+        fields.push((slab(py, s)?, f));
+    }
+    let triangles = triangles.as_array().to_vec();
+    let offsets = offsets.as_array().to_vec();
+    let cell_count = offsets.len().saturating_sub(1);
+    let scene = sorted_scene.inner.clone();
+    let cam = camera.inner.clone();
+    let (marks, img, drawn, resample_seconds, render_seconds) = py
+        .detach(|| -> crate::error::Result<_> {
+            let start = std::time::Instant::now();
+            let refs: Vec<(Slab, &Field)> = fields.iter().map(|(s, f)| (*s, f)).collect();
+            let marks = rf::resample(&refs, cell_count, &cam, interp, subsample)?;
+            let resample_seconds = start.elapsed().as_secs_f64();
+            let start = std::time::Instant::now();
+            let (img, drawn) =
+                rf::render_marked(&scene, &triangles, &offsets, &marks.marked, &cam)?;
+            Ok((
+                marks,
+                img,
+                drawn,
+                resample_seconds,
+                start.elapsed().as_secs_f64(),
+            ))
+        })
+        .py_err(py)?;
+    let d = PyDict::new(py);
+    d.set_item("marked", array(py, marks.marked, &[cell_count])?)?;
+    d.set_item("pixels", marks.pixels)?;
+    d.set_item("outside", marks.outside)?;
+    d.set_item("triangles_drawn", drawn)?;
+    d.set_item("resample_seconds", resample_seconds)?;
+    d.set_item("render_seconds", render_seconds)?;
+    d.set_item("image", super::render::images_dict(py, img)?)?;
+    Ok(d)
+}
+
+/// Render only the marked cells (of the cell-sorted scene) from a camera: the depth image's
+/// dict, triangle ids of the original scene, and the triangles drawn.
+#[pyfunction]
+#[pyo3(signature = (sorted_scene, triangles, offsets, marked, camera))]
+pub fn render_cells<'py>(
+    py: Python<'py>,
+    sorted_scene: &PyScene,
+    triangles: PyReadonlyArray1<'py, u32>,
+    offsets: PyReadonlyArray1<'py, u32>,
+    marked: PyReadonlyArray1<'py, bool>,
+    camera: &PyCamera,
+) -> PyResult<(Bound<'py, PyDict>, usize)> {
+    let triangles = triangles.as_array().to_vec();
+    let offsets = offsets.as_array().to_vec();
+    let marked = marked.as_array().to_vec();
+    let scene = sorted_scene.inner.clone();
+    let cam = camera.inner.clone();
+    let (img, drawn) = py
+        .detach(|| rf::render_marked(&scene, &triangles, &offsets, &marked, &cam))
+        .py_err(py)?;
+    Ok((super::render::images_dict(py, img)?, drawn))
+}
