@@ -246,3 +246,28 @@ def test_the_experiment_writes_tables_and_figures(tmp_path):
         assert (tmp_path / fig).stat().st_size > 10_000
     # Three 32 x 32 tiles: full rendering, field defaults, field 2 ids uv+st.
     assert (tmp_path / "fig13_sphere.png").stat().st_size > 300
+
+
+def test_two_slabs_cover_both_directions_and_grid_scene_is_one_group():
+    """A slab stores lines one way; its mirror (planes swapped) serves cameras on the other
+    side. Marks from several slabs add up. grid="scene" divides the scene as one group."""
+    scene = sphere_scene()
+    fwd = ss.Slab.around(scene)
+    back = ss.Slab(fwd.st, fwd.uv)
+    both = ss.discretize(scene, method="visibility_field", slab=[fwd, back], ids_per_sample=3)
+    assert isinstance(both, list) and len(both) == 2 and both[0].cells is both[1].cells
+    behind = front_camera((4.0, -0.3, 0.2))
+    only_fwd = ss.reconstruct(both[0], behind)
+    assert only_fwd.stats["pixels_outside"] == only_fwd.stats["pixels"]
+    view = ss.reconstruct(both, behind, interpolate="uv+st")
+    assert view.stats["pixels_outside"] < view.stats["pixels"]
+    m = ss.evaluate(view, scene, "cells")
+    assert m["missed_fraction"] < 0.1 and m["cells_rendered"] > 0
+    front = ss.reconstruct(both, front_camera(), interpolate="uv+st")
+    assert (
+        front.marked.sum()
+        >= ss.reconstruct(both[0], front_camera(), interpolate="uv+st").marked.sum()
+    )
+    whole = ss.discretize(scene, method="visibility_field", grid="scene", uv=(4, 4), st=(4, 4))
+    assert whole.stats["groups"] == 1 and (whole.cells["object"] == 0).all()
+    assert len(whole.cells) <= 16**3
