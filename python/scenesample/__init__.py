@@ -20,6 +20,7 @@ from ._core import __version__ as __version__
 from ._epr import Points, Reflector, SplatBuffers, cube_resolution, splat
 from ._evaluate import evaluate, intermediate_cameras
 from ._field import FieldView, Slab, VisibilityField
+from ._impostors import Impostors, ImpostorView
 from ._omni import OmniShadowResult, omni_shadows
 from ._reflections import ReflectionResult, reflection_reference, reflections
 from ._scene import Scene
@@ -46,6 +47,8 @@ __all__ = [
     "GpuError",
     "GpuLimitError",
     "GpuUnavailableError",
+    "ImpostorView",
+    "Impostors",
     "InputError",
     "Mesh",
     "OmniShadowResult",

@@ -11,6 +11,7 @@ import numpy as np
 from . import _core
 from ._epr import Points, epr_points
 from ._field import FieldView, Slab, VisibilityField, field_view, visibility_field
+from ._impostors import Impostors, ImpostorView, impostor_view, impostors
 from ._omni import shadow_points
 from ._scene import Scene
 from .errors import InputError
@@ -19,7 +20,15 @@ from .results import DepthImages, Mesh, RayHits
 __all__ = ["discretize", "reconstruct", "cast_rays", "device_info"]
 
 Camera = _core.Camera
-DISCRETIZE_METHODS = ("conventional", "nonredundant", "peeling", "epr", "ivir", "visibility_field")
+DISCRETIZE_METHODS = (
+    "conventional",
+    "nonredundant",
+    "peeling",
+    "epr",
+    "ivir",
+    "visibility_field",
+    "impostors",
+)
 
 
 def _scene_core(scene: Any) -> _core.Scene:
@@ -60,7 +69,12 @@ def discretize(
     grid: Any = (16, 16, 16),
     ids_per_sample: int = 1,
     supersample: int = 3,
-) -> Union[DepthImages, Points, VisibilityField, list[VisibilityField]]:
+    depth: int = 4,
+    subdivisions: int = 2,
+    projection: str = "orthographic",
+    fov: Optional[float] = None,
+    grow: bool = True,
+) -> Union[DepthImages, Points, VisibilityField, list[VisibilityField], Impostors]:
     """Sample a scene with depth images (non-redundant-rendering.txt §3, §6.1) or with points
     for many off-screen views (eye-based-point-rendering.txt §3).
 
@@ -137,6 +151,14 @@ def discretize(
         For ``visibility_field``: rays per axis of each plane's sample cell (3: 3 x 3 on each
         plane, 81 rays per sample, §3.3). ``seed`` 0 puts them at sub-cell centres (the
         paper's regular grid); any other seed jitters each within its sub-cell.
+    depth, subdivisions, projection, fov, grow
+        For ``impostors``: octree depth (leaves 2**depth per axis of the cubic bounds; empty
+        ones skipped), icosahedron subdivisions (20 * 4**s views per cell: 320 for 2),
+        ``"orthographic"`` (the paper's) or ``"perspective"`` images (camera at radius /
+        sin(fov / 2), ``fov`` in radians), and cell growing (§4.3: each cell's images show
+        every triangle that intersects its bounding sphere; without it only the geometry
+        inside the cell, rays clipped to its box). ``resolution`` is the image side (default
+        128).
 
     ``"epr"`` (§3.1-3.4, Eq. 2-4): per triangle, one visibility bit per cube-map view
     (conservative: dropped only when all vertices lie outside one plane of the 20%-enlarged
@@ -147,6 +169,11 @@ def discretize(
     1 - 10 A; every lattice cell overlapping the triangle gives a point (exact conservative
     rasterization, on the CPU, since wgpu here has none). ``"ivir"``: the same, spaced by the
     cube-map texel at the triangle's distance from the reflector.
+
+    ``"impostors"`` (multi-cell-orthographic-impostors.txt §3.1): per non-empty octree cell and
+    icosahedron direction, a ``resolution``² image of the cell ray-cast on the CPU through a
+    BVH of the cell's triangles, lit view-independently (base colour x (0.3 + 0.7 |n . L|), L
+    fixed), cropped to its content. See :class:`Impostors`.
 
     ``"visibility_field"`` (visibility-field.txt §3): for every sample (iu, iv, is, it) of the
     slab, ``supersample^4`` BVH rays from its uv cell to its st cell; the ``ids_per_sample``
@@ -174,6 +201,18 @@ def discretize(
     """
     if method not in DISCRETIZE_METHODS:
         raise InputError(f"method must be one of {list(DISCRETIZE_METHODS)}, got {method!r}")
+    if method == "impostors":
+        if cameras is not None or eye is not None:
+            raise InputError("method='impostors' makes its own views: no cameras")
+        return impostors(
+            scene,
+            depth=depth,
+            subdivisions=subdivisions,
+            resolution=128 if resolution is None else resolution,
+            projection=projection,
+            fov=fov,
+            grow=grow,
+        )
     if method == "visibility_field":
         if cameras is not None or eye is not None:
             raise InputError("method='visibility_field' samples lines through a slab: no cameras")
@@ -260,14 +299,16 @@ RECONSTRUCT_METHODS = ("mesh", "hybrid", "points")
 
 
 def reconstruct(
-    images: Union[DepthImages, VisibilityField, Sequence[VisibilityField]],
+    images: Union[DepthImages, VisibilityField, Sequence[VisibilityField], Impostors],
     method: Union[str, Camera] = "hybrid",
     *,
     scene: Optional[Scene] = None,
     offset: Optional[DepthImages] = None,
     interpolate: str = "none",
     subsample: int = 1,
-) -> Union[Mesh, FieldView]:
+    triangle_budget: Optional[int] = 0,
+    screen_threshold: float = 0.0,
+) -> Union[Mesh, FieldView, ImpostorView]:
     """Rebuild surfaces from depth-image samples (non-redundant-rendering.txt §4), or a view
     from the visibility field (visibility-field.txt §4).
 
@@ -282,6 +323,15 @@ def reconstruct(
     triangles are rasterized on the GPU (faces are kept sorted by cell: one draw per run of
     marked cells). Returns a :class:`FieldView` (``marked`` (C,) bool, ``image`` a
     :class:`DepthImages`, ``stats``, ``timings`` ``resample`` and ``render``).
+
+    ``reconstruct(impostors, camera, triangle_budget=0, scene=None, screen_threshold=0)`` with
+    :class:`Impostors` draws ``camera``'s view (multi-cell-orthographic-impostors.txt §3.2):
+    cells whose sphere (and triangles) lie outside the view are culled; the rest, nearest
+    first, are drawn as triangles (GPU, lit like the impostors) while their triangles fit in
+    ``triangle_budget`` (``None``: no limit; needs ``scene``) and their sphere spans at least
+    ``screen_threshold`` pixels; every other cell as the impostor whose direction makes the
+    smallest angle with the direction from the cell to the eye, a billboard through the cell's
+    centre, depth-tested, with no per-pixel correction. Returns an :class:`ImpostorView`.
 
     Parameters
     ----------
@@ -319,6 +369,16 @@ def reconstruct(
         column) of the sample each face came from, ``timings`` (``offset`` for rendering H,
         then the method's own step).
     """
+    if isinstance(images, Impostors):
+        if not isinstance(method, Camera):
+            raise InputError("reconstruct(impostors, camera): the second argument must be a Camera")
+        return impostor_view(
+            images,
+            method,
+            triangle_budget=triangle_budget,
+            scene=scene,
+            screen_threshold=screen_threshold,
+        )
     fields = images if isinstance(images, (list, tuple)) else [images]
     if fields and all(isinstance(f, VisibilityField) for f in fields):
         if not isinstance(method, Camera):

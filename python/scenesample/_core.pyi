@@ -9,6 +9,7 @@ from numpy.typing import ArrayLike
 
 __all__ = [
     "Camera",
+    "Impostors",
     "Scene",
     "cast_rays",
     "default_slab",
@@ -19,11 +20,15 @@ __all__ = [
     "epr_points",
     "epr_shadow_points",
     "field_view",
+    "impostor_directions",
+    "impostor_view",
+    "impostors",
     "omni_shadows",
     "read_exr",
     "reflections",
     "reconstruct",
     "render_cells",
+    "render_lit",
     "sampling_metrics",
     "soft_shadows",
     "splat",
@@ -281,6 +286,28 @@ def render_cells(
     marked: np.ndarray,
     camera: Camera,
 ) -> tuple[dict[str, Any], int]: ...
+
+@final
+class Impostors: ...
+
+def impostors(
+    scene: Scene,
+    depth: int,
+    subdivisions: int,
+    resolution: int,
+    projection_name: str,
+    fov: Optional[float],
+    grow: bool,
+) -> tuple[Impostors, dict[str, Any]]: ...
+def impostor_view(
+    handle: Impostors,
+    camera: Camera,
+    triangle_budget: Optional[int],
+    use_scene: bool,
+    screen_threshold: float,
+) -> dict[str, Any]: ...
+def render_lit(scene: Scene, camera: Camera) -> dict[str, Any]: ...
+def impostor_directions(handle: Impostors, camera: Camera) -> list[int]: ...
 def cast_rays(
     scene: Scene,
     origins: ArrayLike,

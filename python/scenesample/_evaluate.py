@@ -69,6 +69,15 @@ def evaluate(
     same with ``_reflective`` over the reference's reflective pixels, and that ``mask``. The
     reflections' reference is :func:`scenesample.reflection_reference` (MVR at 4x, downsampled).
 
+    ``evaluate(view, reference, "image")`` with two :class:`ImpostorView` (the reference
+    typically ``ImpostorView.of_triangles(scene, camera)``) compares their 8-bit colours
+    (multi-cell-orthographic-impostors.txt §5): ``pixel_error`` (the paper's p_diff: the sum
+    over pixels of |dR| + |dG| + |dB|), ``error_per_foreground_pixel`` (divided by the area of
+    the reference's foreground bounding rectangle, Fig. 2), ``gap_pixels`` and ``gap_mask``
+    (background showing through inside the reference's silhouette, i.e. at foreground pixels
+    whose four neighbours are foreground too: the "black line" artifact, not a one-pixel
+    misfit of the outline), ``rmse`` and ``foreground_rect``.
+
     ``evaluate(shadows, reference, "shadow")`` compares two :class:`ShadowResult` (or two
     :class:`OmniShadowResult`) of one view and one set of light samples
     (non-redundant-rendering.txt §6.2) over the pixels both see a surface at, on a 0-255 scale:
@@ -145,6 +154,7 @@ def evaluate(
         Unknown metric or redundancy, images without reference cameras, bad ``intermediate``.
     """
     from ._field import FieldView, cells_metric
+    from ._impostors import ImpostorView, image_error
     from ._omni import OmniShadowResult
     from ._reflections import ReflectionResult, image_metrics
     from ._shadows import ShadowResult
@@ -156,9 +166,12 @@ def evaluate(
             Mesh: "geometry",
             ReflectionResult: "image",
             FieldView: "cells",
+            ImpostorView: "image",
         }.get(type(images), "sampling")
     if metric not in METRICS:
         raise InputError(f"metric must be one of {list(METRICS)}, got {metric!r}")
+    if metric == "image" and isinstance(images, ImpostorView):
+        return image_error(images, scene)
     if metric == "image":
         return image_metrics(images, scene)
     if metric == "shadow":

@@ -7,6 +7,7 @@
 
 pub mod conventional;
 pub mod epr;
+pub mod impostors;
 pub mod nonredundant;
 pub mod redundancy;
 pub mod visibility_field;

@@ -6,6 +6,7 @@
 
 pub mod field;
 pub mod hybrid;
+pub mod impostors;
 pub mod mesh;
 pub mod points;
 

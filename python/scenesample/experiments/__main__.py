@@ -1,18 +1,19 @@
-"""``python -m scenesample.experiments {sampling,shadows,epr,visibility_field} [options]``; see
-each module."""
+"""``python -m scenesample.experiments {sampling,shadows,epr,visibility_field,impostors}
+[options]``; see each module."""
 
 from __future__ import annotations
 
 import argparse
 from typing import Optional
 
-from . import epr, sampling, shadows, visibility_field
+from . import epr, impostors, sampling, shadows, visibility_field
 
 EXPERIMENTS = {
     "sampling": sampling,
     "shadows": shadows,
     "epr": epr,
     "visibility_field": visibility_field,
+    "impostors": impostors,
 }
 
 

@@ -1,0 +1,338 @@
+//! A view from multi-cell impostors (multi-cell-orthographic-impostors.txt §3.2, §3.4 runtime):
+//! frustum culling of the cells, a sort by distance, the nearest cells drawn as triangles until
+//! the triangle budget is met, every other cell as the impostor image whose direction makes the
+//! smallest angle with the direction from the cell to the eye, drawn as a billboard through the
+//! cell's centre facing that direction. As in the paper, nothing is corrected per pixel: a
+//! billboard texel is looked up where the pixel's ray meets the billboard's plane, and its depth
+//! is the plane's. Billboards and triangles are depth-tested against each other.
+//!
+//! Triangles are rasterized on the GPU (the cells' faces, sorted by cell, drawn as ranges) and
+//! lit like the impostor images (`discretize::impostors::lit`); billboards are composited on the
+//! CPU.
+
+use std::time::Instant;
+
+use glam::{DVec2, DVec3};
+use rayon::prelude::*;
+
+use crate::camera::{Camera, Projection};
+use crate::discretize::impostors::{
+    impostor_camera, lit, shading_normal, vertex_normals, ImpostorProjection, Impostors,
+};
+use crate::discretize::{discretize_ranges, DepthImages};
+use crate::error::Result;
+use crate::input_err;
+use crate::scene::Scene;
+
+/// How each cell was drawn.
+pub const CULLED: i32 = -2;
+pub const TRIANGLES: i32 = -1;
+
+#[derive(Debug, Clone)]
+pub struct ImpostorView {
+    pub width: u32,
+    pub height: u32,
+    /// Linear RGB, black where nothing is drawn.
+    pub color: Vec<[f32; 3]>,
+    /// Camera-space depth, +inf where nothing is drawn.
+    pub depth: Vec<f32>,
+    /// Per cell: `CULLED`, `TRIANGLES`, or the index of the impostor direction used.
+    pub used: Vec<i32>,
+    pub stats: Vec<(String, f64)>,
+    pub timings: Vec<(String, f64)>,
+}
+
+/// The lit colour and depth of a depth image of `scene` (black / +inf where empty).
+pub fn lit_image(scene: &Scene, normals: &[DVec3], img: &DepthImages) -> (Vec<[f32; 3]>, Vec<f32>) {
+    let color = img
+        .triangle
+        .par_iter()
+        .zip(img.color.par_iter().zip(&img.position))
+        .map(|(&t, (&c, p))| {
+            if t < 0 {
+                [0.0; 3]
+            } else {
+                let p = DVec3::from_array(p.map(f64::from));
+                lit(c, shading_normal(scene, normals, t as usize, p))
+            }
+        })
+        .collect();
+    (color, img.depth.clone())
+}
+
+/// Render every triangle of `scene` from `camera`, lit as the impostors are: the reference.
+pub fn render_lit(scene: &Scene, camera: &Camera) -> Result<(Vec<[f32; 3]>, Vec<f32>, f64)> {
+    let start = Instant::now();
+    let img = discretize_ranges(scene, std::slice::from_ref(camera), false, None)?;
+    let (c, d) = lit_image(scene, &vertex_normals(scene), &img);
+    Ok((c, d, start.elapsed().as_secs_f64()))
+}
+
+/// The view from `camera`. `sorted` is the scene with its faces in the impostors' cell order
+/// (`Impostors::triangles`), needed when `triangle_budget > 0`; `None` as budget means no
+/// limit.
+pub fn reconstruct(
+    imp: &Impostors,
+    projection: ImpostorProjection,
+    sorted: Option<&Scene>,
+    camera: &Camera,
+    triangle_budget: Option<u64>,
+    screen_threshold: f64,
+) -> Result<ImpostorView> {
+    let total = Instant::now();
+    let c_count = imp.cells.len();
+    if imp.offsets.len() != c_count + 1 {
+        return input_err!("the impostors' cell table is inconsistent");
+    }
+    if triangle_budget != Some(0) && sorted.is_none() {
+        return input_err!("a triangle budget needs the scene (scene=...)");
+    }
+    if let Some(s) = sorted {
+        if s.triangle_count() != imp.triangles.len() {
+            return input_err!("the scene is not the one the impostors were made from");
+        }
+    }
+    if !(screen_threshold.is_finite() && screen_threshold >= 0.0) {
+        return input_err!("screen_threshold must be finite and >= 0, got {screen_threshold}");
+    }
+    let (w, h) = (camera.width as usize, camera.height as usize);
+    let eye = camera.eye();
+
+    // 1. Frustum culling: a cell is kept when the sphere around its box, or around its own
+    // triangles, reaches into the view.
+    let start = Instant::now();
+    let planes = camera.frustum_planes(1.0, 0.0, DVec3::ZERO);
+    let tri_spheres: Vec<(DVec3, f64)> = (0..c_count)
+        .map(|c| {
+            let (a, b) = (imp.offsets[c] as usize, imp.offsets[c + 1] as usize);
+            let Some(s) = sorted else {
+                return (imp.cells[c].center(), 0.0);
+            };
+            let mut lo = DVec3::splat(f64::INFINITY);
+            let mut hi = DVec3::splat(f64::NEG_INFINITY);
+            for i in a..b {
+                for p in s.triangle(i) {
+                    lo = lo.min(p);
+                    hi = hi.max(p);
+                }
+            }
+            if a == b {
+                (imp.cells[c].center(), 0.0)
+            } else {
+                ((lo + hi) / 2.0, (hi - lo).length() / 2.0)
+            }
+        })
+        .collect();
+    let outside = |c: DVec3, r: f64| planes.iter().any(|&(n, d)| n.dot(c) + d < -r);
+    let mut used = vec![CULLED; c_count];
+    let mut order: Vec<usize> = (0..c_count)
+        .filter(|&c| {
+            let cell = &imp.cells[c];
+            let (tc, tr) = tri_spheres[c];
+            !(outside(cell.center(), cell.radius()) && outside(tc, tr))
+        })
+        .collect();
+    // 2. Nearest first.
+    order.sort_by(|&a, &b| {
+        let da = (imp.cells[a].center() - eye).length_squared();
+        let db = (imp.cells[b].center() - eye).length_squared();
+        da.total_cmp(&db).then(a.cmp(&b))
+    });
+    let cull_seconds = start.elapsed().as_secs_f64();
+
+    // 3. Triangles for the nearest cells while the budget lasts (and, with a threshold, while
+    // they look big enough); the rest as impostors.
+    let mut left = triangle_budget.unwrap_or(u64::MAX);
+    let mut budget_open = triangle_budget != Some(0);
+    let mut ranges: Vec<(u32, u32)> = Vec::new();
+    let mut drawn = 0u64;
+    for &c in &order {
+        let n = (imp.offsets[c + 1] - imp.offsets[c]) as u64;
+        let big = screen_threshold == 0.0
+            || projected_size(camera, imp.cells[c].center(), imp.cells[c].radius())
+                >= screen_threshold;
+        if budget_open && big && n <= left {
+            left -= n;
+            drawn += n;
+            used[c] = TRIANGLES;
+            let (a, b) = (imp.offsets[c], imp.offsets[c + 1]);
+            match ranges.last_mut() {
+                Some(r) if r.1 == a => r.1 = b,
+                _ => ranges.push((a, b)),
+            }
+        } else {
+            // A cell too small on screen is an impostor whatever the budget; the first one
+            // that does not fit ends the triangles (the budget is met).
+            if big && n > left {
+                budget_open = false;
+            }
+            used[c] = best_direction(imp, c, camera) as i32;
+        }
+    }
+    ranges.sort_unstable();
+
+    let start = Instant::now();
+    let (mut color, mut depth) = match (sorted, ranges.is_empty()) {
+        (Some(s), false) => {
+            let img = discretize_ranges(s, std::slice::from_ref(camera), false, Some(&ranges))?;
+            lit_image(s, &vertex_normals(s), &img)
+        }
+        _ => (vec![[0.0; 3]; w * h], vec![f32::INFINITY; w * h]),
+    };
+    let triangle_seconds = start.elapsed().as_secs_f64();
+
+    // 4. Billboards, depth-tested.
+    let start = Instant::now();
+    let mut billboard_pixels = 0u64;
+    for &c in &order {
+        let k = used[c];
+        if k < 0 {
+            continue;
+        }
+        billboard_pixels += draw_billboard(
+            imp, projection, c, k as usize, camera, &mut color, &mut depth,
+        )?;
+    }
+    let impostor_seconds = start.elapsed().as_secs_f64();
+    let count = |u: i32| used.iter().filter(|&&x| x == u).count() as f64;
+    let impostors = used.iter().filter(|&&x| x >= 0).count() as f64;
+    Ok(ImpostorView {
+        width: camera.width,
+        height: camera.height,
+        color,
+        depth,
+        stats: vec![
+            ("cells_culled".into(), count(CULLED)),
+            ("cells_triangles".into(), count(TRIANGLES)),
+            ("cells_impostors".into(), impostors),
+            ("triangles_drawn".into(), drawn as f64),
+            ("billboard_pixels".into(), billboard_pixels as f64),
+        ],
+        used,
+        timings: vec![
+            ("cull".into(), cull_seconds),
+            ("triangles".into(), triangle_seconds),
+            ("impostors".into(), impostor_seconds),
+            ("total".into(), total.elapsed().as_secs_f64()),
+        ],
+    })
+}
+
+/// The on-screen diameter of a sphere in pixels (perspective: at its centre's depth).
+fn projected_size(camera: &Camera, c: DVec3, r: f64) -> f64 {
+    let (_, z) = camera.project(c);
+    if z <= r {
+        return f64::INFINITY;
+    }
+    2.0 * r / camera.pixel_footprint(z)
+}
+
+/// The impostor direction with the smallest angle to the direction from the cell to the eye
+/// (for an orthographic eye, to the eye's backward axis).
+pub fn best_direction(imp: &Impostors, c: usize, camera: &Camera) -> usize {
+    let to_eye = match camera.projection {
+        Projection::Perspective { .. } => {
+            (camera.eye() - imp.cells[c].center()).normalize_or_zero()
+        }
+        Projection::Orthographic { .. } => -camera.forward(),
+    };
+    let mut best = 0;
+    let mut best_dot = f64::NEG_INFINITY;
+    for (k, d) in imp.directions.iter().enumerate() {
+        let dot = d.dot(to_eye);
+        if dot > best_dot {
+            best_dot = dot;
+            best = k;
+        }
+    }
+    best
+}
+
+/// Composite cell `c`'s impostor `k` as a billboard; returns the pixels written.
+fn draw_billboard(
+    imp: &Impostors,
+    projection: ImpostorProjection,
+    c: usize,
+    k: usize,
+    camera: &Camera,
+    color: &mut [[f32; 3]],
+    depth: &mut [f32],
+) -> Result<u64> {
+    let cell = &imp.cells[c];
+    let d = imp.directions[k];
+    let icam = impostor_camera(cell, d, imp.resolution, projection)?;
+    let crop = imp.crops[c * imp.directions.len() + k];
+    if crop[2] == 0 {
+        return Ok(0);
+    }
+    let centre = cell.center();
+    // The billboard: the plane through the centre facing d; its extent, the impostor's view at
+    // that plane.
+    let half = match projection {
+        ImpostorProjection::Orthographic => cell.radius(),
+        ImpostorProjection::Perspective(fov) => cell.radius() / (fov / 2.0).cos(),
+    };
+    let r = icam.world_to_camera_rotation();
+    let (right, up) = (r.row(0), r.row(1));
+    let (w, h) = (camera.width as usize, camera.height as usize);
+    let mut lo = DVec2::splat(f64::INFINITY);
+    let mut hi = DVec2::splat(f64::NEG_INFINITY);
+    let mut behind = false;
+    for (a, b) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
+        let (px, z) = camera.project(centre + (right * a + up * b) * half);
+        if !(z > 0.0 && px.is_finite()) {
+            behind = true;
+            break;
+        }
+        lo = lo.min(px);
+        hi = hi.max(px);
+    }
+    let (x0, x1, y0, y1) = if behind {
+        (0, w, 0, h)
+    } else {
+        (
+            (lo.x.floor().max(0.0) as usize).min(w),
+            (hi.x.ceil().max(0.0) as usize).min(w),
+            (lo.y.floor().max(0.0) as usize).min(h),
+            (hi.y.ceil().max(0.0) as usize).min(h),
+        )
+    };
+    let [cx, cy, cw, ch] = crop.map(|v| v as i64);
+    let base = (c * imp.directions.len() + k) * imp.height * imp.width;
+    let mut written = 0;
+    for y in y0..y1 {
+        for x in x0..x1 {
+            let (o, dir) = camera.ray_z1(DVec2::new(x as f64 + 0.5, y as f64 + 0.5));
+            let denom = dir.dot(d);
+            if denom.abs() < 1e-12 {
+                continue;
+            }
+            let t = (centre - o).dot(d) / denom;
+            if t <= 0.0 {
+                continue;
+            }
+            let q = o + dir * t;
+            let (tp, _) = icam.project(q);
+            if !tp.is_finite() {
+                continue;
+            }
+            let (tx, ty) = (tp.x.floor() as i64 - cx, tp.y.floor() as i64 - cy);
+            if tx < 0 || ty < 0 || tx >= cw || ty >= ch {
+                continue;
+            }
+            let texel = base + ty as usize * imp.width + tx as usize;
+            let rgba = imp.color[texel];
+            if rgba[3] == 0 {
+                continue;
+            }
+            let z = camera.project(q).1 as f32;
+            let i = y * w + x;
+            if z < depth[i] {
+                depth[i] = z;
+                color[i] = [rgba[0], rgba[1], rgba[2]].map(|v| v as f32 / 255.0);
+                written += 1;
+            }
+        }
+    }
+    Ok(written)
+}
