@@ -4,6 +4,7 @@
 //! `scenesample._core` is declared in `py/` and compiled only with the `python` feature.
 
 pub mod camera;
+pub mod counters;
 pub mod discretize;
 pub mod effects;
 pub mod error;

@@ -13,7 +13,7 @@ Conventions (shared by every function):
 
 from __future__ import annotations
 
-from . import errors, references, scenes
+from . import errors, plot, references, scenes
 from ._api import cast_rays, device_info, discretize, reconstruct
 from ._core import Camera
 from ._core import __version__ as __version__
@@ -22,9 +22,11 @@ from ._evaluate import evaluate, intermediate_cameras
 from ._field import FieldView, Slab, VisibilityField
 from ._impostors import Impostors, ImpostorView
 from ._omni import OmniShadowResult, omni_shadows
+from ._plan import Effect, Frame, plan, render
 from ._reflections import ReflectionResult, reflection_reference, reflections
 from ._scene import Scene
 from ._shadows import AreaLight, ShadowResult, soft_shadows
+from ._tradeoff import tradeoff
 from .errors import (
     ExrError,
     GpuError,
@@ -42,8 +44,10 @@ __all__ = [
     "AreaLight",
     "Camera",
     "DepthImages",
+    "Effect",
     "ExrError",
     "FieldView",
+    "Frame",
     "GpuError",
     "GpuLimitError",
     "GpuUnavailableError",
@@ -73,11 +77,15 @@ __all__ = [
     "evaluate",
     "intermediate_cameras",
     "omni_shadows",
+    "plan",
+    "plot",
     "reconstruct",
     "references",
     "reflection_reference",
     "reflections",
+    "render",
     "splat",
     "scenes",
     "soft_shadows",
+    "tradeoff",
 ]

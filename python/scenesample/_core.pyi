@@ -12,6 +12,7 @@ __all__ = [
     "Impostors",
     "Scene",
     "cast_rays",
+    "counters",
     "default_slab",
     "device_info",
     "discretize_conventional",
@@ -54,6 +55,7 @@ class Scene:
         materials: Optional[Sequence[dict[str, Any]]] = None,
         object_ids: Optional[ArrayLike] = None,
         objects: Optional[Sequence[str]] = None,
+        lights: Optional[Sequence[dict[str, Any]]] = None,
     ) -> Scene: ...
     @property
     def vertices(self) -> np.ndarray: ...
@@ -316,6 +318,7 @@ def cast_rays(
     t_max: float = ...,
 ) -> dict[str, Any]: ...
 def device_info() -> dict[str, Any]: ...
+def counters() -> dict[str, int]: ...
 def write_exr(
     path: _Path,
     width: int,

@@ -94,6 +94,7 @@ class Scene:
         materials: Optional[list[dict[str, Any]]] = None,
         object_ids: Optional[Any] = None,
         objects: Optional[list[str]] = None,
+        lights: Optional[list[dict[str, Any]]] = None,
     ) -> Scene:
         """A scene from plain arrays; face order is kept, so triangle ids are face indices.
 
@@ -116,10 +117,27 @@ class Scene:
             Per-face index into ``objects`` (default: one object, "mesh").
         objects : list of str, optional
             Object names.
+        lights : list of dict, optional
+            Punctual lights, with the keys :attr:`lights` reports: ``type`` ("point", "spot"
+            or "directional"), ``position``, ``direction``, and optionally ``name``, ``color``,
+            ``intensity``, ``range``, ``inner_cone_angle``, ``outer_cone_angle``.
         """
+
+        def plain(a: Any) -> Any:
+            # Any array_like, including views, misaligned buffers (e.g. unpickled) and lists.
+            return None if a is None else np.require(np.asarray(a), requirements=["C", "A"])
+
         return cls(
             _core.Scene.from_arrays(
-                vertices, faces, normals, colors, material_ids, materials, object_ids, objects
+                plain(vertices),
+                plain(faces),
+                plain(normals),
+                plain(colors),
+                plain(material_ids),
+                materials,
+                plain(object_ids),
+                objects,
+                lights,
             )
         )
 
@@ -241,6 +259,26 @@ class Scene:
 
     def __repr__(self) -> str:
         return repr(self._core)
+
+    def __reduce__(self) -> tuple[Any, tuple[dict[str, Any]]]:
+        """Pickling (e.g. to the workers of a sweep): geometry, normals, colours, materials,
+        objects and lights travel; glTF cameras and load warnings do not."""
+        state = {
+            "vertices": self.vertices,
+            "faces": self.faces,
+            "normals": self.normals,
+            "colors": self.colors,
+            "material_ids": self.material_ids,
+            "materials": self.materials,
+            "object_ids": self.object_ids,
+            "objects": self.objects,
+            "lights": self.lights,
+        }
+        return (_from_state, (state,))
+
+
+def _from_state(state: dict[str, Any]) -> Scene:
+    return Scene.from_arrays(**state)
 
 
 def _vertex_colors(mesh: Any) -> np.ndarray:

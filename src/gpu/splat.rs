@@ -122,6 +122,7 @@ pub fn splat(
     cameras: &[Camera],
     clip_to_triangle: bool,
 ) -> Result<(Vec<u64>, SplatStats)> {
+    crate::counters::add(&crate::counters::SPLAT_PASSES, 1);
     let needed = wgpu::Features::SHADER_INT64 | wgpu::Features::SHADER_INT64_ATOMIC_MIN_MAX;
     if !ctx.device.features().contains(needed) {
         return Err(Error::GpuUnavailable(format!(

@@ -8,8 +8,8 @@ use pyo3::types::{PyDict, PyList};
 
 use super::camera::PyCamera;
 use super::convert::{array, faces, flat_i32, rows_array, rows_f32};
-use super::errors::IntoPy;
-use crate::scene::{LightKind, Material, Scene, SceneParts};
+use super::errors::{input, IntoPy};
+use crate::scene::{Light, LightKind, Material, Scene, SceneParts};
 
 #[pyclass(name = "Scene", module = "scenesample._core", frozen)]
 pub struct PyScene {
@@ -28,7 +28,7 @@ impl PyScene {
     }
 
     #[staticmethod]
-    #[pyo3(signature = (vertices, faces, normals=None, colors=None, material_ids=None, materials=None, object_ids=None, objects=None))]
+    #[pyo3(signature = (vertices, faces, normals=None, colors=None, material_ids=None, materials=None, object_ids=None, objects=None, lights=None))]
     #[allow(clippy::too_many_arguments)]
     fn from_arrays(
         py: Python<'_>,
@@ -40,6 +40,7 @@ impl PyScene {
         materials: Option<Vec<Bound<'_, PyDict>>>,
         object_ids: Option<&Bound<'_, PyAny>>,
         objects: Option<Vec<String>>,
+        lights: Option<Vec<Bound<'_, PyDict>>>,
     ) -> PyResult<Self> {
         let v = rows_f32::<3>(vertices, "vertices")?;
         let f = self::faces(faces, "faces", v.len())?;
@@ -67,6 +68,9 @@ impl PyScene {
         }
         if let Some(names) = objects {
             parts.objects = names;
+        }
+        if let Some(ls) = lights {
+            parts.lights = ls.iter().map(|d| light(py, d)).collect::<PyResult<_>>()?;
         }
         let scene = Scene::new(parts).py_err(py)?;
         Ok(Self {
@@ -231,5 +235,63 @@ fn material(d: &Bound<'_, PyDict>) -> PyResult<Material> {
             Some(v) => v.extract()?,
             None => false,
         },
+    })
+}
+
+/// A punctual light from a dict with the keys `Scene.lights` reports (`type` and `position` for
+/// point and spot lights, `direction` for directional and spot lights; the rest optional).
+fn light(py: Python<'_>, d: &Bound<'_, PyDict>) -> PyResult<Light> {
+    let kind: String = match d.get_item("type")? {
+        Some(v) => v.extract()?,
+        None => return Err(input(py, "a light needs a 'type'".to_string())),
+    };
+    let kind = match kind.as_str() {
+        "point" => LightKind::Point,
+        "spot" => LightKind::Spot,
+        "directional" => LightKind::Directional,
+        other => {
+            return Err(input(
+                py,
+                format!("light type must be 'point', 'spot' or 'directional', got {other:?}"),
+            ))
+        }
+    };
+    let vec3 = |k: &str, default: [f64; 3]| -> PyResult<[f64; 3]> {
+        match d.get_item(k)? {
+            Some(v) if !v.is_none() => {
+                let x: Vec<f64> = v.extract()?;
+                if x.len() != 3 || !x.iter().all(|c| c.is_finite()) {
+                    return Err(input(py, format!("light {k} must be 3 finite numbers")));
+                }
+                Ok([x[0], x[1], x[2]])
+            }
+            _ => Ok(default),
+        }
+    };
+    let opt = |k: &str| -> PyResult<Option<f32>> {
+        match d.get_item(k)? {
+            Some(v) if !v.is_none() => Ok(Some(v.extract()?)),
+            _ => Ok(None),
+        }
+    };
+    let direction = vec3("direction", [0.0, 0.0, -1.0])?;
+    let len = direction.iter().map(|c| c * c).sum::<f64>().sqrt();
+    if len <= 0.0 {
+        return Err(input(py, "light direction must be non-zero".to_string()));
+    }
+    let color = vec3("color", [1.0, 1.0, 1.0])?;
+    Ok(Light {
+        name: match d.get_item("name")? {
+            Some(v) if !v.is_none() => v.extract()?,
+            _ => String::new(),
+        },
+        kind,
+        color: color.map(|c| c as f32),
+        intensity: opt("intensity")?.unwrap_or(1.0),
+        range: opt("range")?,
+        position: vec3("position", [0.0; 3])?,
+        direction: direction.map(|c| c / len),
+        inner_cone_angle: opt("inner_cone_angle")?,
+        outer_cone_angle: opt("outer_cone_angle")?,
     })
 }

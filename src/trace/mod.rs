@@ -223,6 +223,7 @@ pub fn cast_rays(
     t_max: f32,
 ) -> Result<RayHits> {
     check_rays(origins, directions, t_min, t_max)?;
+    crate::counters::add(&crate::counters::RAYS_CAST, origins.len() as u64);
     if scene.triangle_count() >= bvh4::MAX_TRIANGLES as usize {
         return input_err!(
             "cast_rays handles scenes of fewer than {} triangles; this one has {}",
