@@ -180,6 +180,7 @@ def sampling_metrics(
     scene: Scene,
     triangle: ArrayLike,
     position: ArrayLike,
+    depth: ArrayLike,
     cameras: list[Camera],
     method: str,
     reference: list[Camera],

@@ -197,6 +197,7 @@ def evaluate(
         scene._core,
         np.ascontiguousarray(images.triangle, dtype=np.int32).reshape(-1),
         np.ascontiguousarray(images.position, dtype=np.float32).reshape(-1, 3),
+        np.ascontiguousarray(images.depth, dtype=np.float32).reshape(-1, 1),
         list(images.cameras),
         str(images.method),
         reference,

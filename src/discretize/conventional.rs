@@ -12,7 +12,7 @@ use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
 use crate::camera::Camera;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::gpu;
 use crate::input_err;
 use crate::scene::Scene;
@@ -71,10 +71,13 @@ pub fn discretize_ranges(
     let start = Instant::now();
     let ctx = gpu::context()?;
     let device_seconds = start.elapsed().as_secs_f64();
+    // The device's limits first: an image too large for it is refused before any host memory
+    // is taken for it.
+    gpu::raster::check_image_size(&ctx, first.width, first.height)?;
     let start = Instant::now();
     let planes = SurfacePlane::of(scene);
     let prepare_seconds = start.elapsed().as_secs_f64();
-    let mut img = DepthImages::allocate(cameras);
+    let mut img = DepthImages::allocate(cameras)?;
     let rays: Vec<PixelRays> = cameras.iter().map(PixelRays::new).collect();
     let npx = first.width as usize * first.height as usize;
     // Each chunk of ids is resolved as it arrives, while the GPU renders the next chunk.
@@ -142,15 +145,19 @@ pub(crate) fn check_cameras(cameras: &[Camera]) -> Result<()> {
 /// Depth images from per-pixel triangle ids (row-major, image after image, −1 where empty):
 /// every field resolved in f64 from the pixel-centre ray and the triangle, as for conventional
 /// images. Returns the images and the resolve time.
-pub(crate) fn resolve_ids(scene: &Scene, cameras: &[Camera], ids: Vec<i32>) -> (DepthImages, f64) {
+pub(crate) fn resolve_ids(
+    scene: &Scene,
+    cameras: &[Camera],
+    ids: Vec<i32>,
+) -> Result<(DepthImages, f64)> {
     let start = Instant::now();
     let planes = SurfacePlane::of(scene);
-    let mut img = DepthImages::allocate(cameras);
+    let mut img = DepthImages::allocate(cameras)?;
     let rays: Vec<PixelRays> = cameras.iter().map(PixelRays::new).collect();
     let n = ids.len();
     img.triangle = ids;
     resolve_into(&mut img, 0..n, &rays, planes);
-    (img, start.elapsed().as_secs_f64())
+    Ok((img, start.elapsed().as_secs_f64()))
 }
 
 /// Per-camera constants of the pixel-centre rays (see `Camera::ray_z1`): the ray through pixel
@@ -209,22 +216,37 @@ impl PixelRays {
 impl DepthImages {
     /// Output buffers for one image per camera. Zeroed allocations are lazily mapped pages: the
     /// resolve pass is the first and only writer of every pixel (misses included).
-    fn allocate(cameras: &[Camera]) -> Self {
+    /// Zeroed images for `cameras`; an error, not an abort, when the host cannot hold them.
+    fn allocate(cameras: &[Camera]) -> Result<Self> {
         let (w, h) = (cameras[0].width, cameras[0].height);
         let total = w as usize * h as usize * cameras.len();
-        Self {
+        let bytes = total as u128 * 44;
+        let too_big = || {
+            Error::GpuLimit(format!(
+                "{} images of {w}x{h} need {bytes} bytes of host memory, which could not be \
+                 allocated; use fewer or smaller images",
+                cameras.len()
+            ))
+        };
+        fn filled<T: Clone>(n: usize, v: T) -> Option<Vec<T>> {
+            let mut out = Vec::new();
+            out.try_reserve_exact(n).ok()?;
+            out.resize(n, v);
+            Some(out)
+        }
+        Ok(Self {
             n: cameras.len(),
             width: w,
             height: h,
-            depth: vec![0.0; total],
-            triangle: vec![0; total],
-            normal: vec![[0.0; 3]; total],
-            position: vec![[0.0; 3]; total],
-            color: vec![[0.0; 3]; total],
+            depth: filled(total, 0.0).ok_or_else(too_big)?,
+            triangle: filled(total, 0).ok_or_else(too_big)?,
+            normal: filled(total, [0.0; 3]).ok_or_else(too_big)?,
+            position: filled(total, [0.0; 3]).ok_or_else(too_big)?,
+            color: filled(total, [0.0; 3]).ok_or_else(too_big)?,
             cameras: cameras.to_vec(),
             method: "conventional".into(),
             timings: vec![],
-        }
+        })
     }
 }
 

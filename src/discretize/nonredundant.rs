@@ -92,7 +92,7 @@ fn layered_images(
     super::conventional::SurfacePlane::of(scene);
     let prepare_seconds = start.elapsed().as_secs_f64();
     let (ids, raw) = layered::render(&ctx, scene, cameras, test, cull_backfaces)?;
-    let (mut img, resolve_seconds) = resolve_ids(scene, cameras, ids);
+    let (mut img, resolve_seconds) = resolve_ids(scene, cameras, ids)?;
     img.method = method.into();
     img.timings = raster_timings(
         device_seconds,
@@ -121,7 +121,7 @@ fn visibility_images(
         ids.extend(walk_image(scene, cameras, i, cull_backfaces)?);
     }
     let walk_seconds = start.elapsed().as_secs_f64();
-    let (mut img, resolve_seconds) = resolve_ids(scene, cameras, ids);
+    let (mut img, resolve_seconds) = resolve_ids(scene, cameras, ids)?;
     img.method = "nonredundant".into();
     img.timings = vec![
         ("image0".into(), raster_seconds),

@@ -55,17 +55,28 @@ fn sample_pixels(img: &DepthImages, i: usize) -> Vec<usize> {
         .collect()
 }
 
-/// An image's samples, in pixel order.
+/// An image's samples, in pixel order. A sample's point is rebuilt in f64 from its camera and
+/// depth when the images carry depth (the float32 world position is quantized far from the
+/// origin: 1 unit at 1e7), else read from the position.
 fn samples_of(img: &DepthImages, i: usize) -> Vec<Sample> {
-    let npx = img.width as usize * img.height as usize;
+    let w = img.width as usize;
+    let npx = w * img.height as usize;
     let range = i * npx..(i + 1) * npx;
+    let cam = &img.cameras[i];
     img.triangle[range.clone()]
         .iter()
-        .zip(&img.position[range])
-        .filter(|(&t, _)| t >= 0)
-        .map(|(&t, p)| Sample {
-            triangle: t,
-            point: DVec3::from_array(p.map(f64::from)),
+        .zip(&img.position[range.clone()])
+        .enumerate()
+        .filter(|(_, (&t, _))| t >= 0)
+        .map(|(k, (&t, p))| {
+            let d = img.depth.get(i * npx + k).map_or(f64::NAN, |&d| d as f64);
+            let point = if d.is_finite() {
+                let px = glam::DVec2::new((k % w) as f64 + 0.5, (k / w) as f64 + 0.5);
+                cam.unproject(px, d)
+            } else {
+                DVec3::from_array(p.map(f64::from))
+            };
+            Sample { triangle: t, point }
         })
         .collect()
 }
@@ -238,7 +249,13 @@ pub fn sampling_metrics(
             }
             let npx = frames[0].width as usize * frames[0].height as usize;
             let cams = &frames[first..first + ids.len() / npx];
-            let (chunk, _) = resolve_ids(scene, cams, ids.to_vec());
+            let chunk = match resolve_ids(scene, cams, ids.to_vec()) {
+                Ok((chunk, _)) => chunk,
+                Err(e) => {
+                    failure = Some(e);
+                    return;
+                }
+            };
             for f in 0..cams.len() {
                 let r = consume_frame(scene, images, &chunk, f, &disoccluded, &mut useful, mode)
                     .map(|avail| {

@@ -10,13 +10,14 @@ use super::scene::PyScene;
 use crate::discretize::DepthImages;
 
 #[pyfunction]
-#[pyo3(signature = (scene, triangle, position, cameras, method, reference, frames, redundancy, cull_backfaces))]
+#[pyo3(signature = (scene, triangle, position, depth, cameras, method, reference, frames, redundancy, cull_backfaces))]
 #[allow(clippy::too_many_arguments)]
 pub fn sampling_metrics<'py>(
     py: Python<'py>,
     scene: &PyScene,
     triangle: &Bound<'py, PyAny>,
     position: &Bound<'py, PyAny>,
+    depth: &Bound<'py, PyAny>,
     cameras: Vec<PyCamera>,
     method: String,
     reference: Vec<PyCamera>,
@@ -37,19 +38,24 @@ pub fn sampling_metrics<'py>(
         height,
         triangle: flat_i32(triangle, "triangle")?,
         position: rows_f32::<3>(position, "position")?,
+        depth: rows_f32::<1>(depth, "depth")?
+            .into_iter()
+            .map(|[d]| d)
+            .collect(),
         cameras,
         method,
         ..Default::default()
     };
-    if img.triangle.len() != npx || img.position.len() != npx {
+    if img.triangle.len() != npx || img.position.len() != npx || img.depth.len() != npx {
         return Err(input(
             py,
             format!(
-                "triangle and position must hold {npx} pixels ({} images of {width}x{height}), \
-                 got {} and {}",
+                "triangle, position and depth must hold {npx} pixels ({} images of \
+                 {width}x{height}), got {}, {} and {}",
                 img.n,
                 img.triangle.len(),
-                img.position.len()
+                img.position.len(),
+                img.depth.len()
             ),
         ));
     }

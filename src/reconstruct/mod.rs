@@ -83,8 +83,16 @@ impl<'a> ImageView<'a> {
         self.triangle[k] >= 0 && self.position[k].iter().all(|v| v.is_finite())
     }
 
+    /// The sample's world point, rebuilt in f64 from its camera and float32 depth (relative
+    /// precision ~1e-7 of the depth) rather than read from the float32 world position, which
+    /// far from the origin is quantized to the coordinates' ulp (1 unit at 1e7).
     pub fn point(&self, k: usize) -> DVec3 {
-        DVec3::from_array(self.position[k].map(f64::from))
+        let d = self.depth[k] as f64;
+        if !d.is_finite() {
+            return DVec3::from_array(self.position[k].map(f64::from));
+        }
+        let (x, y) = ((k % self.width) as f64 + 0.5, (k / self.width) as f64 + 0.5);
+        self.cam.unproject(glam::DVec2::new(x, y), d)
     }
 
     /// The sample's unit normal, or zero when it has none (zero or non-finite).
