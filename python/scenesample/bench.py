@@ -1,8 +1,11 @@
 """Side-by-side benchmarks against the tools users trust, measured in one run on one machine.
 
-    python -m scenesample.bench               # rays vs Embree, depth images vs pyrender
-    python -m scenesample.bench --quick       # smaller problem, for a smoke test
+    python -m scenesample.bench peers         # rays vs Embree, depth images vs pyrender
     python -m scenesample.bench nonredundant  # non-redundant rendering and peeling vs conventional
+    python -m scenesample.bench epr           # EPR reflections vs MVR and iVIR
+    python -m scenesample.bench field         # visibility-field culling vs drawing everything
+    python -m scenesample.bench all           # every one of them, and a markdown summary table
+    python -m scenesample.bench all --quick   # smaller problems, for a smoke test
 
 Every figure is a best-of-N wall time of the same work on the same scene, rays and cameras;
 ratios say how many times our throughput is the peer's (> 1 is faster). Targets (2-core machine,
@@ -242,6 +245,152 @@ def report_epr(r: dict[str, Any], device: str) -> str:
     return "\n".join(lines)
 
 
+def bench_field(size: int, repeats: int) -> dict[str, Any]:
+    """``scenes.turtles()`` with its default field (16^4 samples, 81 rays each) and 5 ids per
+    sample, seen along a path of 4 views on the uv side of the slab: the field's time (resample
+    + draw the marked cells) and visibility tracing's, against drawing everything (the same
+    GPU depth-image pipeline), in interleaved rounds; best seconds, median per-round ratios."""
+    scene = ss.scenes.turtles()
+    fields = {
+        "field (1 id)": ss.discretize(scene, method="visibility_field"),
+        "field (5 ids, uv+st)": ss.discretize(scene, method="visibility_field", ids_per_sample=5),
+    }
+    lo, hi = scene.bounds.astype(np.float64)
+    c, ext = (lo + hi) / 2, hi - lo
+    cams = [
+        ss.Camera.look_at(
+            (lo[0] - ext[0], c[1] + f * ext[1], c[2] + 0.2 * ext[0]),
+            tuple(c),
+            (0, 0, 1),
+            yfov=0.6,
+            width=size,
+            height=size,
+        )
+        for f in (-0.2, -0.07, 0.07, 0.2)
+    ]
+    interp = {"field (1 id)": "none", "field (5 ids, uv+st)": "uv+st"}
+    for name, f in fields.items():  # warm-up: device, uploads
+        ss.evaluate(ss.reconstruct(f, cams[0], interpolate=interp[name]), scene, "cells")
+    rounds: dict[str, list[float]] = {"all": [], "tracing": [], **{k: [] for k in fields}}
+    missed: dict[str, list[float]] = {k: [] for k in fields}
+    for _ in range(max(repeats, 1)):
+        for cam in cams:
+            for name, f in fields.items():
+                view = ss.reconstruct(f, cam, interpolate=interp[name])
+                m = ss.evaluate(view, scene, "cells")
+                rounds[name].append(m["time_field"])
+                missed[name].append(m["missed_fraction"])
+                if name == "field (1 id)":
+                    rounds["all"].append(m["time_zbuffer"])
+                    rounds["tracing"].append(m["time_tracing"])
+    base = np.array(rounds["all"])
+    out: dict[str, Any] = {"size": size, "triangles": scene.triangle_count, "views": len(cams)}
+    for k, v in rounds.items():
+        out[k] = {
+            "seconds": float(min(v)),
+            "speedup": float(np.median(base / np.array(v))),
+            "missed_fraction": float(np.mean(missed[k])) if k in missed else 0.0,
+        }
+    return out
+
+
+def report_field(r: dict[str, Any], device: str) -> str:
+    lines = [
+        f"device: {device}",
+        "",
+        f"visibility field: scenes.turtles() ({r['triangles']:,} triangles), {r['views']} views "
+        f"of {r['size']}x{r['size']} on the uv side",
+        "| method | seconds per view | speedup over drawing everything | visible cells missed |",
+        "|---|---:|---:|---:|",
+    ]
+    for k in ("all", "field (1 id)", "field (5 ids, uv+st)", "tracing"):
+        x = r[k]
+        missed = 100 * x["missed_fraction"]
+        lines.append(f"| {k} | {x['seconds']:.4f} | {x['speedup']:.2f}x | {missed:.1f}% |")
+    return "\n".join(lines)
+
+
+def summary(results: dict[str, Any], device: str) -> str:
+    """One markdown table of every ratio measured in this run."""
+    import datetime
+    import platform
+
+    rows = []
+    if results.get("rays"):
+        r = results["rays"]
+        per_core = r["ours_rays_per_s"] / r["cores"] / r["embree_1thread_rays_per_s"]
+        rows.append(
+            (
+                "cast_rays per core vs Embree (1 thread)",
+                f"{per_core:.2f}x",
+                f">= {RAY_TARGET_PER_CORE}x",
+                per_core >= RAY_TARGET_PER_CORE,
+            )  # fmt: skip
+        )
+    if results.get("depth"):
+        d = results["depth"]
+        ratio = d["ours_images_per_s"] / d["pyrender_images_per_s"]
+        rows.append(
+            (
+                "depth images vs pyrender (4x MSAA)",
+                f"{ratio:.2f}x",
+                f">= {DEPTH_TARGET}x",
+                ratio >= DEPTH_TARGET,
+            )  # fmt: skip
+        )
+        single = d["ours_images_per_s"] / d["pyrender_single_sample_images_per_s"]
+        rows.append(("depth images vs pyrender (single sample)", f"{single:.2f}x", "", None))
+    if results.get("nonredundant"):
+        n = results["nonredundant"]
+        rows.append(
+            (
+                "non-redundant / conventional time (3 views)",
+                f"{n['nonredundant_ratio']:.2f}x",
+                f"<= {NONREDUNDANT_TARGET}x",
+                n["nonredundant_ratio"] <= NONREDUNDANT_TARGET,
+            )  # fmt: skip
+        )
+        rows.append(
+            ("peeling (3 layers) / conventional time", f"{n['peeling_ratio']:.2f}x", "", None)
+        )
+    if results.get("epr"):
+        e = results["epr"]
+        speed = e["mvr"]["speedup_of_epr"]
+        shading = e["mvr"]["stats"]["shading_ops"] / max(e["epr"]["stats"]["shading_ops"], 1)
+        points = e["ivir"]["stats"]["points"] / max(e["epr"]["stats"]["points"], 1)
+        rows += [
+            (f"EPR speedup over MVR ({e['spheres']} reflectors)", f"{speed:.2f}x",
+             f">= {EPR_SPEED_TARGET}x", speed >= EPR_SPEED_TARGET),
+            ("MVR / EPR shading operations", f"{shading:.1f}x", f">= {EPR_SHADING_TARGET}x",
+             shading >= EPR_SHADING_TARGET),
+            ("iVIR / EPR points", f"{points:.1f}x", f">= {EPR_POINTS_TARGET}x",
+             points >= EPR_POINTS_TARGET),
+            ("EPR speedup over iVIR", f"{e['ivir']['speedup_of_epr']:.2f}x", "", None),
+        ]  # fmt: skip
+    if results.get("field"):
+        f = results["field"]
+        for k in ("field (1 id)", "field (5 ids, uv+st)", "tracing"):
+            rows.append(
+                (
+                    f"{k} speedup over drawing everything (turtles)",
+                    f"{f[k]['speedup']:.2f}x",
+                    "",
+                    None,
+                )
+            )
+    lines = [
+        f"`python -m scenesample.bench all`, {datetime.date.today().isoformat()}, "
+        f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, {device}",
+        "",
+        "| benchmark | ratio | target | verdict |",
+        "|---|---:|---:|---|",
+    ]
+    for name, ratio, target, ok in rows:
+        verdict = "" if ok is None else ("met" if ok else "NOT met")
+        lines.append(f"| {name} | {ratio} | {target} | {verdict} |")
+    return "\n".join(lines) + "\n"
+
+
 def _verdict(ratio: float, target: float) -> str:
     return f"{ratio:.2f}x (target >= {target}x): {'met' if ratio >= target else 'NOT met'}"
 
@@ -287,9 +436,10 @@ def main(argv: Optional[list[str]] = None) -> None:
         "which",
         nargs="?",
         default="all",
-        choices=["all", "nonredundant", "epr"],
+        choices=["all", "peers", "nonredundant", "epr", "field"],
         help="benchmark set",
     )
+    p.add_argument("--out", default="out/bench/all.md", help="all: where the summary goes")
     p.add_argument("--spheres", type=int, default=50, help="epr: mirror spheres")
     p.add_argument("--quick", action="store_true", help="small scene and images (smoke test)")
     p.add_argument("--only", choices=["rays", "depth"], help="run one benchmark")
@@ -304,6 +454,36 @@ def main(argv: Optional[list[str]] = None) -> None:
         if a.json:
             with open(a.json, "w") as f:
                 json.dump({"epr": r, "device": info}, f, indent=2)
+        return
+    if a.which == "field":
+        r = bench_field(128 if a.quick else 256, a.repeats)
+        print(report_field(r, f"{info['name']} ({info['backend']})"))
+        if a.json:
+            with open(a.json, "w") as f:
+                json.dump({"field": r, "device": info}, f, indent=2)
+        return
+    if a.which == "all":
+        device = f"{info['name']} ({info['backend']})"
+        results: dict[str, Any] = {"device": info}
+        scene = bench_scene(a.quick)
+        results["rays"] = bench_rays(scene, size, a.repeats)
+        results["depth"] = bench_depth(scene, size, 2 if a.quick else 8, a.repeats)
+        print(report(results["rays"], results["depth"], device), flush=True)
+        results["nonredundant"] = bench_nonredundant(size, a.repeats)
+        print(report_nonredundant(results["nonredundant"], device), flush=True)
+        results["epr"] = bench_epr(128 if a.quick else 512, 10 if a.quick else a.spheres, 1)
+        print(report_epr(results["epr"], device), flush=True)
+        results["field"] = bench_field(128 if a.quick else 256, a.repeats)
+        print(report_field(results["field"], device), flush=True)
+        md = summary(results, device)
+        print(md)
+        os.makedirs(os.path.dirname(a.out) or ".", exist_ok=True)
+        with open(a.out, "w") as f:
+            f.write(md)
+        print(f"wrote {a.out}")
+        if a.json:
+            with open(a.json, "w") as f:
+                json.dump(results, f, indent=2, default=float)
         return
     if a.which == "nonredundant":
         r = bench_nonredundant(size, a.repeats)
