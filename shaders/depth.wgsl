@@ -17,21 +17,31 @@ struct View {
 
 @group(0) @binding(0) var<uniform> view: View;
 
-struct VsOut {
-    @builtin(position) position: vec4<f32>,
-    // The index of the draw's first triangle: a draw of a range of faces (the visibility
-    // field's marked cells) passes it as its first instance, since the primitive index counts
-    // from 0 in every draw.
-    @location(0) @interpolate(flat) first: u32,
-};
-
 // Vertex positions relative to the scene centre.
 @vertex
-fn vs_main(@location(0) p: vec3<f32>, @builtin(instance_index) first: u32) -> VsOut {
-    return VsOut(view.view_proj * vec4<f32>(p, 1.0), first);
+fn vs_main(@location(0) p: vec3<f32>) -> @builtin(position) vec4<f32> {
+    return view.view_proj * vec4<f32>(p, 1.0);
 }
 
 @fragment
-fn fs_main(@builtin(primitive_index) prim: u32, @location(0) @interpolate(flat) first: u32) -> @location(0) i32 {
+fn fs_main(@builtin(primitive_index) prim: u32) -> @location(0) i32 {
+    return i32(prim);
+}
+
+// Drawing ranges of faces only (the visibility field's marked cells, the impostors' nearest
+// cells): each draw passes its first triangle as its first instance, since the primitive index
+// counts from 0 in every draw. A separate entry pair, so that full draws carry no varying.
+struct RangedOut {
+    @builtin(position) position: vec4<f32>,
+    @location(0) @interpolate(flat) first: u32,
+};
+
+@vertex
+fn vs_ranged(@location(0) p: vec3<f32>, @builtin(instance_index) first: u32) -> RangedOut {
+    return RangedOut(view.view_proj * vec4<f32>(p, 1.0), first);
+}
+
+@fragment
+fn fs_ranged(@builtin(primitive_index) prim: u32, @location(0) @interpolate(flat) first: u32) -> @location(0) i32 {
     return i32(prim + first);
 }

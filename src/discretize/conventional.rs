@@ -228,21 +228,22 @@ impl DepthImages {
                 cameras.len()
             ))
         };
-        fn filled<T: Clone>(n: usize, v: T) -> Option<Vec<T>> {
-            let mut out = Vec::new();
-            out.try_reserve_exact(n).ok()?;
-            out.resize(n, v);
-            Some(out)
-        }
+        // Probe once for the whole amount, then allocate with `vec!`, whose zeroed memory comes
+        // from the kernel lazily (filling it here would double the cost of large images).
+        let mut probe: Vec<u8> = Vec::new();
+        probe
+            .try_reserve_exact(usize::try_from(bytes).map_err(|_| too_big())?)
+            .map_err(|_| too_big())?;
+        drop(probe);
         Ok(Self {
             n: cameras.len(),
             width: w,
             height: h,
-            depth: filled(total, 0.0).ok_or_else(too_big)?,
-            triangle: filled(total, 0).ok_or_else(too_big)?,
-            normal: filled(total, [0.0; 3]).ok_or_else(too_big)?,
-            position: filled(total, [0.0; 3]).ok_or_else(too_big)?,
-            color: filled(total, [0.0; 3]).ok_or_else(too_big)?,
+            depth: vec![0.0; total],
+            triangle: vec![0; total],
+            normal: vec![[0.0; 3]; total],
+            position: vec![[0.0; 3]; total],
+            color: vec![[0.0; 3]; total],
             cameras: cameras.to_vec(),
             method: "conventional".into(),
             timings: vec![],

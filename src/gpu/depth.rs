@@ -6,8 +6,8 @@ use std::time::Instant;
 use bytemuck::{Pod, Zeroable};
 
 use super::raster::{
-    align, check_image_size, copy, draw_ids, id_pipeline, submit_readback, texture_2d, wait,
-    IdPass, Timestamps, DEPTH_FORMAT, TRI_FORMAT,
+    align, check_image_size, copy, draw_ids, id_pipeline, id_pipeline_with, submit_readback,
+    texture_2d, wait, IdPass, Timestamps, DEPTH_FORMAT, TRI_FORMAT,
 };
 use super::{GpuContext, SceneBuffers};
 use crate::camera::Camera;
@@ -30,6 +30,8 @@ pub struct DepthPipeline {
     layout: wgpu::BindGroupLayout,
     /// Index 0: no culling; 1: back faces (counter-clockwise front) culled.
     pipelines: [wgpu::RenderPipeline; 2],
+    /// The same for drawing face ranges (`vs_ranged` / `fs_ranged`).
+    ranged: [wgpu::RenderPipeline; 2],
 }
 
 impl DepthPipeline {
@@ -58,9 +60,14 @@ impl DepthPipeline {
             immediate_size: 0,
         });
         let make = |cull| id_pipeline(device, &module, &pipeline_layout, "fs_main", cull, &[]);
+        let ranged = |cull| {
+            let l = &pipeline_layout;
+            id_pipeline_with(device, &module, l, "vs_ranged", "fs_ranged", cull, &[])
+        };
         Self {
             layout,
             pipelines: [make(None), make(Some(wgpu::Face::Back))],
+            ranged: [ranged(None), ranged(Some(wgpu::Face::Back))],
         }
     }
 }
@@ -254,7 +261,11 @@ fn submit_chunk(
             tri_view: &targets.tri_view,
             depth_view: &targets.depth_view,
             store_depth: false,
-            pipeline: &pipeline.pipelines[cull_backfaces as usize],
+            pipeline: if ranges.is_some() {
+                &pipeline.ranged[cull_backfaces as usize]
+            } else {
+                &pipeline.pipelines[cull_backfaces as usize]
+            },
             bind: &bind,
             offsets: &[(i * stride) as u32],
         };

@@ -80,12 +80,25 @@ pub fn id_pipeline(
     cull: Option<wgpu::Face>,
     constants: &[(&str, f64)],
 ) -> wgpu::RenderPipeline {
+    id_pipeline_with(device, module, layout, "vs_main", fs_entry, cull, constants)
+}
+
+/// `id_pipeline` with a vertex entry point other than `vs_main`.
+pub fn id_pipeline_with(
+    device: &wgpu::Device,
+    module: &wgpu::ShaderModule,
+    layout: &wgpu::PipelineLayout,
+    vs_entry: &str,
+    fs_entry: &str,
+    cull: Option<wgpu::Face>,
+    constants: &[(&str, f64)],
+) -> wgpu::RenderPipeline {
     device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
         label: Some(fs_entry),
         layout: Some(layout),
         vertex: wgpu::VertexState {
             module,
-            entry_point: Some("vs_main"),
+            entry_point: Some(vs_entry),
             compilation_options: Default::default(),
             buffers: &[Some(POSITIONS)],
         },
