@@ -151,10 +151,10 @@ pub struct Impostors {
     pub timings: Vec<(String, f64)>,
 }
 
-/// Unit directions to the face centres of an icosahedron subdivided `s` times (20·4^s).
-pub fn icosahedron_directions(s: u32) -> Vec<DVec3> {
+/// The regular icosahedron: 12 unit vertices and 20 counter-clockwise faces.
+pub fn icosahedron() -> ([DVec3; 12], [[u32; 3]; 20]) {
     let t = (1.0 + 5f64.sqrt()) / 2.0;
-    let v: Vec<DVec3> = [
+    let v = [
         (-1.0, t, 0.0),
         (1.0, t, 0.0),
         (-1.0, -t, 0.0),
@@ -168,10 +168,8 @@ pub fn icosahedron_directions(s: u32) -> Vec<DVec3> {
         (-t, 0.0, -1.0),
         (-t, 0.0, 1.0),
     ]
-    .iter()
-    .map(|&(x, y, z)| DVec3::new(x, y, z).normalize())
-    .collect();
-    let f: [[usize; 3]; 20] = [
+    .map(|(x, y, z)| DVec3::new(x, y, z).normalize());
+    let f = [
         [0, 11, 5],
         [0, 5, 1],
         [0, 1, 7],
@@ -193,7 +191,13 @@ pub fn icosahedron_directions(s: u32) -> Vec<DVec3> {
         [8, 6, 7],
         [9, 8, 1],
     ];
-    let mut tris: Vec<[DVec3; 3]> = f.iter().map(|t| t.map(|i| v[i])).collect();
+    (v, f)
+}
+
+/// Unit directions to the face centres of an icosahedron subdivided `s` times (20·4^s).
+pub fn icosahedron_directions(s: u32) -> Vec<DVec3> {
+    let (v, f) = icosahedron();
+    let mut tris: Vec<[DVec3; 3]> = f.iter().map(|t| t.map(|i| v[i as usize])).collect();
     for _ in 0..s {
         tris = tris
             .iter()

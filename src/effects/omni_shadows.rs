@@ -31,7 +31,7 @@ use crate::error::Result;
 use crate::gpu;
 use crate::input_err;
 use crate::scene::Scene;
-use crate::shadows::{eye_points, raytraced};
+use crate::shadows::{eye_points, per_pixel, raytraced};
 use crate::splat::{splat_views, Points};
 
 /// The smallest adaptive cube-map face resolution.
@@ -267,24 +267,7 @@ pub fn omni_shadows(
         }
     };
 
-    let words = points.len().div_ceil(32).max(1);
-    let npx = mask.len();
-    let mut visible = vec![true; npx * s_count];
-    let mut visibility = vec![1.0f32; npx];
-    let mut k = 0;
-    for (px, &m) in mask.iter().enumerate() {
-        if !m {
-            continue;
-        }
-        let mut lit = 0u32;
-        for s in 0..s_count {
-            let bit = (bits[s * words + k / 32] >> (k % 32)) & 1 == 1;
-            visible[px * s_count + s] = bit;
-            lit += bit as u32;
-        }
-        visibility[px] = lit as f32 / s_count as f32;
-        k += 1;
-    }
+    let (visible, visibility) = per_pixel(&bits, &mask, s_count);
     stats.push(("light_samples".to_string(), s_count as f64));
     stats.push((
         "views".to_string(),

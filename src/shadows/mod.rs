@@ -202,7 +202,6 @@ pub fn soft_shadows(
     let samples = light.samples(nu, nv);
     let diagonal = scene.diagonal();
     let s_count = samples.len();
-    let p_count = points.len();
     let (occluder_triangles, bits) = match opts.discretization {
         Discretization::Raytraced => {
             let start = Instant::now();
@@ -250,24 +249,7 @@ pub fn soft_shadows(
         }
     };
 
-    let words = p_count.div_ceil(32).max(1);
-    let npx = mask.len();
-    let mut visible = vec![true; npx * s_count];
-    let mut visibility = vec![1.0f32; npx];
-    let mut k = 0;
-    for (px, &m) in mask.iter().enumerate() {
-        if !m {
-            continue;
-        }
-        let mut lit = 0u32;
-        for s in 0..s_count {
-            let bit = (bits[s * words + k / 32] >> (k % 32)) & 1 == 1;
-            visible[px * s_count + s] = bit;
-            lit += bit as u32;
-        }
-        visibility[px] = lit as f32 / s_count as f32;
-        k += 1;
-    }
+    let (visible, visibility) = per_pixel(&bits, &mask, s_count);
     timings.push(("total".to_string(), total.elapsed().as_secs_f64()));
     Ok(ShadowResult {
         width: eye.width,
@@ -278,6 +260,31 @@ pub fn soft_shadows(
         occluder_triangles,
         timings,
     })
+}
+
+/// Per output pixel, from the visibility bits of the covered pixels (per sample, bit k of word
+/// w is covered pixel 32w + k): whether each sample is visible (sample fastest; true where no
+/// surface) and the visible fraction (1 where no surface).
+pub(crate) fn per_pixel(bits: &[u32], mask: &[bool], samples: usize) -> (Vec<bool>, Vec<f32>) {
+    let covered = mask.iter().filter(|&&m| m).count();
+    let words = covered.div_ceil(32).max(1);
+    let mut visible = vec![true; mask.len() * samples];
+    let mut visibility = vec![1.0f32; mask.len()];
+    let mut k = 0;
+    for (px, &m) in mask.iter().enumerate() {
+        if !m {
+            continue;
+        }
+        let mut lit = 0u32;
+        for s in 0..samples {
+            let bit = (bits[s * words + k / 32] >> (k % 32)) & 1 == 1;
+            visible[px * samples + s] = bit;
+            lit += bit as u32;
+        }
+        visibility[px] = lit as f32 / samples as f32;
+        k += 1;
+    }
+    (visible, visibility)
 }
 
 /// World points and eye-facing unit normals of the covered pixels (in pixel order), and the

@@ -361,46 +361,9 @@ pub(crate) mod tests {
 
     /// An icosphere subdivided `n` times: a closed mesh with shared edges and vertices.
     pub(crate) fn icosphere(n: u32) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
-        let t = (1.0 + 5f32.sqrt()) / 2.0;
-        let mut v: Vec<Vec3> = [
-            (-1., t, 0.),
-            (1., t, 0.),
-            (-1., -t, 0.),
-            (1., -t, 0.),
-            (0., -1., t),
-            (0., 1., t),
-            (0., -1., -t),
-            (0., 1., -t),
-            (t, 0., -1.),
-            (t, 0., 1.),
-            (-t, 0., -1.),
-            (-t, 0., 1.),
-        ]
-        .iter()
-        .map(|&(x, y, z)| Vec3::new(x, y, z).normalize())
-        .collect();
-        let mut f: Vec<[u32; 3]> = vec![
-            [0, 11, 5],
-            [0, 5, 1],
-            [0, 1, 7],
-            [0, 7, 10],
-            [0, 10, 11],
-            [1, 5, 9],
-            [5, 11, 4],
-            [11, 10, 2],
-            [10, 7, 6],
-            [7, 1, 8],
-            [3, 9, 4],
-            [3, 4, 2],
-            [3, 2, 6],
-            [3, 6, 8],
-            [3, 8, 9],
-            [4, 9, 5],
-            [2, 4, 11],
-            [6, 2, 10],
-            [8, 6, 7],
-            [9, 8, 1],
-        ];
+        let (v0, f0) = crate::discretize::impostors::icosahedron();
+        let mut v: Vec<Vec3> = v0.iter().map(|p| p.as_vec3()).collect();
+        let mut f: Vec<[u32; 3]> = f0.to_vec();
         for _ in 0..n {
             let mut mid = std::collections::HashMap::new();
             let mut next = Vec::new();
