@@ -230,6 +230,26 @@ class Points:
         mat = np.asarray(scene.material_ids, dtype=np.int32)[np.where(ok, tri, 0)] if n else tri
         return cls(c, length, tri, nrm, mat, bits, cams, [], {}, {}, scene)
 
+    @classmethod
+    def _from_core(
+        cls, d: dict[str, Any], reflectors: list, scene: Scene, **stats: float
+    ) -> Points:
+        """Points from the native module's dict (``epr_points`` or ``epr_shadow_points``),
+        with ``stats`` added to its own."""
+        return cls(
+            d["center"],
+            d["length"],
+            d["triangle"],
+            d["normal"],
+            d["material"],
+            d["views"],
+            list(d["cameras"]),
+            reflectors,
+            dict(d["timings"]),
+            {**dict(d["stats"]), **stats},
+            scene,
+        )
+
     def __len__(self) -> int:
         return len(self.center)
 
@@ -332,19 +352,7 @@ def epr_points(
         float(rho_scale),
         int(seed),
     )
-    return Points(
-        d["center"],
-        d["length"],
-        d["triangle"],
-        d["normal"],
-        d["material"],
-        d["views"],
-        list(d["cameras"]),
-        refl,
-        dict(d["timings"]),
-        dict(d["stats"]),
-        scene,
-    )
+    return Points._from_core(d, refl, scene)
 
 
 def splat(

@@ -13,7 +13,7 @@ import numpy as np
 
 from . import _core
 from ._scene import Scene
-from .errors import InputError
+from .errors import InputError, check_integer
 
 __all__ = ["Impostors", "ImpostorView", "PROJECTIONS"]
 
@@ -160,12 +160,6 @@ class ImpostorView:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
-def _positive(name: str, value: Any, minimum: int = 1) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
-        raise InputError(f"{name} must be an integer >= {minimum}, got {value!r}")
-    return int(value)
-
-
 def impostors(
     scene: Scene,
     *,
@@ -193,9 +187,9 @@ def impostors(
     start = time.perf_counter()
     handle, d = _core.impostors(
         scene._core,
-        _positive("depth", depth, 0),
-        _positive("subdivisions", subdivisions, 0),
-        _positive("resolution", resolution),
+        check_integer("depth", depth, 0),
+        check_integer("subdivisions", subdivisions, 0),
+        check_integer("resolution", resolution),
         projection,
         fov,
         bool(grow),
@@ -274,7 +268,7 @@ def impostor_view(
     ):
         budget = None
     else:
-        budget = _positive("triangle_budget", triangle_budget, 0)
+        budget = check_integer("triangle_budget", triangle_budget, 0)
     if budget != 0:
         if scene is None:
             raise InputError(

@@ -11,7 +11,7 @@ import numpy as np
 from . import _core
 from ._epr import Points
 from ._scene import Scene
-from .errors import InputError
+from .errors import InputError, check_integer
 
 __all__ = ["OmniShadowResult", "omni_shadows", "OMNI_METHODS"]
 
@@ -86,12 +86,6 @@ def _light(center: Any, radius: Any) -> tuple[np.ndarray, float]:
     if not (np.isfinite(r) and r >= 0):
         raise InputError(f"light_radius must be finite and >= 0, got {radius!r}")
     return c, r
-
-
-def _count(name: str, value: Any, minimum: int = 1) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
-        raise InputError(f"{name} must be an integer >= {minimum}, got {value!r}")
-    return int(value)
 
 
 def _rho(rho_scale: Any) -> float:
@@ -183,8 +177,8 @@ def omni_shadows(
     c, r = _light(light_center, light_radius)
     if method not in OMNI_METHODS:
         raise InputError(f"method must be one of {list(OMNI_METHODS)}, got {method!r}")
-    n = _count("light_samples", light_samples)
-    res = 0 if resolution is None else _count("resolution", resolution)
+    n = check_integer("light_samples", light_samples)
+    res = 0 if resolution is None else check_integer("resolution", resolution)
     d = _core.omni_shadows(
         scene._core,
         eye,
@@ -194,8 +188,8 @@ def omni_shadows(
         method,
         _rho(rho_scale),
         res,
-        _count("max_resolution", max_resolution),
-        _count("seed", seed, 0),
+        check_integer("max_resolution", max_resolution),
+        check_integer("seed", seed, 0),
     )
     return OmniShadowResult(
         visibility=d["visibility"],
@@ -228,8 +222,8 @@ def shadow_points(
     except (TypeError, ValueError):
         raise InputError(f"light must be (center, radius), got {light!r}") from None
     c, r = _light(center, radius)
-    n = _count("light_samples", light_samples)
-    res = 0 if resolution is None else _count("resolution", resolution)
+    n = check_integer("light_samples", light_samples)
+    res = 0 if resolution is None else check_integer("resolution", resolution)
     d = _core.epr_shadow_points(
         scene._core,
         eye,
@@ -240,20 +234,6 @@ def shadow_points(
         MAX_SHADOW_RESOLUTION,
         density,
         _rho(rho_scale),
-        _count("seed", seed, 0),
+        check_integer("seed", seed, 0),
     )
-    stats = dict(d["stats"])
-    stats["light_samples"] = float(n)
-    return Points(
-        d["center"],
-        d["length"],
-        d["triangle"],
-        d["normal"],
-        d["material"],
-        d["views"],
-        list(d["cameras"]),
-        [],
-        dict(d["timings"]),
-        stats,
-        scene,
-    )
+    return Points._from_core(d, [], scene, light_samples=float(n))

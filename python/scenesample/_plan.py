@@ -444,15 +444,14 @@ def render(
             att = att * ((-w * axis).sum(-1) >= np.cos(outer))
         vis = visibility.get(k, np.ones(cos.shape))
         light_sum += col * (cos * att * vis)[..., None]
-    for name, light in [(nm, a) for nm, a in emissive_lights(scene)] + [
-        (f"area light {k}", a) for k, a in enumerate(area_lights)
-    ]:
+    areas = emissive_lights(scene) + [(f"area light {k}", a) for k, a in enumerate(area_lights)]
+    for name, light in areas:
         to = np.asarray(light.center) - pos
         w = to / np.maximum(np.linalg.norm(to, axis=-1), 1e-30)[..., None]
         cos = np.clip((n * w).sum(-1), 0, None)
         vis = area_vis.get(name, np.ones(cos.shape))
         light_sum += (cos * vis)[..., None]
-    if not lights and not emissive_lights(scene) and not area_lights:
+    if not lights and not areas:
         fwd = np.array(camera.forward)
         up = np.array([0.0, 0.0, 1.0]) if abs(fwd[2]) < 0.9 else np.array([0.0, 1.0, 0.0])
         w = -fwd + 0.5 * up + 0.3 * np.cross(fwd, up)
@@ -470,7 +469,7 @@ def render(
     stats["reflectors"] = sum(
         len(e.params["reflectors"]) for e in chosen if e.kind == "reflections"
     )
-    stats["lights"] = len(lights) + len(emissive_lights(scene)) + len(area_lights)
+    stats["lights"] = len(lights) + len(areas)
     stats["effects"] = stats_eff
     return Frame(
         image=image.astype(np.float32),

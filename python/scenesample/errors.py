@@ -57,3 +57,13 @@ class ExrError(ScenesampleError, OSError):
 class SceneWarning(UserWarning):
     """A scene loaded, but something in it was skipped or approximated (missing image, unknown
     extension, point or line primitives)."""
+
+
+def check_integer(name: str, value: object, minimum: int = 1) -> int:
+    """``value`` as an int, or an :class:`InputError` naming ``name`` when it is not an integer
+    >= ``minimum`` (bools are refused)."""
+    import numpy as np
+
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+        raise InputError(f"{name} must be an integer >= {minimum}, got {value!r}")
+    return int(value)

@@ -147,6 +147,9 @@ pub struct Impostors {
     /// CSR by centroid: the triangles that draw each cell as geometry.
     pub offsets: Vec<u32>,
     pub triangles: Vec<u32>,
+    /// The scene's shading normals per vertex (`vertex_normals`), shared by the images and by
+    /// the cells drawn as triangles at runtime (face order does not change them).
+    pub normals: Vec<DVec3>,
     pub rays: u64,
     pub timings: Vec<(String, f64)>,
 }
@@ -588,6 +591,7 @@ pub fn build(scene: &Scene, opts: &ImpostorOptions) -> Result<Impostors> {
         triangle_counts: counts,
         offsets,
         triangles: order,
+        normals,
         rays,
         timings: vec![
             ("cells".into(), cell_seconds),

@@ -88,7 +88,7 @@ pub fn reconstruct(
         return input_err!("a triangle budget needs the scene (scene=...)");
     }
     if let Some(s) = sorted {
-        if s.triangle_count() != imp.triangles.len() {
+        if s.triangle_count() != imp.triangles.len() || s.vertices().len() != imp.normals.len() {
             return input_err!("the scene is not the one the impostors were made from");
         }
     }
@@ -175,7 +175,7 @@ pub fn reconstruct(
     let (mut color, mut depth) = match (sorted, ranges.is_empty()) {
         (Some(s), false) => {
             let img = discretize_ranges(s, std::slice::from_ref(camera), false, Some(&ranges))?;
-            lit_image(s, &vertex_normals(s), &img)
+            lit_image(s, &imp.normals, &img)
         }
         _ => (vec![[0.0; 3]; w * h], vec![f32::INFINITY; w * h]),
     };
