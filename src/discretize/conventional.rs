@@ -67,6 +67,23 @@ pub fn discretize_ranges(
             return input_err!("triangle range [{a}, {b}) is not within the scene's {n} faces");
         }
     }
+    resolve_streamed(scene, cameras, total, |ctx, on_chunk| {
+        gpu::depth::rasterize(ctx, scene, cameras, cull_backfaces, ranges, on_chunk)
+    })
+}
+
+/// The body every GPU discretization shares: `raster` renders the cameras' triangle ids and
+/// hands each chunk of images to its callback as it arrives; each chunk is resolved here while
+/// the GPU renders the next. `total` started when the call did.
+pub(crate) fn resolve_streamed(
+    scene: &Scene,
+    cameras: &[Camera],
+    total: Instant,
+    raster: impl FnOnce(
+        &gpu::GpuContext,
+        &mut dyn FnMut(usize, &[i32]),
+    ) -> Result<gpu::depth::RasterStats>,
+) -> Result<DepthImages> {
     let first = &cameras[0];
     let start = Instant::now();
     let ctx = gpu::context()?;
@@ -80,8 +97,7 @@ pub fn discretize_ranges(
     let mut img = DepthImages::allocate(cameras)?;
     let rays: Vec<PixelRays> = cameras.iter().map(PixelRays::new).collect();
     let npx = first.width as usize * first.height as usize;
-    // Each chunk of ids is resolved as it arrives, while the GPU renders the next chunk.
-    let raw = gpu::depth::rasterize(&ctx, scene, cameras, cull_backfaces, ranges, |at, ids| {
+    let raw = raster(&ctx, &mut |at, ids| {
         let range = at * npx..at * npx + ids.len();
         img.triangle[range.clone()].copy_from_slice(ids);
         resolve_into(&mut img, range, &rays, planes);

@@ -19,13 +19,13 @@
 use std::time::Instant;
 
 use super::conventional::{
-    check_cameras, discretize_conventional, raster_timings, resolve_ids, PixelRays,
+    check_cameras, discretize_conventional, resolve_ids, resolve_streamed, PixelRays,
 };
 use super::redundancy::{self, Redundancy, Sample};
 use super::DepthImages;
 use crate::camera::Camera;
 use crate::error::Result;
-use crate::gpu::{self, layered};
+use crate::gpu::layered;
 use crate::input_err;
 use crate::scene::Scene;
 use crate::trace;
@@ -84,23 +84,10 @@ fn layered_images(
     cull_backfaces: bool,
     method: &str,
 ) -> Result<DepthImages> {
-    let total = Instant::now();
-    let start = Instant::now();
-    let ctx = gpu::context()?;
-    let device_seconds = start.elapsed().as_secs_f64();
-    let start = Instant::now();
-    super::conventional::SurfacePlane::of(scene);
-    let prepare_seconds = start.elapsed().as_secs_f64();
-    let (ids, raw) = layered::render(&ctx, scene, cameras, test, cull_backfaces)?;
-    let (mut img, resolve_seconds) = resolve_ids(scene, cameras, ids)?;
+    let mut img = resolve_streamed(scene, cameras, Instant::now(), |ctx, on_image| {
+        layered::render(ctx, scene, cameras, test, cull_backfaces, on_image)
+    })?;
     img.method = method.into();
-    img.timings = raster_timings(
-        device_seconds,
-        prepare_seconds,
-        &raw,
-        resolve_seconds,
-        total,
-    );
     Ok(img)
 }
 

@@ -158,16 +158,17 @@ pub fn rasterize(
     Ok(stats)
 }
 
-/// A submitted chunk whose readback is not yet consumed.
-struct Pending {
-    readback: wgpu::Buffer,
-    queries: Option<Timestamps>,
-    submission: wgpu::SubmissionIndex,
-    first: usize,
-    n: usize,
-    w: u32,
-    h: u32,
-    row_tri: u64,
+/// A submitted chunk whose readback is not yet consumed: images `first..first + n` of w×h ids,
+/// rows `row_tri` bytes apart in `readback`.
+pub(super) struct Pending {
+    pub readback: wgpu::Buffer,
+    pub queries: Option<Timestamps>,
+    pub submission: wgpu::SubmissionIndex,
+    pub first: usize,
+    pub n: usize,
+    pub w: u32,
+    pub h: u32,
+    pub row_tri: u64,
 }
 
 struct Targets {
@@ -287,7 +288,7 @@ fn submit_chunk(
 }
 
 /// Wait for a chunk, hand its ids to `on_chunk`, and add its GPU time.
-fn finish_chunk(
+pub(super) fn finish_chunk(
     ctx: &GpuContext,
     p: Pending,
     stats: &mut RasterStats,

@@ -1,9 +1,10 @@
 //! Raster passes of `shaders/layered.wgsl`: images rendered one after another, each pass testing
 //! its fragments against the images before it — non-redundant rendering with pixel redundancy
-//! (non-redundant-rendering.txt Algorithm 1 with Algorithm 3) or depth peeling. All passes go in
-//! one submission: after each pass its triangle ids are copied into a storage buffer that the
-//! later passes read (and that is read back at the end), and peeling alternates two depth
-//! textures, one the target and the other the previous layer. A non-redundant pass maps each
+//! (non-redundant-rendering.txt Algorithm 1 with Algorithm 3) or depth peeling. Each pass is its
+//! own submission: after it, its triangle ids are copied into a storage buffer that the later
+//! passes read and into a readback buffer that the caller consumes while the GPU renders the next
+//! image. Peeling alternates two depth textures, one the target and the other the previous
+//! layer. A non-redundant pass maps each
 //! fragment's window position and depth straight into the earlier images with matrices formed
 //! here in f64, and its pipeline is compiled for its count of earlier images (see
 //! `LayeredPipeline::nonredundant`).
@@ -15,10 +16,10 @@ use std::time::Instant;
 use bytemuck::{Pod, Zeroable};
 use glam::DMat4;
 
-use super::depth::RasterStats;
+use super::depth::{finish_chunk, Pending, RasterStats};
 use super::raster::{
-    align, check_image_size, copy, draw_ids, id_pipeline, submit_readback, texture_2d, wait,
-    IdPass, Timestamps, DEPTH_FORMAT, TRI_FORMAT,
+    align, check_image_size, copy, draw_ids, id_pipeline, submit_readback, texture_2d, IdPass,
+    Timestamps, DEPTH_FORMAT, TRI_FORMAT,
 };
 use super::{GpuContext, SceneBuffers};
 use crate::camera::Camera;
@@ -157,14 +158,16 @@ impl LayeredPipeline {
 }
 
 /// Render one image per camera (all of one resolution), image i tested against images 0..i.
-/// Returns the triangle ids, row-major, image after image (−1 where empty).
+/// `on_image(i, ids)` receives image i's triangle ids (row-major, −1 where empty) while the GPU
+/// already renders image i + 1.
 pub fn render(
     ctx: &GpuContext,
     scene: &Scene,
     cameras: &[Camera],
     test: LayerTest,
     cull_backfaces: bool,
-) -> Result<(Vec<i32>, RasterStats)> {
+    mut on_image: impl FnMut(usize, &[i32]),
+) -> Result<RasterStats> {
     let (w, h) = (cameras[0].width, cameras[0].height);
     let n = cameras.len() as u64;
     check_image_size(ctx, w, h)?;
@@ -257,12 +260,6 @@ pub fn render(
             | wgpu::BufferUsages::COPY_SRC,
         mapped_at_creation: false,
     });
-    let readback = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("layered readback"),
-        size: history_bytes,
-        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
     let texture = |label, format, usage| texture_2d(device, label, (w, h), format, usage);
     let tri = texture(
         "layered triangle ids",
@@ -311,7 +308,6 @@ pub fn render(
             ],
         })
     });
-    let queries = Timestamps::new(ctx, n as u32);
     let cull = cull_backfaces as usize;
     let passes: Vec<wgpu::RenderPipeline> = (0..n as u32)
         .map(|i| match (i, test) {
@@ -320,8 +316,21 @@ pub fn render(
             (_, LayerTest::PixelRedundancy) => pipeline.nonredundant(device, i, cull_backfaces),
         })
         .collect();
-    let mut encoder = device.create_command_encoder(&Default::default());
+    stats.raster_seconds = start.elapsed().as_secs_f64();
+    // One submission per image, so that the caller consumes image i while the GPU renders
+    // image i + 1 (as `depth::rasterize` does with its chunks); the passes still see each other's
+    // ids through `history`, in submission order.
+    let mut in_flight: Option<Pending> = None;
     for i in 0..n {
+        let start = Instant::now();
+        let queries = Timestamps::new(ctx, 1);
+        let readback = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("layered readback"),
+            size: image_bytes,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut encoder = device.create_command_encoder(&Default::default());
         let pass = IdPass {
             ranges: None,
             tri_view: &tri_view,
@@ -331,33 +340,29 @@ pub fn render(
             bind: &binds[i as usize % 2],
             offsets: &[(i * stride) as u32, reproject_at[i as usize]],
         };
-        draw_ids(&mut encoder, &buffers, &pass, queries.as_ref(), i as u32);
+        draw_ids(&mut encoder, &buffers, &pass, queries.as_ref(), 0);
         copy(&mut encoder, &tri, &history, i * image_bytes, row, w, h);
-    }
-    encoder.copy_buffer_to_buffer(&history, 0, &readback, 0, history_bytes);
-    let submission = submit_readback(ctx, encoder, &readback, queries.as_ref());
-    wait(ctx, submission)?;
-    stats.raster_seconds = start.elapsed().as_secs_f64();
-
-    let start = Instant::now();
-    let (wu, hu) = (w as usize, h as usize);
-    let mut ids = vec![0i32; n as usize * wu * hu];
-    {
-        let data = readback
-            .slice(..)
-            .get_mapped_range()
-            .map_err(|e| Error::Gpu(format!("mapping the readback buffer failed: {e}")))?;
-        for (r, dst) in ids.chunks_exact_mut(wu).enumerate() {
-            let src = &data[r * row as usize..][..wu * 4];
-            dst.copy_from_slice(bytemuck::cast_slice(src));
+        encoder.copy_buffer_to_buffer(&history, i * image_bytes, &readback, 0, image_bytes);
+        let submission = submit_readback(ctx, encoder, &readback, queries.as_ref());
+        let next = Pending {
+            readback,
+            queries,
+            submission,
+            first: i as usize,
+            n: 1,
+            w,
+            h,
+            row_tri: row,
+        };
+        stats.raster_seconds += start.elapsed().as_secs_f64();
+        if let Some(done) = in_flight.replace(next) {
+            finish_chunk(ctx, done, &mut stats, &mut on_image)?;
         }
     }
-    readback.unmap();
-    if let Some(q) = &queries {
-        stats.gpu_seconds = Some(q.seconds(ctx)?);
+    if let Some(done) = in_flight {
+        finish_chunk(ctx, done, &mut stats, &mut on_image)?;
     }
-    stats.readback_seconds = start.elapsed().as_secs_f64();
-    Ok((ids, stats))
+    Ok(stats)
 }
 
 /// The matrices `reproject` of layered.wgsl, a block per image: for image i and each earlier
