@@ -115,7 +115,7 @@ pub(crate) fn resolve_streamed(
 /// The stages of a GPU discretization, in the order they run: device creation, scene upload,
 /// per-triangle preparation, raster (CPU side, and GPU timestamps when available), readback,
 /// the f64 resolve, and the total since `total` started.
-pub(crate) fn raster_timings(
+fn raster_timings(
     device_seconds: f64,
     prepare_seconds: f64,
     raw: &gpu::depth::RasterStats,

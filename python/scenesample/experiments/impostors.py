@@ -149,39 +149,47 @@ def figures(name, scene, up, rows, built, multi_label, args, out: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(6.5, 4.2))
-    for label in built:
-        sel = [r for r in rows if r["variant"] == label and r["budget_fraction"] == 0]
-        ax.plot(
-            [r["distance"] for r in sel],
-            [r["error_per_foreground_pixel"] for r in sel],
-            "o-",
-            label=label,
-        )
-    ax.set_xlabel("relative camera distance (bounding-box diagonals)")
-    ax.set_ylabel("error per foreground pixel (sum |dRGB|, 0-765)")
-    ax.set_title(f"{name}: impostors vs triangles")
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(out / f"fig2_{name}.png", dpi=110)
-    plt.close(fig)
+    def error_vs_distance(series, xlabel: str, ylabel: str, title: str, path: Path) -> None:
+        """One line per (label, rows) of error per foreground pixel against distance."""
+        fig, ax = plt.subplots(figsize=(6.5, 4.2))
+        for label, sel in series:
+            ax.plot(
+                [r["distance"] for r in sel],
+                [r["error_per_foreground_pixel"] for r in sel],
+                "o-",
+                label=label,
+            )
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel(ylabel)
+        ax.set_title(title)
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
 
-    fig, ax = plt.subplots(figsize=(6.5, 4.2))
-    for frac in sorted({r["budget_fraction"] for r in rows}):
-        sel = [r for r in rows if r["variant"] == multi_label and r["budget_fraction"] == frac]
-        ax.plot(
-            [r["distance"] for r in sel],
-            [r["error_per_foreground_pixel"] for r in sel],
-            "o-",
-            label=f"budget {frac:.0%} of the triangles",
-        )
-    ax.set_xlabel("relative camera distance")
-    ax.set_ylabel("error per foreground pixel")
-    ax.set_title(f"{name}: nearest cells as triangles ({multi_label})")
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(out / f"fig15_{name}.png", dpi=110)
-    plt.close(fig)
+    error_vs_distance(
+        [
+            (label, [r for r in rows if r["variant"] == label and r["budget_fraction"] == 0])
+            for label in built
+        ],
+        "relative camera distance (bounding-box diagonals)",
+        "error per foreground pixel (sum |dRGB|, 0-765)",
+        f"{name}: impostors vs triangles",
+        out / f"fig2_{name}.png",
+    )
+    error_vs_distance(
+        [
+            (
+                f"budget {frac:.0%} of the triangles",
+                [r for r in rows if r["variant"] == multi_label and r["budget_fraction"] == frac],
+            )
+            for frac in sorted({r["budget_fraction"] for r in rows})
+        ],
+        "relative camera distance",
+        "error per foreground pixel",
+        f"{name}: nearest cells as triangles ({multi_label})",
+        out / f"fig15_{name}.png",
+    )
 
     cam = camera(scene, up, 1.0, args.size)
     ref = ss.ImpostorView.of_triangles(scene, cam)
