@@ -11,33 +11,29 @@ use rayon::prelude::*;
 use bytemuck::{Pod, Zeroable};
 
 use super::raster::align;
-use super::{GpuContext, SceneBuffers};
+use super::GpuContext;
 use crate::camera::Camera;
 use crate::error::{Error, Result};
-use crate::scene::Scene;
 
 const SHADER: &str = include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/shaders/splat.wgsl"));
 
-/// Host copy of `Params` in splat.wgsl.
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct Params {
-    count: u32,
-    first: u32,
-    clip: u32,
-    _pad: u32,
-}
-const PARAMS_SIZE: u64 = std::mem::size_of::<Params>() as u64;
-
-/// Host copy of `View` in splat.wgsl.
+/// Host copy of `View` in splat.wgsl: one per dispatch, at a dynamic offset.
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
 struct ViewUniform {
     view_proj: [[f32; 4]; 4],
     forward_depth: [f32; 4],
     near: [f32; 4],
-    size_offset: [u32; 4],
+    size: [u32; 4],
+    range: [u32; 4],
 }
+const VIEW_SIZE: u64 = std::mem::size_of::<ViewUniform>() as u64;
+
+/// Floats per point in the `geometry` texture (four RGBA32F texels).
+pub const GEOMETRY_FLOATS: usize = 16;
+const GEOMETRY_BYTES: u64 = GEOMETRY_FLOATS as u64 * 4;
+/// Texels per row of the `geometry` and `list` textures: `1 << ROW_SHIFT` in splat.wgsl.
+const TEXTURE_ROW: u32 = 4096;
 
 /// Workgroups per dispatch dimension (wgpu's default limit) and threads per workgroup.
 const MAX_GROUPS: u32 = 65535;
@@ -64,13 +60,22 @@ impl SplatPipeline {
             },
             count: None,
         };
-        let read = wgpu::BufferBindingType::Storage { read_only: true };
-        let mut entries = vec![entry(0, wgpu::BufferBindingType::Uniform)];
-        entries.extend((1..7).map(|b| entry(b, read)));
-        entries.push(entry(
-            7,
-            wgpu::BufferBindingType::Storage { read_only: false },
-        ));
+        let texture = |binding, sample_type| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Texture {
+                sample_type,
+                view_dimension: wgpu::TextureViewDimension::D2,
+                multisampled: false,
+            },
+            count: None,
+        };
+        let entries = [
+            entry(0, wgpu::BufferBindingType::Uniform),
+            texture(1, wgpu::TextureSampleType::Float { filterable: false }),
+            texture(2, wgpu::TextureSampleType::Uint),
+            entry(3, wgpu::BufferBindingType::Storage { read_only: false }),
+        ];
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("splat.wgsl bindings"),
             entries: &entries,
@@ -94,10 +99,9 @@ impl SplatPipeline {
 
 /// The points to splat, in the layout splat.wgsl reads.
 pub struct PointBuffersIn<'a> {
-    /// Centres relative to the scene centre (xyz) and side length (w).
-    pub centers: &'a [[f32; 4]],
-    /// Triangle index per point.
-    pub triangles: &'a [u32],
+    /// `GEOMETRY_FLOATS` per point, as the `geometry` binding of splat.wgsl describes them
+    /// (positions relative to the scene centre).
+    pub geometry: &'a [[f32; GEOMETRY_FLOATS]],
     /// `words` visibility words per point.
     pub bits: &'a [u64],
     pub words: usize,
@@ -114,12 +118,14 @@ pub struct SplatStats {
 }
 
 /// Splat the points into one buffer per camera (each at its own resolution); returns the keys
-/// (depth bits << 32 | point index, `u64::MAX` empty), view after view, row-major.
+/// (depth bits << 32 | point index, `u64::MAX` empty), view after view, row-major. `centre` is
+/// the origin the points' geometry is given relative to.
 pub fn splat(
     ctx: &GpuContext,
-    scene: &Scene,
     points: &PointBuffersIn,
     cameras: &[Camera],
+    centre: DVec3,
+    bounds: [[f32; 3]; 2],
     clip_to_triangle: bool,
 ) -> Result<(Vec<u64>, SplatStats)> {
     crate::counters::add(&crate::counters::SPLAT_PASSES, 1);
@@ -147,16 +153,7 @@ pub fn splat(
             c.width, c.height
         )));
     }
-    let n = points.triangles.len();
-    // The visibility strings stay on the host (they become the pair lists); the centres and
-    // triangles go up whole.
-    if n as u64 * 16 > binding {
-        return Err(Error::GpuLimit(format!(
-            "{n} points' centres take {} bytes, more than this device's storage limit of \
-             {binding} bytes; splat fewer points per call",
-            n as u64 * 16
-        )));
-    }
+    let n = points.geometry.len();
     if n > u32::MAX as usize {
         return Err(Error::GpuLimit(format!(
             "{n} points: at most 2^32 - 1 fit the 32-bit point index of a splat key"
@@ -171,25 +168,34 @@ pub fn splat(
 
     use wgpu::util::DeviceExt;
     let start = Instant::now();
-    let buffers = SceneBuffers::of(ctx, scene)?;
-    let centre = scene.center();
-    // wgpu rejects empty bindings: pad each array to at least one element.
-    let storage = |label, bytes: &[u8]| {
-        let mut v = bytes.to_vec();
-        if v.len() < 16 {
-            v.resize(16, 0);
-        }
-        device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some(label),
-            contents: &v,
-            usage: wgpu::BufferUsages::STORAGE,
+    if ctx.limits.max_texture_dimension_2d < TEXTURE_ROW {
+        return Err(Error::GpuLimit(format!(
+            "splatting reads points from {TEXTURE_ROW}-texel-wide textures; this device allows \
+             {}",
+            ctx.limits.max_texture_dimension_2d
+        )));
+    }
+    let rows = ctx.limits.max_texture_dimension_2d as u64;
+    // The points' geometry, in chunks of at most one binding's worth of bytes that each fit one
+    // texture.
+    let per_chunk = ((binding / GEOMETRY_BYTES).min(rows * TEXTURE_ROW as u64 / 4) as usize).max(1);
+    let point_chunks: Vec<std::ops::Range<usize>> = (0..n.max(1))
+        .step_by(per_chunk)
+        .map(|s| s..(s + per_chunk).min(n))
+        .collect();
+    let geometry: Vec<wgpu::TextureView> = point_chunks
+        .iter()
+        .map(|r| {
+            row_texture(
+                ctx,
+                "splat geometry",
+                wgpu::TextureFormat::Rgba32Float,
+                bytemuck::cast_slice(&points.geometry[r.clone()]),
+            )
         })
-    };
-    let centers = storage("splat centres", bytemuck::cast_slice(points.centers));
-    let triangles = storage("splat triangles", bytemuck::cast_slice(points.triangles));
+        .collect();
     // The clip range only shapes the projection's depth row, unused here (a splat's depth comes
     // from `forward_depth`).
-    let bounds = scene.bounds();
     let view_data: Vec<ViewUniform> = cameras
         .iter()
         .map(|cam| {
@@ -201,82 +207,95 @@ pub fn splat(
                 view_proj: m.as_mat4().to_cols_array_2d(),
                 forward_depth: [f.x as f32, f.y as f32, f.z as f32, eye.dot(f) as f32],
                 near: [cam.znear.unwrap_or(0.0) as f32, 0.0, 0.0, 0.0],
-                size_offset: [0; 4],
+                size: [cam.width, cam.height, 0, clip_to_triangle as u32],
+                range: [0; 4],
             }
         })
         .collect();
     stats.upload_seconds = start.elapsed().as_secs_f64();
 
-    // Chunks of consecutive views whose buffers, and whose (point, view) pairs, each fit one
-    // binding together.
     let start = Instant::now();
     let lists = points_per_view(points, cameras, centre);
     stats.pairs_seconds = start.elapsed().as_secs_f64();
-    let pair_counts: Vec<usize> = lists.iter().map(Vec::len).collect();
+
+    // Chunks of consecutive views whose buffers, and whose point lists, each fit one binding.
     let mut chunks: Vec<std::ops::Range<usize>> = Vec::new();
     let mut start_view = 0;
-    let (mut bytes, mut pair_bytes) = (0, 0);
-    for (i, (&b, &c)) in view_bytes.iter().zip(&pair_counts).enumerate() {
-        let pb = c as u64 * 8;
-        if pb > binding {
+    let (mut bytes, mut list_bytes) = (0, 0);
+    // A chunk's lists go in one texture: at most a binding's worth of bytes, and its rows.
+    let list_limit = binding.min(rows * TEXTURE_ROW as u64 * 4);
+    for (i, (&b, list)) in view_bytes.iter().zip(&lists).enumerate() {
+        let lb = list.len() as u64 * 4;
+        if lb > list_limit {
             return Err(Error::GpuLimit(format!(
-                "view {i} alone receives {c} points, whose (point, view) pairs take {pb} bytes, \
-                 more than this device's storage limit of {binding} bytes; splat fewer points"
+                "view {i} alone receives {} points, whose list takes {lb} bytes, more than this \
+                 device's limit of {list_limit} bytes; splat fewer points",
+                list.len()
             )));
         }
-        let full = bytes + b > binding || pair_bytes + pb > binding;
-        if i > start_view && (full || i - start_view == MAX_GROUPS as usize) {
+        if i > start_view && (bytes + b > binding || list_bytes + lb > list_limit) {
             chunks.push(start_view..i);
             start_view = i;
-            (bytes, pair_bytes) = (0, 0);
+            (bytes, list_bytes) = (0, 0);
         }
         bytes += b;
-        pair_bytes += pb;
+        list_bytes += lb;
     }
     chunks.push(start_view..cameras.len());
-    let param_stride = align(
-        PARAMS_SIZE,
+    let stride = align(
+        VIEW_SIZE,
         ctx.limits.min_uniform_buffer_offset_alignment as u64,
     );
+    let per_dispatch = (MAX_GROUPS * GROUP) as usize;
     let total_pixels: u64 = view_bytes.iter().sum::<u64>() / 8;
     let mut out = vec![0u64; total_pixels as usize];
     let mut pending: Option<Pending> = None;
     let mut at_pixel = 0usize;
     for range in chunks {
         let start = Instant::now();
-        let mut cams = view_data[range.clone()].to_vec();
+        // The chunk's lists one after another, and one dispatch per (view, point chunk, run of
+        // at most `per_dispatch` points): (point chunk, uniform).
+        let mut list: Vec<u32> =
+            Vec::with_capacity(lists[range.clone()].iter().map(Vec::len).sum());
+        let mut dispatches: Vec<(usize, ViewUniform)> = Vec::new();
         let mut offset = 0u32;
-        for (v, cam) in cams.iter_mut().zip(&cameras[range.clone()]) {
-            v.size_offset = [cam.width, cam.height, offset, 0];
+        for (cam, (data, ps)) in cameras[range.clone()]
+            .iter()
+            .zip(view_data[range.clone()].iter().zip(&lists[range.clone()]))
+        {
+            let first = list.len();
+            list.extend_from_slice(ps);
+            // The list is in point order: each point chunk is one run of it.
+            let mut from = 0;
+            for (k, r) in point_chunks.iter().enumerate() {
+                let to = from + ps[from..].partition_point(|&p| (p as usize) < r.end);
+                for s in (from..to).step_by(per_dispatch) {
+                    let count = (to - s).min(per_dispatch);
+                    let mut u = *data;
+                    u.size[2] = offset;
+                    u.range = [count as u32, (first + s) as u32, r.start as u32, 0];
+                    dispatches.push((k, u));
+                }
+                from = to;
+            }
             offset += cam.width * cam.height;
         }
-        // The chunk's (point, view) pairs, grouped by view.
-        let pairs: Vec<[u32; 2]> = lists[range.clone()]
-            .iter()
-            .enumerate()
-            .flat_map(|(v, ps)| ps.iter().map(move |&p| [p, v as u32]))
-            .collect();
-        let per_dispatch = (MAX_GROUPS * GROUP) as usize;
-        let dispatches = pairs.len().div_ceil(per_dispatch).max(1);
-        let mut params = vec![0u8; param_stride as usize * dispatches];
-        for d in 0..dispatches {
-            let first = d * per_dispatch;
-            let p = Params {
-                count: (pairs.len() - first.min(pairs.len())).min(per_dispatch) as u32,
-                first: first as u32,
-                clip: clip_to_triangle as u32,
-                _pad: 0,
-            };
-            let at = d * param_stride as usize;
-            params[at..at + PARAMS_SIZE as usize].copy_from_slice(bytemuck::bytes_of(&p));
+        let mut uniforms = vec![0u8; stride as usize * dispatches.len().max(1)];
+        for (d, (_, u)) in dispatches.iter().enumerate() {
+            let at = d * stride as usize;
+            uniforms[at..at + VIEW_SIZE as usize].copy_from_slice(bytemuck::bytes_of(u));
         }
-        let pairs_buf = storage("splat pairs", bytemuck::cast_slice(&pairs));
-        let params_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("splat params"),
-            contents: &params,
+        let list_view = row_texture(
+            ctx,
+            "splat lists",
+            wgpu::TextureFormat::R32Uint,
+            bytemuck::cast_slice(&list),
+        );
+        let uniform_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("splat views"),
+            contents: &uniforms,
             usage: wgpu::BufferUsages::UNIFORM,
         });
-        let views_buf = storage("splat views", bytemuck::cast_slice(&cams));
         let bytes = offset as u64 * 8;
         let target = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("splat buffers"),
@@ -292,62 +311,46 @@ pub fn splat(
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("splat.wgsl bindings"),
-            layout: &ctx.splat_pipeline().layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                        buffer: &params_buf,
-                        offset: 0,
-                        size: wgpu::BufferSize::new(PARAMS_SIZE),
-                    }),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: views_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: centers.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: triangles.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 4,
-                    resource: pairs_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 5,
-                    resource: buffers.positions.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 6,
-                    resource: buffers.faces.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 7,
-                    resource: target.as_entire_binding(),
-                },
-            ],
-        });
+        let binds: Vec<wgpu::BindGroup> = geometry
+            .iter()
+            .map(|g| {
+                device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("splat.wgsl bindings"),
+                    layout: &ctx.splat_pipeline().layout,
+                    entries: &[
+                        wgpu::BindGroupEntry {
+                            binding: 0,
+                            resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                                buffer: &uniform_buf,
+                                offset: 0,
+                                size: wgpu::BufferSize::new(VIEW_SIZE),
+                            }),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 1,
+                            resource: wgpu::BindingResource::TextureView(g),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 2,
+                            resource: wgpu::BindingResource::TextureView(&list_view),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 3,
+                            resource: target.as_entire_binding(),
+                        },
+                    ],
+                })
+            })
+            .collect();
         let mut encoder = device.create_command_encoder(&Default::default());
         // Zero is "empty": the shader stores complemented keys with atomicMax.
         encoder.clear_buffer(&target, 0, None);
         {
             let mut pass = encoder.begin_compute_pass(&Default::default());
             pass.set_pipeline(&ctx.splat_pipeline().pipeline);
-            for d in 0..dispatches {
-                let first = d * per_dispatch;
-                let count = (pairs.len() - first.min(pairs.len())).min(per_dispatch) as u32;
-                if count == 0 {
-                    continue;
-                }
-                pass.set_bind_group(0, &bind, &[(d as u64 * param_stride) as u32]);
-                pass.dispatch_workgroups(count.div_ceil(GROUP), 1, 1);
+            for (d, (k, u)) in dispatches.iter().enumerate() {
+                pass.set_bind_group(0, &binds[*k], &[(d as u64 * stride) as u32]);
+                pass.dispatch_workgroups(u.range[0].div_ceil(GROUP), 1, 1);
             }
         }
         encoder.copy_buffer_to_buffer(&target, 0, &readback, 0, bytes);
@@ -371,6 +374,43 @@ pub fn splat(
     Ok((out, stats))
 }
 
+/// A 2D texture of `format` holding `data` texel after texel, `TEXTURE_ROW` texels per row,
+/// the last row zero-padded (at least one row); the caller has checked that the rows fit.
+fn row_texture(
+    ctx: &GpuContext,
+    label: &str,
+    format: wgpu::TextureFormat,
+    data: &[u8],
+) -> wgpu::TextureView {
+    use wgpu::util::DeviceExt;
+    let texel = format.block_copy_size(None).unwrap_or(4) as usize;
+    let row = TEXTURE_ROW as usize * texel;
+    let rows = data.len().div_ceil(row).max(1);
+    let mut padded = Vec::with_capacity(rows * row);
+    padded.extend_from_slice(data);
+    padded.resize(rows * row, 0);
+    let texture = ctx.device.create_texture_with_data(
+        &ctx.queue,
+        &wgpu::TextureDescriptor {
+            label: Some(label),
+            size: wgpu::Extent3d {
+                width: TEXTURE_ROW,
+                height: rows as u32,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING,
+            view_formats: &[],
+        },
+        wgpu::util::TextureDataOrder::LayerMajor,
+        &padded,
+    );
+    texture.create_view(&Default::default())
+}
+
 /// A submitted chunk of views whose readback is not yet consumed.
 struct Pending {
     /// Its first pixel in the output, and its pixel count.
@@ -386,7 +426,7 @@ struct Pending {
 /// no pixel, so the output is the same and the GPU does only pairs that matter.
 fn points_per_view(points: &PointBuffersIn, cameras: &[Camera], centre: DVec3) -> Vec<Vec<u32>> {
     let words = points.words;
-    let n = points.triangles.len();
+    let n = points.geometry.len();
     cameras
         .par_iter()
         .enumerate()
@@ -398,9 +438,10 @@ fn points_per_view(points: &PointBuffersIn, cameras: &[Camera], centre: DVec3) -
                     if points.bits[p * words + w] & bit == 0 {
                         return false;
                     }
-                    let c = points.centers[p];
-                    let at = DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64);
-                    let r = c[3] as f64 * std::f64::consts::FRAC_1_SQRT_2;
+                    let g = &points.geometry[p];
+                    let at = DVec3::new(g[0] as f64, g[1] as f64, g[2] as f64);
+                    // The square's circumradius: half its diagonal.
+                    let r = g[3] as f64 * std::f64::consts::SQRT_2;
                     planes.iter().all(|&(nrm, d)| nrm.dot(at) + d >= -r)
                 })
                 .map(|p| p as u32)

@@ -10,6 +10,9 @@
 
 use std::time::Instant;
 
+use glam::DVec3;
+use rayon::prelude::*;
+
 use crate::camera::Camera;
 use crate::error::Result;
 use crate::gpu;
@@ -209,29 +212,21 @@ pub fn splat_views(
     let ctx = gpu::context()?;
     let device_seconds = start.elapsed().as_secs_f64();
     let start = Instant::now();
-    let c = scene.center();
-    let centers: Vec<[f32; 4]> = points
-        .center
-        .iter()
-        .zip(&points.length)
-        .map(|(p, &l)| {
-            [
-                (p[0] as f64 - c.x) as f32,
-                (p[1] as f64 - c.y) as f32,
-                (p[2] as f64 - c.z) as f32,
-                l,
-            ]
-        })
-        .collect();
-    let triangles: Vec<u32> = points.triangle.iter().map(|&t| t as u32).collect();
+    let geometry = square_geometry(scene, points);
     let prepare_seconds = start.elapsed().as_secs_f64();
     let input = gpu::splat::PointBuffersIn {
-        centers: &centers,
-        triangles: &triangles,
+        geometry: &geometry,
         bits: &points.views,
         words: points.words(),
     };
-    let (packed, stats) = gpu::splat::splat(&ctx, scene, &input, cameras, clip_to_triangle)?;
+    let (packed, stats) = gpu::splat::splat(
+        &ctx,
+        &input,
+        cameras,
+        scene.center(),
+        scene.bounds(),
+        clip_to_triangle,
+    )?;
     Ok((
         packed,
         vec![
@@ -244,4 +239,58 @@ pub fn splat_views(
             ("total".into(), total.elapsed().as_secs_f64()),
         ],
     ))
+}
+
+/// Per point, what the splat shader reads (`gpu::splat::GEOMETRY_FLOATS` floats, positions
+/// relative to the scene centre): the centre and half the side; the square's unit axes, u along
+/// the triangle's longest edge and v across it in the triangle's plane (x and y for a
+/// degenerate triangle); the triangle's vertices relative to the centre in (u, v) coordinates,
+/// zero for a degenerate triangle, which the shader then does not clip to. Computed once per
+/// point in f64, so the GPU does per (point, view) pair only what depends on the view.
+fn square_geometry(scene: &Scene, points: &Points) -> Vec<[f32; gpu::splat::GEOMETRY_FLOATS]> {
+    let origin = scene.center();
+    points
+        .center
+        .par_iter()
+        .zip(&points.length)
+        .zip(&points.triangle)
+        .map(|((p, &length), &t)| {
+            let c = DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+            let [v0, v1, v2] = scene.triangle(t as usize);
+            let edges = [v1 - v0, v2 - v1, v0 - v2];
+            let along = edges
+                .iter()
+                .copied()
+                .reduce(|a, e| {
+                    if e.length_squared() > a.length_squared() {
+                        e
+                    } else {
+                        a
+                    }
+                })
+                .unwrap_or(DVec3::X);
+            let n = edges[0].cross(-edges[2]);
+            let (la, ln) = (along.length(), n.length());
+            let flat = !(la > 0.0 && ln > 0.0);
+            let (u, v) = if flat {
+                (DVec3::X, DVec3::Y)
+            } else {
+                let u = along / la;
+                (u, (n / ln).cross(u))
+            };
+            let rel = c - origin;
+            let mut g = [0f32; gpu::splat::GEOMETRY_FLOATS];
+            g[..4].copy_from_slice(&[rel.x as f32, rel.y as f32, rel.z as f32, 0.5 * length]);
+            g[4..7].copy_from_slice(&u.as_vec3().to_array());
+            g[7..10].copy_from_slice(&v.as_vec3().to_array());
+            if !flat {
+                for (k, w) in [v0, v1, v2].into_iter().enumerate() {
+                    let d = w - c;
+                    g[10 + 2 * k] = d.dot(u) as f32;
+                    g[11 + 2 * k] = d.dot(v) as f32;
+                }
+            }
+            g
+        })
+        .collect()
 }
