@@ -425,27 +425,47 @@ struct Pending {
 /// conservative per-triangle test (§3.1); this per-point test drops the pairs that would write
 /// no pixel, so the output is the same and the GPU does only pairs that matter.
 fn points_per_view(points: &PointBuffersIn, cameras: &[Camera], centre: DVec3) -> Vec<Vec<u32>> {
+    // Blocks of points in parallel, each walking its points' set bits once; then each view's
+    // list is its blocks' lists in block order, so in point order.
+    const BLOCK: usize = 1 << 15;
     let words = points.words;
     let n = points.geometry.len();
-    cameras
-        .par_iter()
-        .enumerate()
-        .map(|(v, cam)| {
-            let planes = cam.frustum_planes(1.0, cam.znear.unwrap_or(0.0), centre);
-            let (w, bit) = (v / 64, 1u64 << (v % 64));
-            (0..n)
-                .filter(|&p| {
-                    if points.bits[p * words + w] & bit == 0 {
-                        return false;
+    let planes: Vec<Vec<(DVec3, f64)>> = cameras
+        .iter()
+        .map(|cam| cam.frustum_planes(1.0, cam.znear.unwrap_or(0.0), centre))
+        .collect();
+    let blocks: Vec<Vec<Vec<u32>>> = (0..n.div_ceil(BLOCK))
+        .into_par_iter()
+        .map(|b| {
+            let mut lists = vec![Vec::new(); cameras.len()];
+            for p in b * BLOCK..((b + 1) * BLOCK).min(n) {
+                let g = &points.geometry[p];
+                let at = DVec3::new(g[0] as f64, g[1] as f64, g[2] as f64);
+                // The square's circumradius: half its diagonal.
+                let r = g[3] as f64 * std::f64::consts::SQRT_2;
+                for (w, &word) in points.bits[p * words..(p + 1) * words].iter().enumerate() {
+                    let mut bits = word;
+                    while bits != 0 {
+                        let v = w * 64 + bits.trailing_zeros() as usize;
+                        bits &= bits - 1;
+                        let Some(view) = planes.get(v) else { break };
+                        if view.iter().all(|&(nrm, d)| nrm.dot(at) + d >= -r) {
+                            lists[v].push(p as u32);
+                        }
                     }
-                    let g = &points.geometry[p];
-                    let at = DVec3::new(g[0] as f64, g[1] as f64, g[2] as f64);
-                    // The square's circumradius: half its diagonal.
-                    let r = g[3] as f64 * std::f64::consts::SQRT_2;
-                    planes.iter().all(|&(nrm, d)| nrm.dot(at) + d >= -r)
-                })
-                .map(|p| p as u32)
-                .collect()
+                }
+            }
+            lists
+        })
+        .collect();
+    (0..cameras.len())
+        .into_par_iter()
+        .map(|v| {
+            let mut list = Vec::with_capacity(blocks.iter().map(|b| b[v].len()).sum());
+            for b in &blocks {
+                list.extend_from_slice(&b[v]);
+            }
+            list
         })
         .collect()
 }
