@@ -190,7 +190,11 @@ pub fn splat(
                 ctx,
                 "splat geometry",
                 wgpu::TextureFormat::Rgba32Float,
-                bytemuck::cast_slice(&points.geometry[r.clone()]),
+                4 * r.len(),
+                |mut view| {
+                    let bytes: &[u8] = bytemuck::cast_slice(&points.geometry[r.clone()]);
+                    view.slice(..bytes.len()).copy_from_slice(bytes);
+                },
             )
         })
         .collect();
@@ -224,13 +228,13 @@ pub fn splat(
     let (mut bytes, mut list_bytes) = (0, 0);
     // A chunk's lists go in one texture: at most a binding's worth of bytes, and its rows.
     let list_limit = binding.min(rows * TEXTURE_ROW as u64 * 4);
-    for (i, (&b, list)) in view_bytes.iter().zip(&lists).enumerate() {
-        let lb = list.len() as u64 * 4;
+    for (i, (&b, &count)) in view_bytes.iter().zip(&lists.counts).enumerate() {
+        let lb = count as u64 * 4;
         if lb > list_limit {
             return Err(Error::GpuLimit(format!(
                 "view {i} alone receives {} points, whose list takes {lb} bytes, more than this \
                  device's limit of {list_limit} bytes; splat fewer points",
-                list.len()
+                count
             )));
         }
         if i > start_view && (bytes + b > binding || list_bytes + lb > list_limit) {
@@ -255,20 +259,17 @@ pub fn splat(
         let start = Instant::now();
         // The chunk's lists one after another, and one dispatch per (view, point chunk, run of
         // at most `per_dispatch` points): (point chunk, uniform).
-        let mut list: Vec<u32> =
-            Vec::with_capacity(lists[range.clone()].iter().map(Vec::len).sum());
         let mut dispatches: Vec<(usize, ViewUniform)> = Vec::new();
         let mut offset = 0u32;
-        for (cam, (data, ps)) in cameras[range.clone()]
-            .iter()
-            .zip(view_data[range.clone()].iter().zip(&lists[range.clone()]))
+        let mut first = 0;
+        for (v, (cam, data)) in range
+            .clone()
+            .zip(cameras[range.clone()].iter().zip(&view_data[range.clone()]))
         {
-            let first = list.len();
-            list.extend_from_slice(ps);
             // The list is in point order: each point chunk is one run of it.
             let mut from = 0;
             for (k, r) in point_chunks.iter().enumerate() {
-                let to = from + ps[from..].partition_point(|&p| (p as usize) < r.end);
+                let to = lists.below(v, r.end);
                 for s in (from..to).step_by(per_dispatch) {
                     let count = (to - s).min(per_dispatch);
                     let mut u = *data;
@@ -278,6 +279,7 @@ pub fn splat(
                 }
                 from = to;
             }
+            first += lists.counts[v];
             offset += cam.width * cam.height;
         }
         let mut uniforms = vec![0u8; stride as usize * dispatches.len().max(1)];
@@ -289,7 +291,15 @@ pub fn splat(
             ctx,
             "splat lists",
             wgpu::TextureFormat::R32Uint,
-            bytemuck::cast_slice(&list),
+            first,
+            |mut view| {
+                let mut at = 0;
+                for part in range.clone().flat_map(|v| lists.view(v)) {
+                    let bytes: &[u8] = bytemuck::cast_slice(part);
+                    view.slice(at..at + bytes.len()).copy_from_slice(bytes);
+                    at += bytes.len();
+                }
+            },
         );
         let uniform_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("splat views"),
@@ -374,40 +384,58 @@ pub fn splat(
     Ok((out, stats))
 }
 
-/// A 2D texture of `format` holding `data` texel after texel, `TEXTURE_ROW` texels per row,
-/// the last row zero-padded (at least one row); the caller has checked that the rows fit.
+/// A 2D texture of `format` with `texels` texels, `TEXTURE_ROW` per row (at least one row),
+/// whose bytes `fill` writes into a zeroed staging buffer; uploaded by its own submission,
+/// which the queue runs before any later one. The caller has checked that the rows fit.
 fn row_texture(
     ctx: &GpuContext,
     label: &str,
     format: wgpu::TextureFormat,
-    data: &[u8],
+    texels: usize,
+    fill: impl FnOnce(wgpu::BufferViewMut),
 ) -> wgpu::TextureView {
-    use wgpu::util::DeviceExt;
-    let texel = format.block_copy_size(None).unwrap_or(4) as usize;
-    let row = TEXTURE_ROW as usize * texel;
-    let rows = data.len().div_ceil(row).max(1);
-    let mut padded = Vec::with_capacity(rows * row);
-    padded.extend_from_slice(data);
-    padded.resize(rows * row, 0);
-    let texture = ctx.device.create_texture_with_data(
-        &ctx.queue,
-        &wgpu::TextureDescriptor {
-            label: Some(label),
-            size: wgpu::Extent3d {
-                width: TEXTURE_ROW,
-                height: rows as u32,
-                depth_or_array_layers: 1,
+    let device = &ctx.device;
+    let row = TEXTURE_ROW * format.block_copy_size(None).unwrap_or(4);
+    let rows = texels.div_ceil(TEXTURE_ROW as usize).max(1) as u32;
+    let staging = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: row as u64 * rows as u64,
+        usage: wgpu::BufferUsages::MAP_WRITE | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: true,
+    });
+    if let Ok(view) = staging.slice(..).get_mapped_range_mut() {
+        fill(view);
+    }
+    staging.unmap();
+    let size = wgpu::Extent3d {
+        width: TEXTURE_ROW,
+        height: rows,
+        depth_or_array_layers: 1,
+    };
+    let texture = device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size,
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format,
+        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        view_formats: &[],
+    });
+    let mut encoder = device.create_command_encoder(&Default::default());
+    encoder.copy_buffer_to_texture(
+        wgpu::TexelCopyBufferInfo {
+            buffer: &staging,
+            layout: wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(row),
+                rows_per_image: Some(rows),
             },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format,
-            usage: wgpu::TextureUsages::TEXTURE_BINDING,
-            view_formats: &[],
         },
-        wgpu::util::TextureDataOrder::LayerMajor,
-        &padded,
+        texture.as_image_copy(),
+        size,
     );
+    ctx.queue.submit([encoder.finish()]);
     texture.create_view(&Default::default())
 }
 
@@ -423,10 +451,31 @@ struct Pending {
 /// For each view, the points to splat into it: those whose bit for the view is set and whose
 /// square (its circumscribed sphere) reaches into the view's frustum. The bits are the paper's
 /// conservative per-triangle test (§3.1); this per-point test drops the pairs that would write
-/// no pixel, so the output is the same and the GPU does only pairs that matter.
-fn points_per_view(points: &PointBuffersIn, cameras: &[Camera], centre: DVec3) -> Vec<Vec<u32>> {
-    // Blocks of points in parallel, each walking its points' set bits once; then each view's
-    // list is its blocks' lists in block order, so in point order.
+/// no pixel, so the output is the same and the GPU does only pairs that matter. A view's list is
+/// the concatenation of its parts in `blocks` (consecutive blocks of points), so in point order.
+struct PairLists {
+    /// Per block of points, per view, the block's points for the view.
+    blocks: Vec<Vec<Vec<u32>>>,
+    /// Per view, the length of its list.
+    counts: Vec<usize>,
+}
+
+impl PairLists {
+    fn view(&self, v: usize) -> impl Iterator<Item = &[u32]> + '_ {
+        self.blocks.iter().map(move |b| b[v].as_slice())
+    }
+
+    /// How many entries of view `v`'s list are below point `end`.
+    fn below(&self, v: usize, end: usize) -> usize {
+        self.view(v)
+            .map(|part| part.partition_point(|&p| (p as usize) < end))
+            .sum()
+    }
+}
+
+fn points_per_view(points: &PointBuffersIn, cameras: &[Camera], centre: DVec3) -> PairLists {
+    // Blocks of points in parallel, each walking its points' set bits twice: to size its lists
+    // (the bits bound them), then to fill them.
     const BLOCK: usize = 1 << 15;
     let words = points.words;
     let n = points.geometry.len();
@@ -434,40 +483,50 @@ fn points_per_view(points: &PointBuffersIn, cameras: &[Camera], centre: DVec3) -
         .iter()
         .map(|cam| cam.frustum_planes(1.0, cam.znear.unwrap_or(0.0), centre))
         .collect();
+    let views = cameras.len();
+    let bits_of = |p: usize| &points.bits[p * words..(p + 1) * words];
     let blocks: Vec<Vec<Vec<u32>>> = (0..n.div_ceil(BLOCK))
         .into_par_iter()
         .map(|b| {
-            let mut lists = vec![Vec::new(); cameras.len()];
-            for p in b * BLOCK..((b + 1) * BLOCK).min(n) {
+            let block = b * BLOCK..((b + 1) * BLOCK).min(n);
+            let mut bound = vec![0usize; cameras.len()];
+            for p in block.clone() {
+                for_each_view(bits_of(p), views, |v| bound[v] += 1);
+            }
+            let mut lists: Vec<Vec<u32>> = bound.iter().map(|&c| Vec::with_capacity(c)).collect();
+            for p in block {
                 let g = &points.geometry[p];
                 let at = DVec3::new(g[0] as f64, g[1] as f64, g[2] as f64);
                 // The square's circumradius: half its diagonal.
                 let r = g[3] as f64 * std::f64::consts::SQRT_2;
-                for (w, &word) in points.bits[p * words..(p + 1) * words].iter().enumerate() {
-                    let mut bits = word;
-                    while bits != 0 {
-                        let v = w * 64 + bits.trailing_zeros() as usize;
-                        bits &= bits - 1;
-                        let Some(view) = planes.get(v) else { break };
-                        if view.iter().all(|&(nrm, d)| nrm.dot(at) + d >= -r) {
-                            lists[v].push(p as u32);
-                        }
+                for_each_view(bits_of(p), views, |v| {
+                    if planes[v].iter().all(|&(nrm, d)| nrm.dot(at) + d >= -r) {
+                        lists[v].push(p as u32);
                     }
-                }
+                });
             }
             lists
         })
         .collect();
-    (0..cameras.len())
-        .into_par_iter()
-        .map(|v| {
-            let mut list = Vec::with_capacity(blocks.iter().map(|b| b[v].len()).sum());
-            for b in &blocks {
-                list.extend_from_slice(&b[v]);
+    let counts = (0..cameras.len())
+        .map(|v| blocks.iter().map(|b| b[v].len()).sum())
+        .collect();
+    PairLists { blocks, counts }
+}
+
+/// Call `each` with every view below `views` whose bit is set in `bits`, in increasing order.
+fn for_each_view(bits: &[u64], views: usize, mut each: impl FnMut(usize)) {
+    for (w, &word) in bits.iter().enumerate() {
+        let mut rest = word;
+        while rest != 0 {
+            let v = w * 64 + rest.trailing_zeros() as usize;
+            rest &= rest - 1;
+            if v >= views {
+                return;
             }
-            list
-        })
-        .collect()
+            each(v);
+        }
+    }
 }
 
 /// Wait for one chunk of views and copy its keys, un-complemented, into `out`.
