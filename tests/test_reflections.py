@@ -141,3 +141,67 @@ def test_epr_experiment_writes_tables_and_figures(tmp_path):
     assert "Table 3 analogue" in md
     assert len((tmp_path / "table3.csv").read_text().splitlines()) == 1 + 2 * 3
     assert (tmp_path / "fig10.png").stat().st_size > 300
+
+
+def _mirror_between_walls(double_sided_left: bool) -> ss.Scene:
+    """A mirror sphere between two walls that turn their backs to it: red on the left
+    (single-sided unless ``double_sided_left``), green on the right (double-sided), each
+    material stated, so the left wall is the only thing sidedness can hide."""
+    unit_v, unit_f = ss.scenes._icosphere_arrays(3)
+    verts = [0.5 * unit_v]
+    faces = [unit_f]
+    mats = [np.zeros(len(unit_f), dtype=np.int64)]
+    # Vertical walls at x = -1.5 (normal -x) and x = +1.5 (normal +x): fronts face away.
+    for x, m in ((-1.5, 1), (1.5, 2)):
+        base = sum(len(v) for v in verts)
+        v = np.array([[x, -1.5, -1.5], [x, 1.5, -1.5], [x, 1.5, 1.5], [x, -1.5, 1.5]])
+        f = np.array([[0, 1, 2], [0, 2, 3]]) if x > 0 else np.array([[0, 2, 1], [0, 3, 2]])
+        verts.append(v)
+        faces.append(f + base)
+        mats.append(np.full(2, m))
+    colors = np.ones((sum(len(v) for v in verts), 3))
+    colors[len(unit_v) : len(unit_v) + 4] = (0.9, 0.05, 0.05)
+    colors[len(unit_v) + 4 :] = (0.05, 0.9, 0.05)
+    return ss.Scene.from_arrays(
+        np.concatenate(verts),
+        np.concatenate(faces),
+        colors=colors,
+        material_ids=np.concatenate(mats),
+        materials=[
+            {"name": "mirror", "metallic": 1.0, "roughness": 0.0},
+            {"name": "left", "metallic": 0.0, "roughness": 0.8, "double_sided": double_sided_left},
+            {"name": "right", "metallic": 0.0, "roughness": 0.8, "double_sided": True},
+        ],
+    )
+
+
+@pytest.mark.parametrize("method", ["epr", "mvr", "ivir"])
+def test_mirrors_follow_the_materials_sidedness(gpu, method):
+    """glTF sidedness in the cube maps, the same for all three methods: the back of a
+    single-sided wall never shows in the mirror, the back of a double-sided one does. The
+    scene mixes both kinds, so MVR takes its two-draw path (culled and unculled, merged)."""
+    eye = ss.Camera.look_at((0, -3, 0), (0, 0, 0), (0, 0, 1), yfov=0.5, width=64, height=64)
+
+    def tint(double_sided_left: bool) -> tuple[int, int]:
+        r = ss.reflections(_mirror_between_walls(double_sided_left), eye, method=method)
+        rgb = r.image[r.reflective]
+        red = (rgb[:, 0] > 0.02) & (rgb[:, 0] > 4 * rgb[:, 1])
+        green = (rgb[:, 1] > 0.02) & (rgb[:, 1] > 4 * rgb[:, 0])
+        return int(red.sum()), int(green.sum())
+
+    red, green = tint(False)
+    assert red == 0 and green > 20, (red, green)
+    red, green = tint(True)
+    assert red > 20 and green > 20, (red, green)
+
+
+def test_reflective_room_is_wound_like_its_normals():
+    """Its materials are single-sided, so a triangle wound against its normal would vanish from
+    the cube maps: every triangle's winding agrees with its vertex normals."""
+    scene = ss.scenes.reflective_room(spheres=6, seed=2, detail=1)
+    v = scene.vertices.astype(np.float64)
+    f = scene.faces
+    wound = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    stated = scene.normals[f].sum(axis=1)
+    assert ((wound * stated).sum(axis=1) > 0).all()
+    assert not any(m["double_sided"] for m in scene.materials)

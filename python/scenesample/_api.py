@@ -162,7 +162,10 @@ def discretize(
 
     ``"epr"`` (§3.1-3.4, Eq. 2-4): per triangle, one visibility bit per cube-map view
     (conservative: dropped only when all vertices lie outside one plane of the 20%-enlarged
-    frustum; a reflector's own triangles are left out of its own cube); point spacing = the
+    frustum; a reflector's own triangles are left out of its own cube, and so is a triangle
+    whose material is single-sided (``double_sided`` false) and turns its back to the
+    reflector's centre, as §3.2 samples a triangle only for the views it faces; triangles
+    without a material count as double-sided); point spacing = the
     eye's pixel footprint at the distance light travels from the triangle via the nearest
     reflector's bounding sphere to the eye, divided by ``rho_scale``, never finer than the finest
     cube map that sees the triangle; triangles under 1/10 point-cell dropped with probability

@@ -119,6 +119,11 @@ def reflections(
     seed : int
         Seeds EPR's stochastic culling.
 
+    Sidedness (shared by all methods, glTF's ``doubleSided``): a cube map does not see the back
+    of a triangle whose material is single-sided (MVR culls it; EPR and iVIR sample a triangle
+    only for the cube maps it faces, §3.2); it sees both sides of a double-sided one, and of a
+    triangle without a material. In a closed, consistently wound scene this changes no pixel.
+
     Shading (shared by all methods): Lambert + GGX under the scene's punctual lights (one default
     directional light when it has none) plus ambient, no shadows; reflective pixels show their
     albedo times the reflected radiance; where a lookup finds nothing, a constant sky.

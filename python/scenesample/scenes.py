@@ -155,7 +155,9 @@ def reflective_room(spheres: int = 10, seed: int = 0, detail: int = 3) -> Scene:
     high, a dozen coloured boxes, and ``spheres`` icospheres (``detail`` subdivisions, smooth
     vertex normals) of radius 0.12-0.2 at seeded positions that do not overlap, with a mirror
     material (metallic 1, roughness 0.05, objects ``sphere 0`` ...). Everything else is diffuse
-    (metallic 0, roughness 0.8). z is up; see :func:`reflective_room_eye`."""
+    (metallic 0, roughness 0.8). Every material is single-sided and every triangle wound
+    counter-clockwise seen from the side its normal points to (into the room for the floor and
+    walls, outward for boxes and spheres). z is up; see :func:`reflective_room_eye`."""
     if spheres < 0:
         raise ValueError(f"spheres must be >= 0, got {spheres}")
     rng = np.random.default_rng(seed)
@@ -183,8 +185,8 @@ def reflective_room(spheres: int = 10, seed: int = 0, detail: int = 3) -> Scene:
         ([[-2, -2, 0], [-2, 2, 0], [-2, 2, 2], [-2, -2, 2]], [1, 0, 0], (0.3, 0.55, 0.35)),
         ([[2, 2, 0], [2, -2, 0], [2, -2, 2], [2, 2, 2]], [-1, 0, 0], (0.3, 0.4, 0.7)),
     ]
-    for v, n, c in walls:
-        add(v, [[0, 2, 1], [0, 3, 2]], c, [n] * 4, 0, 0)
+    for v, n, c in walls:  # counter-clockwise seen from inside: fronts face the room
+        add(v, [[0, 1, 2], [0, 2, 3]], c, [n] * 4, 0, 0)
     occupied: list[tuple[np.ndarray, float]] = []
     for k in range(12):
         lo = np.array([rng.uniform(-1.8, 1.5), rng.uniform(-1.8, 1.5), 0.0])

@@ -51,6 +51,50 @@ pub fn discretize_conventional(
     discretize_ranges(scene, cameras, cull_backfaces, None)
 }
 
+/// Conventional images under glTF's sidedness (`Material::double_sided`): the back faces of
+/// single-sided triangles are not drawn, those of double-sided ones are. These are the
+/// reflections' off-screen views (eye-based-point-rendering.txt §3.2 samples a triangle only for
+/// the views it faces). One culled draw when every triangle is single-sided, one unculled draw
+/// when every one is double-sided; otherwise the two kinds are drawn separately (culled and
+/// not) and each pixel keeps the nearer.
+pub fn discretize_sided(scene: &Scene, cameras: &[Camera]) -> Result<DepthImages> {
+    let double: Vec<bool> = (0..scene.triangle_count())
+        .map(|t| scene.is_double_sided(t))
+        .collect();
+    if !double.contains(&true) || !double.contains(&false) {
+        return discretize_conventional(scene, cameras, !double.contains(&true));
+    }
+    // Runs of consecutive triangles of one kind: [a, b) ranges.
+    let runs = |kind: bool| {
+        let mut out: Vec<(u32, u32)> = Vec::new();
+        for (t, _) in double.iter().enumerate().filter(|(_, &d)| d == kind) {
+            match out.last_mut() {
+                Some((_, b)) if *b == t as u32 => *b += 1,
+                _ => out.push((t as u32, t as u32 + 1)),
+            }
+        }
+        out
+    };
+    let mut near = discretize_ranges(scene, cameras, true, Some(&runs(false)))?;
+    let other = discretize_ranges(scene, cameras, false, Some(&runs(true)))?;
+    for i in 0..near.depth.len() {
+        if other.depth[i] < near.depth[i] {
+            near.depth[i] = other.depth[i];
+            near.triangle[i] = other.triangle[i];
+            near.normal[i] = other.normal[i];
+            near.position[i] = other.position[i];
+            near.color[i] = other.color[i];
+        }
+    }
+    for (stage, seconds) in other.timings {
+        match near.timings.iter_mut().find(|(s, _)| *s == stage) {
+            Some((_, total)) => *total += seconds,
+            None => near.timings.push((stage, seconds)),
+        }
+    }
+    Ok(near)
+}
+
 /// Like `discretize_conventional`, drawing only the triangles in `ranges` (`[a, b)` index
 /// ranges of the scene's faces, e.g. the visibility field's marked cells) when given.
 pub fn discretize_ranges(

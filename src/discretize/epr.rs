@@ -6,7 +6,10 @@
 //!    frusta enlarged by 20%; a large triangle can span a frustum with every vertex outside it
 //!    (a floor under a cube map's −Y face), so we keep a view unless all three vertices lie
 //!    outside one plane of its 20%-enlarged frustum — conservative for every triangle. A
-//!    reflector's own triangles are left out of its own cube map (they surround its centre).
+//!    reflector's own triangles are left out of its own cube map (they surround its centre), and
+//!    so is a single-sided triangle (glTF `doubleSided` false) that turns its back to the
+//!    reflector's centre: §3.2 samples a triangle only for the views it faces, and MVR's
+//!    rasterizer culls the same back faces (`discretize_sided`).
 //! 2. Density (§3.2, §4.1.1, Eq. 2-3): the spacing of the points is the eye's pixel footprint
 //!    at the distance light travels from the triangle via the nearest reflector to the eye,
 //!    `s = d_r · θ_pixel / ρ_scale`, with `d_r = |e − cp| + |cp − cc|`, `cc` the triangle's
@@ -129,7 +132,19 @@ pub fn generate(
     let (pixel, perspective) = eye_pixel(eye);
     let e = eye.eye();
     let floor = scene.diagonal() * 1e-9;
-    let skip = |t: usize, v: usize| owner[t] == (v / 6) as u32;
+    // A reflector does not see itself, nor the back of a single-sided triangle (§3.2: a
+    // triangle is sampled only for the views it faces; its cube map's eye is its centre).
+    let facing: Vec<(DVec3, DVec3, bool)> = (0..scene.triangle_count())
+        .map(|t| {
+            let v0 = scene.triangle(t)[0];
+            (scene.face_normal(t), v0, scene.is_double_sided(t))
+        })
+        .collect();
+    let skip = |t: usize, v: usize| {
+        let k = v / 6;
+        let (n, v0, double) = facing[t];
+        owner[t] == k as u32 || !(double || n.dot(reflectors[k].center - v0) > 0.0)
+    };
     let spacing = |t: usize, p: &[DVec3; 3], bits: &[u64]| {
         let cc = circumcentre(p);
         // The finest spacing any cube map that sees the triangle can show.

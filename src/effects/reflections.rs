@@ -16,8 +16,11 @@
 //!
 //! Cube maps are centred on each reflector's bounding sphere with their near plane on the
 //! sphere, so the reflector's own triangles never enter its own cube map (EPR also clears their
-//! visibility bits); lookups treat the environment as distant (no parallax correction), the same
-//! for all three methods. All shading uses `shading::shade` with the cube's centre as the viewer.
+//! visibility bits). All three methods follow glTF's sidedness in the cube maps: the back face
+//! of a single-sided triangle is invisible there (MVR culls it, EPR and iVIR clear its bit for
+//! the cube maps it turns its back to), a double-sided one is seen from both sides. Lookups
+//! treat the environment as distant (no parallax correction), the same for all three methods.
+//! All shading uses `shading::shade` with the cube's centre as the viewer.
 
 use std::time::Instant;
 
@@ -27,7 +30,7 @@ use rayon::prelude::*;
 use super::shading::{self, ShadeLight};
 use crate::camera::Camera;
 use crate::discretize::epr::{self, Density, Reflector};
-use crate::discretize::{discretize_conventional, DepthImages};
+use crate::discretize::{discretize_conventional, discretize_sided, DepthImages};
 use crate::error::Result;
 use crate::input_err;
 use crate::scene::Scene;
@@ -171,7 +174,7 @@ pub fn reflections(
                     .iter()
                     .flat_map(|&k| views[6 * k..6 * k + 6].iter().cloned())
                     .collect();
-                let img = discretize_conventional(scene, &cams, false)?;
+                let img = discretize_sided(scene, &cams)?;
                 let per = 6 * size as usize * size as usize;
                 for (j, &k) in ks.iter().enumerate() {
                     images[k] = Some((

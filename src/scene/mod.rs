@@ -216,6 +216,16 @@ impl Scene {
     pub fn degenerate_count(&self) -> usize {
         self.degenerate_count
     }
+    /// Whether triangle `i`'s back face may be seen: its material's `double_sided` (glTF's
+    /// `doubleSided`). A triangle without a material (id −1, as in scenes built from bare
+    /// arrays) says nothing about its sides and counts as double-sided, the way every image of
+    /// the package draws both sides unless asked to cull.
+    pub fn is_double_sided(&self, i: usize) -> bool {
+        usize::try_from(self.parts.material_ids[i])
+            .ok()
+            .and_then(|m| self.parts.materials.get(m))
+            .is_none_or(|m| m.double_sided)
+    }
     /// Whether triangle `i` has (numerically) zero area.
     pub fn is_degenerate(&self, i: usize) -> bool {
         self.degenerate[i]
