@@ -481,46 +481,60 @@ impl Shader<'_> {
         samples: usize,
     ) -> (Vec<DVec3>, u64) {
         let offsets = poisson(samples);
-        // The texels each reflective pixel looks up.
-        let lookups: Vec<Vec<(usize, usize)>> = (0..px.len())
-            .into_par_iter()
-            .map(|i| {
-                let p = &px[i];
-                if p.reflector < 0 || p.triangle < 0 {
-                    return Vec::new();
-                }
-                let (gx, gy) = normal_gradient(px, w, h, i);
-                let cube = &self.cubes[p.reflector as usize];
-                offsets
-                    .iter()
-                    .map(|o| {
-                        let n = (p.normal + gx * o.x + gy * o.y).normalize_or(p.normal);
-                        (p.reflector as usize, cube.texel(reflect(p.view, n)))
-                    })
-                    .collect()
-            })
+        let per = offsets.len().max(1);
+        // Texel t of cube c is texel base[c] + t of all the cubes.
+        let mut base = vec![0usize];
+        for cube in self.cubes {
+            base.push(base[base.len() - 1] + cube.triangle.len());
+        }
+        // The reflective pixels and the texels each looks up, `per` after `per`.
+        let reflective: Vec<usize> = (0..px.len())
+            .filter(|&i| px[i].reflector >= 0 && px[i].triangle >= 0)
             .collect();
-        let mut unique: Vec<(usize, usize)> = lookups.iter().flatten().copied().collect();
-        unique.par_sort_unstable();
-        unique.dedup();
+        let mut lookups = vec![0usize; reflective.len() * per];
+        lookups
+            .par_chunks_mut(per)
+            .zip(&reflective)
+            .for_each(|(out, &i)| {
+                let p = &px[i];
+                let (gx, gy) = normal_gradient(px, w, h, i);
+                let c = p.reflector as usize;
+                for (o, slot) in offsets.iter().zip(out.iter_mut()) {
+                    let n = (p.normal + gx * o.x + gy * o.y).normalize_or(p.normal);
+                    *slot = base[c] + self.cubes[c].texel(reflect(p.view, n));
+                }
+            });
+        // Each distinct texel once, in the order of first lookup; lookups become its slot.
+        let mut slot = vec![usize::MAX; base[base.len() - 1]];
+        let mut unique: Vec<usize> = Vec::new();
+        for l in lookups.iter_mut() {
+            let s = &mut slot[*l];
+            if *s == usize::MAX {
+                *s = unique.len();
+                unique.push(*l);
+            }
+            *l = *s;
+        }
         let shaded: Vec<(DVec3, u64)> = unique
             .par_iter()
-            .map(|&(c, t)| {
+            .map(|&g| {
+                let c = base.partition_point(|&b| b <= g) - 1;
                 let mut ops = 0;
-                let r = self.texel_radiance(c, t, 1, &mut ops);
+                let r = self.texel_radiance(c, g - base[c], 1, &mut ops);
                 (r, ops)
             })
             .collect();
         let ops = shaded.iter().map(|s| s.1).sum();
+        let mut row = vec![usize::MAX; px.len()];
+        for (r, &i) in reflective.iter().enumerate() {
+            row[i] = r;
+        }
         let image = self.eye_image(px, |i, _| {
-            let sum: DVec3 = lookups[i]
+            let sum: DVec3 = lookups[row[i] * per..(row[i] + 1) * per]
                 .iter()
-                .map(|key| {
-                    let j = unique.binary_search(key).unwrap_or(0);
-                    shaded[j].0
-                })
+                .map(|&s| shaded[s].0)
                 .sum();
-            sum / lookups[i].len().max(1) as f64
+            sum / per as f64
         });
         (image, ops)
     }
