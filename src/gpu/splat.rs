@@ -1,7 +1,11 @@
 //! The compute pass of `shaders/splat.wgsl` (eye-based-point-rendering.txt §3.5): points
-//! scattered into many off-screen views at once with 64-bit atomics. Views go in chunks whose
-//! buffers fit the device's storage-binding limit, points in dispatches of at most
-//! `MAX_GROUPS · 64`; each view chunk is one submission, read back while the next one runs.
+//! scattered into many off-screen views at once with 64-bit atomics. The host turns the
+//! visibility bits into one point list per view; each view is one dispatch (or several: per
+//! chunk of points, at most `MAX_GROUPS · 64` each) with its camera in a uniform at a dynamic
+//! offset. The points' square geometry and the lists are textures, which lavapipe fetches for
+//! all SIMD lanes at once (a storage buffer it reads lane by lane). Views go in chunks whose
+//! buffers and lists fit the device's limits; each view chunk is one submission, read back
+//! while the next one runs.
 
 use std::time::Instant;
 
