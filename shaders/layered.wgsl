@@ -53,16 +53,14 @@ fn vs_main(@location(0) p: vec3<f32>) -> @builtin(position) vec4<f32> {
 // j at the pixel it projects to?
 fn held_by(j: u32, frag: vec4<f32>, prim: i32) -> bool {
     let c = reproject[j] * vec4<f32>(frag.xyz, 1.0);
-    if !(c.w > 0.0 && c.z > 0.0) {
-        return false;
-    }
-    let px = c.xy / c.z;
-    if !(px.x >= 0.0 && px.y >= 0.0 && px.x < f32(view.width) && px.y < f32(view.height)) {
-        return false;
-    }
-    let pixel = vec2<u32>(px);
+    let px = c.xy * (1.0 / c.z);
+    let size = vec2<f32>(f32(view.width), f32(view.height));
+    // Branch-free: llvmpipe runs both sides of a branch under a lane mask anyway. The pixel is
+    // clamped so that the load stays in image j even where the test already failed.
+    let inside = c.w > 0.0 && c.z > 0.0 && all(px >= vec2<f32>(0.0)) && all(px < size);
+    let pixel = vec2<u32>(clamp(px, vec2<f32>(0.0), size - 1.0));
     let at = j * view.stride * view.height + pixel.y * view.stride + pixel.x;
-    return earlier_ids[at] == prim;
+    return inside && earlier_ids[at] == prim;
 }
 
 @fragment
