@@ -200,3 +200,37 @@ def test_bad_input_raises_typed_errors(gpu, tilted):
         ss.discretize(scene, method="epr", eye=cam)
     with pytest.raises(ss.InputError, match="rho_scale"):
         ss.discretize(scene, method="epr", eye=cam, reflectors=[((0, 0, 0), 0.5)], rho_scale=0)
+
+
+def test_points_beyond_one_texture_chunk_splat_like_their_halves(gpu):
+    """2.3M points: more than one chunk of the point geometry on lavapipe (2M points per 128 MiB
+    binding). The buffers equal the nearest of splatting each half alone, the second half's
+    indices shifted: chunking changes nothing."""
+    scene = ss.Scene.from_arrays(
+        [[-1, -1, 0], [1, -1, 0], [0, 1, 0], [-1, -1, 0.5], [1, -1, 0.5], [0, 1, 0.5]],
+        [[0, 1, 2], [3, 4, 5]],
+    )
+    cam = ss.Camera.look_at((0, 0, 3), (0, 0, 0), (0, 1, 0), yfov=0.8, width=96, height=96)
+    rng = np.random.default_rng(7)
+    n = 2_300_000
+    tris = rng.integers(0, 2, n)
+    # Uniform points in the triangle (barycentric), on its plane.
+    r1, r2 = rng.random(n), rng.random(n)
+    flip = r1 + r2 > 1
+    r1[flip], r2[flip] = 1 - r1[flip], 1 - r2[flip]
+    v = scene.vertices[scene.faces[tris]].astype(np.float64)
+    centers = v[:, 0] + r1[:, None] * (v[:, 1] - v[:, 0]) + r2[:, None] * (v[:, 2] - v[:, 0])
+    lengths = rng.uniform(0.005, 0.03, n).astype(np.float32)
+
+    def splat(sl):
+        return ss.splat(
+            ss.Points.from_arrays(scene, centers[sl], lengths[sl], tris[sl], cameras=[cam])
+        ).packed
+
+    whole = splat(slice(None))
+    half = n // 2
+    a, b = splat(slice(0, half)), splat(slice(half, None))
+    empty = np.iinfo(np.uint64).max
+    b = np.where(b == empty, b, b + np.uint64(half))
+    assert np.array_equal(whole, np.minimum(a, b))
+    assert (whole != empty).mean() > 0.3
