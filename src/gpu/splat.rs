@@ -560,3 +560,28 @@ fn finish(ctx: &GpuContext, p: Pending, out: &mut [u64], stats: &mut SplatStats)
     stats.readback_seconds += start.elapsed().as_secs_f64();
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shader_and_host_agree_on_the_texture_row() {
+        assert!(TEXTURE_ROW.is_power_of_two());
+        let line = format!("const ROW_SHIFT: u32 = {}u;", TEXTURE_ROW.trailing_zeros());
+        assert!(SHADER.contains(&line), "splat.wgsl lacks `{line}`");
+        assert_eq!(
+            std::mem::size_of::<[f32; GEOMETRY_FLOATS]>(),
+            4 * wgpu::TextureFormat::Rgba32Float
+                .block_copy_size(None)
+                .unwrap_or(0) as usize
+        );
+    }
+
+    #[test]
+    fn each_set_bit_below_the_view_count_is_visited_in_order() {
+        let mut seen = Vec::new();
+        for_each_view(&[0b1010_0001, 1 << 63, 0b11], 129, |v| seen.push(v));
+        assert_eq!(seen, vec![0, 5, 7, 127, 128]);
+    }
+}
