@@ -201,7 +201,7 @@ pub fn splat(
                 },
             )
         })
-        .collect();
+        .collect::<Result<_>>()?;
     // The clip range only shapes the projection's depth row, unused here (a splat's depth comes
     // from `forward_depth`).
     let view_data: Vec<ViewUniform> = cameras
@@ -304,7 +304,7 @@ pub fn splat(
                     at += bytes.len();
                 }
             },
-        );
+        )?;
         let uniform_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("splat views"),
             contents: &uniforms,
@@ -389,15 +389,16 @@ pub fn splat(
 }
 
 /// A 2D texture of `format` with `texels` texels, `TEXTURE_ROW` per row (at least one row),
-/// whose bytes `fill` writes into a zeroed staging buffer; uploaded by its own submission,
-/// which the queue runs before any later one. The caller has checked that the rows fit.
+/// whose bytes `fill` writes into a mapped staging buffer (the shader never reads past
+/// `texels`); uploaded by its own submission, which the queue runs before any later one. The
+/// caller has checked that the rows fit.
 fn row_texture(
     ctx: &GpuContext,
     label: &str,
     format: wgpu::TextureFormat,
     texels: usize,
     fill: impl FnOnce(wgpu::BufferViewMut),
-) -> wgpu::TextureView {
+) -> Result<wgpu::TextureView> {
     let device = &ctx.device;
     let row = TEXTURE_ROW * format.block_copy_size(None).unwrap_or(4);
     let rows = texels.div_ceil(TEXTURE_ROW as usize).max(1) as u32;
@@ -407,9 +408,11 @@ fn row_texture(
         usage: wgpu::BufferUsages::MAP_WRITE | wgpu::BufferUsages::COPY_SRC,
         mapped_at_creation: true,
     });
-    if let Ok(view) = staging.slice(..).get_mapped_range_mut() {
-        fill(view);
-    }
+    let view = staging
+        .slice(..)
+        .get_mapped_range_mut()
+        .map_err(|e| Error::Gpu(format!("mapping the {label} staging buffer failed: {e}")))?;
+    fill(view);
     staging.unmap();
     let size = wgpu::Extent3d {
         width: TEXTURE_ROW,
@@ -440,7 +443,7 @@ fn row_texture(
         size,
     );
     ctx.queue.submit([encoder.finish()]);
-    texture.create_view(&Default::default())
+    Ok(texture.create_view(&Default::default()))
 }
 
 /// A submitted chunk of views whose readback is not yet consumed.
