@@ -7,7 +7,7 @@ use bytemuck::{Pod, Zeroable};
 
 use super::raster::{
     align, check_image_size, copy, draw_ids, id_pipeline, id_pipeline_with, submit_readback,
-    texture_2d, wait, IdPass, Timestamps, DEPTH_FORMAT, TRI_FORMAT,
+    texture_2d, uniform_window, wait, IdPass, Timestamps, DEPTH_FORMAT, TRI_FORMAT,
 };
 use super::{GpuContext, SceneBuffers};
 use crate::camera::Camera;
@@ -237,14 +237,7 @@ fn submit_chunk(
     let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
         label: Some("depth.wgsl bindings"),
         layout: &pipeline.layout,
-        entries: &[wgpu::BindGroupEntry {
-            binding: 0,
-            resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                buffer: &uniform_buf,
-                offset: 0,
-                size: wgpu::BufferSize::new(64),
-            }),
-        }],
+        entries: &[uniform_window(0, &uniform_buf, 64)],
     });
     let readback = device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("readback"),

@@ -18,8 +18,8 @@ use glam::DMat4;
 
 use super::depth::{finish_chunk, Pending, RasterStats};
 use super::raster::{
-    align, check_image_size, copy, draw_ids, id_pipeline, submit_readback, texture_2d, IdPass,
-    Timestamps, DEPTH_FORMAT, TRI_FORMAT,
+    align, check_image_size, copy, draw_ids, id_pipeline, submit_readback, texture_2d,
+    uniform_window, IdPass, Timestamps, DEPTH_FORMAT, TRI_FORMAT,
 };
 use super::{GpuContext, SceneBuffers};
 use crate::camera::Camera;
@@ -281,22 +281,8 @@ pub fn render(
             label: Some("layered.wgsl bindings"),
             layout: &pipeline.layout,
             entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                        buffer: &uniform_buf,
-                        offset: 0,
-                        size: wgpu::BufferSize::new(VIEW_SIZE),
-                    }),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                        buffer: &reproject_buf,
-                        offset: 0,
-                        size: wgpu::BufferSize::new(REPROJECT_SIZE),
-                    }),
-                },
+                uniform_window(0, &uniform_buf, VIEW_SIZE),
+                uniform_window(1, &reproject_buf, REPROJECT_SIZE),
                 wgpu::BindGroupEntry {
                     binding: 2,
                     resource: history.as_entire_binding(),

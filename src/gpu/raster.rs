@@ -68,6 +68,19 @@ pub fn align(x: u64, a: u64) -> u64 {
     x.div_ceil(a) * a
 }
 
+/// Bind group entry `binding`: a `size`-byte window at the start of `buffer`, moved by the
+/// dynamic offset of each draw or dispatch (one uniform block per image, view or light).
+pub fn uniform_window(binding: u32, buffer: &wgpu::Buffer, size: u64) -> wgpu::BindGroupEntry<'_> {
+    wgpu::BindGroupEntry {
+        binding,
+        resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+            buffer,
+            offset: 0,
+            size: wgpu::BufferSize::new(size),
+        }),
+    }
+}
+
 /// A pipeline drawing the scene's indexed triangles (positions relative to the scene centre,
 /// `vs_main`) into a `TRI_FORMAT` target with a reversed depth test, fragment stage `fs_entry`,
 /// counter-clockwise fronts, culling `cull`, and the fragment stage's pipeline-overridable

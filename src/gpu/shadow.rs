@@ -9,7 +9,8 @@ use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
 
 use super::raster::{
-    align, reversed_depth, submit_readback, texture_2d, wait, Timestamps, DEPTH_FORMAT, POSITIONS,
+    align, reversed_depth, submit_readback, texture_2d, uniform_window, wait, Timestamps,
+    DEPTH_FORMAT, POSITIONS,
 };
 use super::{GpuContext, SceneBuffers};
 use crate::camera::Camera;
@@ -301,14 +302,7 @@ pub fn visibility(
         label: Some("shadow.wgsl bindings"),
         layout: &pipeline.layout,
         entries: &[
-            wgpu::BindGroupEntry {
-                binding: 0,
-                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                    buffer: &uniform_buf,
-                    offset: 0,
-                    size: wgpu::BufferSize::new(LIGHT_SIZE),
-                }),
-            },
+            uniform_window(0, &uniform_buf, LIGHT_SIZE),
             wgpu::BindGroupEntry {
                 binding: 1,
                 resource: points_buf.as_entire_binding(),
@@ -330,14 +324,7 @@ pub fn visibility(
     let raster_bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
         label: Some("shadow.wgsl raster bindings"),
         layout: &pipeline.raster_layout,
-        entries: &[wgpu::BindGroupEntry {
-            binding: 0,
-            resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                buffer: &uniform_buf,
-                offset: 0,
-                size: wgpu::BufferSize::new(LIGHT_SIZE),
-            }),
-        }],
+        entries: &[uniform_window(0, &uniform_buf, LIGHT_SIZE)],
     });
     let queries = Timestamps::new(ctx, lights.len() as u32);
     let mut encoder = device.create_command_encoder(&Default::default());

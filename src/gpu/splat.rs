@@ -14,7 +14,7 @@ use rayon::prelude::*;
 
 use bytemuck::{Pod, Zeroable};
 
-use super::raster::align;
+use super::raster::{align, uniform_window};
 use super::GpuContext;
 use crate::camera::Camera;
 use crate::error::{Error, Result};
@@ -332,14 +332,7 @@ pub fn splat(
                     label: Some("splat.wgsl bindings"),
                     layout: &ctx.splat_pipeline().layout,
                     entries: &[
-                        wgpu::BindGroupEntry {
-                            binding: 0,
-                            resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                                buffer: &uniform_buf,
-                                offset: 0,
-                                size: wgpu::BufferSize::new(VIEW_SIZE),
-                            }),
-                        },
+                        uniform_window(0, &uniform_buf, VIEW_SIZE),
                         wgpu::BindGroupEntry {
                             binding: 1,
                             resource: wgpu::BindingResource::TextureView(g),
