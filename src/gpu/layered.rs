@@ -1,13 +1,14 @@
 //! Raster passes of `shaders/layered.wgsl`: images rendered one after another, each pass testing
 //! its fragments against the images before it — non-redundant rendering with pixel redundancy
 //! (non-redundant-rendering.txt Algorithm 1 with Algorithm 3) or depth peeling. Each pass is its
-//! own submission: after it, its triangle ids are copied into a storage buffer that the later
-//! passes read and into a readback buffer that the caller consumes while the GPU renders the next
-//! image. Peeling alternates two depth textures, one the target and the other the previous
-//! layer. A non-redundant pass maps each
-//! fragment's window position and depth straight into the earlier images with matrices formed
-//! here in f64, and its pipeline is compiled for its count of earlier images (see
-//! `LayeredPipeline::nonredundant`).
+//! own submission: after it, its triangle ids are copied into a layer of a texture array that the
+//! later passes read and into a readback buffer that the caller consumes while the GPU renders
+//! the next image. Peeling alternates two depth textures, one the target and the other the
+//! previous layer. A non-redundant pass reaches its first `VARYING_IMAGES` earlier images through
+//! positions the vertex stage projects into them and the rasteriser interpolates, and any further
+//! ones by mapping the fragment's window position and depth with a matrix read from a texture;
+//! the projections are formed here in f64, and each pass's pipeline is compiled for its count of
+//! earlier images (see `LayeredPipeline::nonredundant`).
 
 use std::collections::HashMap;
 use std::sync::Mutex;
@@ -18,8 +19,8 @@ use glam::DMat4;
 
 use super::depth::{finish_chunk, Pending, RasterStats};
 use super::raster::{
-    align, check_image_size, copy, draw_ids, id_pipeline, submit_readback, texture_2d,
-    uniform_window, IdPass, Timestamps, DEPTH_FORMAT, TRI_FORMAT,
+    align, check_image_size, copy, draw_ids, id_pipeline, id_pipeline_with, submit_readback,
+    texture_2d, uniform_window, IdPass, Timestamps, DEPTH_FORMAT, TRI_FORMAT,
 };
 use super::{GpuContext, SceneBuffers};
 use crate::camera::Camera;
@@ -42,18 +43,17 @@ pub enum LayerTest {
 #[derive(Clone, Copy, Pod, Zeroable)]
 struct ViewUniform {
     view_proj: [[f32; 4]; 4],
-    image: u32,
-    width: u32,
-    height: u32,
-    stride: u32,
 }
 const VIEW_SIZE: u64 = std::mem::size_of::<ViewUniform>() as u64;
-const _: () = assert!(VIEW_SIZE == 80);
+const _: () = assert!(VIEW_SIZE == 64);
 
-/// How many earlier images a non-redundant pass can test against (`MAX_EARLIER` in
-/// layered.wgsl): the reprojection matrices of one pass are one uniform binding.
+/// How many earlier images a non-redundant pass can test against: the earlier images are the
+/// layers of one texture array, and WebGPU guarantees 256 layers.
 pub const MAX_EARLIER: usize = 255;
-const REPROJECT_SIZE: u64 = 64 * MAX_EARLIER as u64;
+/// How many earlier images a pass reaches through interpolated positions (`VARYING_IMAGES` in
+/// layered.wgsl); the rest through matrices read per fragment.
+const VARYING_IMAGES: u32 = 4;
+const PROJECT_INTO_SIZE: u64 = 64 * VARYING_IMAGES as u64;
 
 pub struct LayeredPipeline {
     layout: wgpu::BindGroupLayout,
@@ -62,10 +62,10 @@ pub struct LayeredPipeline {
     /// [test][cull]: test 0 = peel, 1 = none (image 0, early depth test); cull 0 = none,
     /// 1 = back faces.
     fixed: [[wgpu::RenderPipeline; 2]; 2],
-    /// `fs_nonredundant` compiled for one count of earlier images (the override
-    /// `earlier_count`), by (count, cull), made on first use. With the count a constant the
-    /// shader compiler unrolls the loop over earlier images and loads each reprojection matrix
-    /// from a constant address; on lavapipe that halves the cost of the test.
+    /// The non-redundant pipeline for one count of earlier images, by (count, cull), made on
+    /// first use: `vs_earlierK`/`fs_earlierK` with K = min(count, VARYING_IMAGES) interpolated
+    /// earlier images, and the count as the override `earlier_count`, so that the loop over the
+    /// remaining ones unrolls.
     nonredundant: Mutex<HashMap<(u32, bool), wgpu::RenderPipeline>>,
 }
 
@@ -75,13 +75,13 @@ impl LayeredPipeline {
             label: Some("layered.wgsl"),
             source: wgpu::ShaderSource::Wgsl(SHADER.into()),
         });
-        let storage = |binding| wgpu::BindGroupLayoutEntry {
+        let texture = |binding, sample_type, view_dimension| wgpu::BindGroupLayoutEntry {
             binding,
             visibility: wgpu::ShaderStages::FRAGMENT,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage { read_only: true },
-                has_dynamic_offset: false,
-                min_binding_size: None,
+            ty: wgpu::BindingType::Texture {
+                sample_type,
+                view_dimension,
+                multisampled: false,
             },
             count: None,
         };
@@ -98,24 +98,28 @@ impl LayeredPipeline {
                     },
                     count: None,
                 },
+                texture(
+                    1,
+                    wgpu::TextureSampleType::Float { filterable: false },
+                    wgpu::TextureViewDimension::D2,
+                ),
+                texture(
+                    2,
+                    wgpu::TextureSampleType::Sint,
+                    wgpu::TextureViewDimension::D2Array,
+                ),
+                texture(
+                    3,
+                    wgpu::TextureSampleType::Depth,
+                    wgpu::TextureViewDimension::D2,
+                ),
                 wgpu::BindGroupLayoutEntry {
-                    binding: 1,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    binding: 4,
+                    visibility: wgpu::ShaderStages::VERTEX,
                     ty: wgpu::BindingType::Buffer {
                         ty: wgpu::BufferBindingType::Uniform,
-                        has_dynamic_offset: true,
-                        min_binding_size: wgpu::BufferSize::new(REPROJECT_SIZE),
-                    },
-                    count: None,
-                },
-                storage(2),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 3,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Depth,
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                        multisampled: false,
+                        has_dynamic_offset: false,
+                        min_binding_size: wgpu::BufferSize::new(PROJECT_INTO_SIZE),
                     },
                     count: None,
                 },
@@ -144,11 +148,13 @@ impl LayeredPipeline {
         cache
             .entry((image, cull))
             .or_insert_with(|| {
-                id_pipeline(
+                let k = image.min(VARYING_IMAGES);
+                id_pipeline_with(
                     device,
                     &self.module,
                     &self.pipeline_layout,
-                    "fs_nonredundant",
+                    &format!("vs_earlier{k}"),
+                    &format!("fs_earlier{k}"),
                     cull.then_some(wgpu::Face::Back),
                     &[("earlier_count", image as f64)],
                 )
@@ -171,26 +177,20 @@ pub fn render(
     let (w, h) = (cameras[0].width, cameras[0].height);
     let n = cameras.len() as u64;
     check_image_size(ctx, w, h)?;
-    if test == LayerTest::PixelRedundancy && cameras.len() > MAX_EARLIER + 1 {
+    let nonredundant = test == LayerTest::PixelRedundancy;
+    // Non-redundant passes read every image but the last as a layer of `earlier`.
+    let layers = (n as u32).saturating_sub(1).max(1);
+    if nonredundant && layers > ctx.limits.max_texture_array_layers.min(MAX_EARLIER as u32) {
+        let most = ctx.limits.max_texture_array_layers.min(MAX_EARLIER as u32) + 1;
         return Err(Error::GpuLimit(format!(
             "non-redundant rendering tests each image against the ones before it, at most \
-             {MAX_EARLIER} of them; got {n} cameras, split them into calls of at most {}",
-            MAX_EARLIER + 1
+             {} of them on this device; got {n} cameras, split them into calls of at most \
+             {most}",
+            most - 1
         )));
     }
     let row = align(w as u64 * 4, wgpu::COPY_BYTES_PER_ROW_ALIGNMENT as u64);
     let image_bytes = row * h as u64;
-    let history_bytes = image_bytes * n;
-    let limit = ctx
-        .limits
-        .max_storage_buffer_binding_size
-        .min(ctx.limits.max_buffer_size);
-    if history_bytes > limit {
-        return Err(Error::GpuLimit(format!(
-            "{n} layered images of {w}x{h} need {history_bytes} bytes of triangle ids on the GPU, \
-             more than this device's storage limit of {limit} bytes; use fewer or smaller images"
-        )));
-    }
     let _guard = ctx
         .lock
         .lock()
@@ -220,76 +220,121 @@ pub fn render(
         let m = cam.projection_matrix(near, far) * cam.view_matrix_relative(centre);
         let u = ViewUniform {
             view_proj: m.as_mat4().to_cols_array_2d(),
-            image: i as u32,
-            width: w,
-            height: h,
-            stride: (row / 4) as u32,
         };
         let at = i * stride as usize;
         uniforms[at..at + VIEW_SIZE as usize].copy_from_slice(bytemuck::bytes_of(&u));
         clip.push(m);
     }
-    // Image i's i reprojection matrices, each image's block at an aligned offset.
-    let mut reproject = Vec::new();
-    let mut reproject_at = Vec::with_capacity(cameras.len());
-    for block in reprojections(cameras, &clip, centre, w, h) {
-        reproject_at.push(reproject.len() as u32);
-        reproject.extend_from_slice(bytemuck::cast_slice(&block));
-        let end = align(
-            reproject.len() as u64,
-            ctx.limits.min_uniform_buffer_offset_alignment as u64,
-        );
-        reproject.resize(end as usize, 0u8);
-    }
-    reproject.resize(reproject.len() + REPROJECT_SIZE as usize, 0u8);
     let uniform_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("layered view uniforms"),
         contents: &uniforms,
         usage: wgpu::BufferUsages::UNIFORM,
     });
-    let reproject_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("reprojections"),
-        contents: &reproject,
-        usage: wgpu::BufferUsages::UNIFORM,
-    });
-    let history = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("earlier triangle ids"),
-        size: history_bytes,
-        usage: wgpu::BufferUsages::STORAGE
-            | wgpu::BufferUsages::COPY_DST
-            | wgpu::BufferUsages::COPY_SRC,
-        mapped_at_creation: false,
-    });
-    let texture = |label, format, usage| texture_2d(device, label, (w, h), format, usage);
-    let tri = texture(
+    let descriptor = |label, (w, h, layers), format, usage| wgpu::TextureDescriptor {
+        label: Some(label),
+        size: wgpu::Extent3d {
+            width: w,
+            height: h,
+            depth_or_array_layers: layers,
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format,
+        usage,
+        view_formats: &[],
+    };
+    // Row i, texels 4(j − VARYING_IMAGES) + 0..4: the columns of image i's matrix for earlier
+    // image j >= VARYING_IMAGES (a 4x1 stand-in when no pass has such an image).
+    let later = (n as usize).saturating_sub(1 + VARYING_IMAGES as usize);
+    let columns = 4 * later.max(1);
+    let mut texels = vec![[0f32; 4]; columns * n as usize];
+    if nonredundant && later > 0 {
+        for (i, block) in reprojections(cameras, &clip, centre, w, h)
+            .into_iter()
+            .enumerate()
+        {
+            let row = &mut texels[i * columns..];
+            for (k, m) in block.iter().skip(VARYING_IMAGES as usize).enumerate() {
+                row[4 * k..4 * k + 4].copy_from_slice(m);
+            }
+        }
+    }
+    let reproject = device.create_texture_with_data(
+        &ctx.queue,
+        &descriptor(
+            "reprojections",
+            (columns as u32, n as u32, 1),
+            wgpu::TextureFormat::Rgba32Float,
+            wgpu::TextureUsages::TEXTURE_BINDING,
+        ),
+        wgpu::util::TextureDataOrder::LayerMajor,
+        bytemuck::cast_slice(&texels),
+    );
+    // Peeling never reads earlier ids: a 1x1 stand-in fills the binding.
+    let earlier_size = if nonredundant {
+        (w, h, layers)
+    } else {
+        (1, 1, 1)
+    };
+    let earlier = device.create_texture(&descriptor(
+        "earlier triangle ids",
+        earlier_size,
+        TRI_FORMAT,
+        wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+    ));
+    let tri = texture_2d(
+        device,
         "layered triangle ids",
+        (w, h),
         TRI_FORMAT,
         wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
     );
     let tri_view = tri.create_view(&Default::default());
     // Two depth textures: pass i renders into depths[i % 2] and reads the other.
     let depth_usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
-    let depths = [
-        texture("layered depth a", DEPTH_FORMAT, depth_usage),
-        texture("layered depth b", DEPTH_FORMAT, depth_usage),
-    ];
+    let depths = ["layered depth a", "layered depth b"]
+        .map(|label| texture_2d(device, label, (w, h), DEPTH_FORMAT, depth_usage));
     let depth_views = depths
         .each_ref()
         .map(|d| d.create_view(&Default::default()));
+    let reproject_view = reproject.create_view(&Default::default());
+    let earlier_view = earlier.create_view(&wgpu::TextureViewDescriptor {
+        dimension: Some(wgpu::TextureViewDimension::D2Array),
+        ..Default::default()
+    });
+    let mut project_into = [[[0f32; 4]; 4]; VARYING_IMAGES as usize];
+    for (m, (cam, clip)) in project_into.iter_mut().zip(cameras.iter().zip(&clip)) {
+        *m = projection_into(cam, clip, centre, w, h)
+            .as_mat4()
+            .to_cols_array_2d();
+    }
+    let project_into_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("projections into earlier images"),
+        contents: bytemuck::cast_slice(&project_into),
+        usage: wgpu::BufferUsages::UNIFORM,
+    });
     let binds = [1, 0].map(|other: usize| {
         device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("layered.wgsl bindings"),
             layout: &pipeline.layout,
             entries: &[
                 uniform_window(0, &uniform_buf, VIEW_SIZE),
-                uniform_window(1, &reproject_buf, REPROJECT_SIZE),
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(&reproject_view),
+                },
                 wgpu::BindGroupEntry {
                     binding: 2,
-                    resource: history.as_entire_binding(),
+                    resource: wgpu::BindingResource::TextureView(&earlier_view),
                 },
                 wgpu::BindGroupEntry {
                     binding: 3,
                     resource: wgpu::BindingResource::TextureView(&depth_views[other]),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: project_into_buf.as_entire_binding(),
                 },
             ],
         })
@@ -305,7 +350,7 @@ pub fn render(
     stats.raster_seconds = start.elapsed().as_secs_f64();
     // One submission per image, so that the caller consumes image i while the GPU renders
     // image i + 1 (as `depth::rasterize` does with its chunks); the passes still see each other's
-    // ids through `history`, in submission order.
+    // ids through `earlier`, in submission order.
     let mut in_flight: Option<Pending> = None;
     for i in 0..n {
         let start = Instant::now();
@@ -324,11 +369,30 @@ pub fn render(
             store_depth: true,
             pipeline: &passes[i as usize],
             bind: &binds[i as usize % 2],
-            offsets: &[(i * stride) as u32, reproject_at[i as usize]],
+            offsets: &[(i * stride) as u32],
         };
         draw_ids(&mut encoder, &buffers, &pass, queries.as_ref(), 0);
-        copy(&mut encoder, &tri, &history, i * image_bytes, row, w, h);
-        encoder.copy_buffer_to_buffer(&history, i * image_bytes, &readback, 0, image_bytes);
+        if nonredundant && (i as u32) < layers {
+            encoder.copy_texture_to_texture(
+                tri.as_image_copy(),
+                wgpu::TexelCopyTextureInfo {
+                    texture: &earlier,
+                    mip_level: 0,
+                    origin: wgpu::Origin3d {
+                        x: 0,
+                        y: 0,
+                        z: i as u32,
+                    },
+                    aspect: wgpu::TextureAspect::All,
+                },
+                wgpu::Extent3d {
+                    width: w,
+                    height: h,
+                    depth_or_array_layers: 1,
+                },
+            );
+        }
+        copy(&mut encoder, &tri, &readback, 0, row, w, h);
         let submission = submit_readback(ctx, encoder, &readback, queries.as_ref());
         let next = Pending {
             readback,
@@ -351,11 +415,31 @@ pub fn render(
     Ok(stats)
 }
 
-/// The matrices `reproject` of layered.wgsl, a block per image: for image i and each earlier
+/// `project_into` of layered.wgsl for camera `cam` with clip matrix `clip` (relative to
+/// `centre`): the map from a position relative to the scene centre to (x·w, y·w, w, f) in its
+/// w×h image — pixel position (x right, y down from the top-left corner), clip w, and the signed
+/// distance in front of the camera's image plane, (p_rel + centre − eye)·forward. In f64.
+fn projection_into(cam: &Camera, clip: &DMat4, centre: glam::DVec3, w: u32, h: u32) -> DMat4 {
+    let (wf, hf) = (w as f64, h as f64);
+    // Clip coordinates to (x·w, y·w, w) in pixels; the last row is replaced below.
+    let clip_to_pixel = DMat4::from_cols_array_2d(&[
+        [wf / 2.0, 0.0, 0.0, wf / 2.0],
+        [0.0, -hf / 2.0, 0.0, hf / 2.0],
+        [0.0, 0.0, 0.0, 1.0],
+        [0.0, 0.0, 0.0, 0.0],
+    ])
+    .transpose();
+    let fwd = cam.forward();
+    let mut rows = (clip_to_pixel * *clip).transpose();
+    rows.w_axis = fwd.extend((centre - cam.eye()).dot(fwd));
+    rows.transpose()
+}
+
+/// The matrices of `reproject` in layered.wgsl, a block per image: for image i and each earlier
 /// image j < i, the map from i's homogeneous window coordinates (x, y, depth, 1) to
-/// (x·w, y·w, w, f) in image j — pixel position, clip w and signed distance in front of j's image
-/// plane, all scaled by the same positive weight. Formed in f64 from the clip matrices `clip`
-/// (relative to `centre`) and rounded once to f32. Image 0's block is empty.
+/// (x·w, y·w, w, f) in image j (see `projection_into`), all scaled by the same positive weight.
+/// Formed in f64 from the clip matrices `clip` (relative to `centre`) and rounded once to f32.
+/// Image 0's block is empty.
 fn reprojections(
     cameras: &[Camera],
     clip: &[DMat4],
@@ -364,35 +448,126 @@ fn reprojections(
     h: u32,
 ) -> Vec<Vec<[[f32; 4]; 4]>> {
     let (wf, hf) = (w as f64, h as f64);
-    let rows = |r: [[f64; 4]; 4]| DMat4::from_cols_array_2d(&r).transpose();
     // Window (x right, y down, depth) to normalized device coordinates.
-    let window_to_ndc = rows([
+    let window_to_ndc = DMat4::from_cols_array_2d(&[
         [2.0 / wf, 0.0, 0.0, -1.0],
         [0.0, -2.0 / hf, 0.0, 1.0],
         [0.0, 0.0, 1.0, 0.0],
         [0.0, 0.0, 0.0, 1.0],
-    ]);
-    // Clip coordinates to (x·w, y·w, w) in pixels.
-    let clip_to_pixel = rows([
-        [wf / 2.0, 0.0, 0.0, wf / 2.0],
-        [0.0, -hf / 2.0, 0.0, hf / 2.0],
-        [0.0, 0.0, 0.0, 1.0],
-        [0.0, 0.0, 0.0, 0.0],
-    ]);
+    ])
+    .transpose();
+    let into: Vec<DMat4> = cameras
+        .iter()
+        .zip(clip)
+        .map(|(cam, m)| projection_into(cam, m, centre, w, h))
+        .collect();
     let mut out = vec![Vec::new()];
     for i in 1..cameras.len() {
         let back = clip[i].inverse() * window_to_ndc;
-        let mut block = Vec::with_capacity(i);
-        for j in 0..i {
-            let fwd = cameras[j].forward();
-            // In front: (p_rel + centre − eye)·forward > 0.
-            let front = fwd.extend((centre - cameras[j].eye()).dot(fwd));
-            let mut r = clip_to_pixel * clip[j] * back;
-            r = r.transpose();
-            r.w_axis = back.transpose() * front;
-            block.push(r.transpose().as_mat4().to_cols_array_2d());
-        }
+        let block = into[..i]
+            .iter()
+            .map(|m| (*m * back).as_mat4().to_cols_array_2d())
+            .collect();
         out.push(block);
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::camera::{look_at_pose, Projection};
+    use glam::{DVec3, DVec4};
+
+    #[test]
+    fn shader_and_host_agree_on_the_interpolated_images() {
+        let line = format!("const VARYING_IMAGES: u32 = {VARYING_IMAGES}u;");
+        assert!(SHADER.contains(&line), "layered.wgsl lacks `{line}`");
+        for k in 1..=VARYING_IMAGES {
+            for entry in [format!("fn vs_earlier{k}("), format!("fn fs_earlier{k}(")] {
+                assert!(SHADER.contains(&entry), "layered.wgsl lacks `{entry}`");
+            }
+        }
+    }
+
+    /// Both ways into an earlier image — a vertex's projection (interpolated) and a fragment's
+    /// window position and depth through its matrix — land where `Camera::project` puts the
+    /// point, with a perspective and an orthographic camera.
+    #[test]
+    fn both_reprojections_agree_with_camera_project() {
+        let (w, h) = (320, 200);
+        let centre = DVec3::new(10.0, -4.0, 3.0);
+        let up = DVec3::Z;
+        let pose = |eye: DVec3| look_at_pose(centre + eye, centre, up).unwrap();
+        let cameras = [
+            Camera::new(
+                pose(DVec3::new(0.0, -8.0, 2.0)),
+                Projection::Perspective { yfov: 0.9 },
+                w,
+                h,
+                None,
+                None,
+            )
+            .unwrap(),
+            Camera::new(
+                pose(DVec3::new(6.0, -5.0, 4.0)),
+                Projection::Orthographic {
+                    xmag: 3.0,
+                    ymag: 2.0,
+                },
+                w,
+                h,
+                None,
+                Some(40.0),
+            )
+            .unwrap(),
+            Camera::new(
+                pose(DVec3::new(-5.0, -6.0, 1.0)),
+                Projection::Perspective { yfov: 0.7 },
+                w,
+                h,
+                None,
+                None,
+            )
+            .unwrap(),
+        ];
+        let bounds = [[5.0, -9.0, -2.0], [15.0, 1.0, 8.0]];
+        let clip: Vec<DMat4> = cameras
+            .iter()
+            .map(|c| {
+                let (near, far) = c.clip_range(bounds);
+                c.projection_matrix(near, far) * c.view_matrix_relative(centre)
+            })
+            .collect();
+        let blocks = reprojections(&cameras, &clip, centre, w, h);
+        let pixel = |c: DVec4| (c.x / c.z, c.y / c.z);
+        for p in [
+            DVec3::new(10.3, -4.2, 3.5),
+            DVec3::new(11.0, -3.0, 2.0),
+            DVec3::new(9.2, -4.9, 3.9),
+        ] {
+            let rel = (p - centre).extend(1.0);
+            // Image 2's window coordinates of p, as the rasteriser gives them to a fragment.
+            let ndc = clip[2] * rel;
+            let ndc = ndc.truncate() / ndc.w;
+            let window = DVec4::new(
+                (ndc.x + 1.0) * 0.5 * w as f64,
+                (1.0 - ndc.y) * 0.5 * h as f64,
+                ndc.z,
+                1.0,
+            );
+            for (j, cam) in cameras[..2].iter().enumerate() {
+                let (want, depth) = cam.project(p);
+                let direct = projection_into(cam, &clip[j], centre, w, h) * rel;
+                let via = glam::Mat4::from_cols_array_2d(&blocks[2][j]).as_dmat4() * window;
+                for c in [direct, via] {
+                    let (x, y) = pixel(c);
+                    assert!((x - want.x).abs() < 1e-3 && (y - want.y).abs() < 1e-3);
+                    // In front of camera j: w and f positive (f is the depth along forward).
+                    assert!(c.z > 0.0 && c.w > 0.0);
+                }
+                assert!((direct.w - depth).abs() < 1e-9 * depth.max(1.0));
+            }
+        }
+    }
 }
