@@ -66,12 +66,9 @@ pub fn discretize_sided(scene: &Scene, cameras: &[Camera]) -> Result<DepthImages
     }
     // Runs of consecutive triangles of one kind: [a, b) ranges.
     let runs = |kind: bool| {
-        let mut out: Vec<(u32, u32)> = Vec::new();
+        let mut out = Vec::new();
         for (t, _) in double.iter().enumerate().filter(|(_, &d)| d == kind) {
-            match out.last_mut() {
-                Some((_, b)) if *b == t as u32 => *b += 1,
-                _ => out.push((t as u32, t as u32 + 1)),
-            }
+            push_range(&mut out, t as u32, t as u32 + 1);
         }
         out
     };
@@ -93,6 +90,15 @@ pub fn discretize_sided(scene: &Scene, cameras: &[Camera]) -> Result<DepthImages
         }
     }
     Ok(near)
+}
+
+/// Append the face range `[a, b)` to `ranges`, merged into the last one when it starts where
+/// that one ends, so that `discretize_ranges` makes as few draws as it can.
+pub fn push_range(ranges: &mut Vec<(u32, u32)>, a: u32, b: u32) {
+    match ranges.last_mut() {
+        Some(last) if last.1 == a => last.1 = b,
+        _ => ranges.push((a, b)),
+    }
 }
 
 /// Like `discretize_conventional`, drawing only the triangles in `ranges` (`[a, b)` index

@@ -20,7 +20,8 @@ use glam::DMat4;
 use super::depth::{finish_chunk, Pending, RasterStats};
 use super::raster::{
     align, check_image_size, copy, draw_ids, id_pipeline, id_pipeline_with, submit_readback,
-    texture_2d, uniform_window, IdPass, Timestamps, DEPTH_FORMAT, TRI_FORMAT,
+    texture_2d, texture_2d_descriptor, uniform_window, IdPass, Timestamps, DEPTH_FORMAT,
+    TRI_FORMAT,
 };
 use super::{GpuContext, SceneBuffers};
 use crate::camera::Camera;
@@ -230,20 +231,6 @@ pub fn render(
         contents: &uniforms,
         usage: wgpu::BufferUsages::UNIFORM,
     });
-    let descriptor = |label, (w, h, layers), format, usage| wgpu::TextureDescriptor {
-        label: Some(label),
-        size: wgpu::Extent3d {
-            width: w,
-            height: h,
-            depth_or_array_layers: layers,
-        },
-        mip_level_count: 1,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D2,
-        format,
-        usage,
-        view_formats: &[],
-    };
     // Row i, texels 4(j − VARYING_IMAGES) + 0..4: the columns of image i's matrix for earlier
     // image j >= VARYING_IMAGES (a 4x1 stand-in when no pass has such an image).
     let later = (n as usize).saturating_sub(1 + VARYING_IMAGES as usize);
@@ -254,15 +241,15 @@ pub fn render(
             .into_iter()
             .enumerate()
         {
-            let row = &mut texels[i * columns..];
+            let dst = &mut texels[i * columns..];
             for (k, m) in block.iter().skip(VARYING_IMAGES as usize).enumerate() {
-                row[4 * k..4 * k + 4].copy_from_slice(m);
+                dst[4 * k..4 * k + 4].copy_from_slice(m);
             }
         }
     }
     let reproject = device.create_texture_with_data(
         &ctx.queue,
-        &descriptor(
+        &texture_2d_descriptor(
             "reprojections",
             (columns as u32, n as u32, 1),
             wgpu::TextureFormat::Rgba32Float,
@@ -277,7 +264,7 @@ pub fn render(
     } else {
         (1, 1, 1)
     };
-    let earlier = device.create_texture(&descriptor(
+    let earlier = device.create_texture(&texture_2d_descriptor(
         "earlier triangle ids",
         earlier_size,
         TRI_FORMAT,

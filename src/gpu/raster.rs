@@ -48,12 +48,23 @@ pub fn texture_2d(
     format: wgpu::TextureFormat,
     usage: wgpu::TextureUsages,
 ) -> wgpu::Texture {
-    device.create_texture(&wgpu::TextureDescriptor {
+    device.create_texture(&texture_2d_descriptor(label, (w, h, 1), format, usage))
+}
+
+/// The descriptor of a single-sampled w×h 2D texture (an array of `layers` of them) without mip
+/// levels.
+pub fn texture_2d_descriptor(
+    label: &str,
+    (w, h, layers): (u32, u32, u32),
+    format: wgpu::TextureFormat,
+    usage: wgpu::TextureUsages,
+) -> wgpu::TextureDescriptor<'_> {
+    wgpu::TextureDescriptor {
         label: Some(label),
         size: wgpu::Extent3d {
             width: w,
             height: h,
-            depth_or_array_layers: 1,
+            depth_or_array_layers: layers,
         },
         mip_level_count: 1,
         sample_count: 1,
@@ -61,7 +72,7 @@ pub fn texture_2d(
         format,
         usage,
         view_formats: &[],
-    })
+    }
 }
 
 pub fn align(x: u64, a: u64) -> u64 {

@@ -14,7 +14,7 @@ use rayon::prelude::*;
 
 use bytemuck::{Pod, Zeroable};
 
-use super::raster::{align, uniform_window};
+use super::raster::{align, texture_2d, uniform_window};
 use super::GpuContext;
 use crate::camera::Camera;
 use crate::error::{Error, Result};
@@ -412,16 +412,13 @@ fn row_texture(
         height: rows,
         depth_or_array_layers: 1,
     };
-    let texture = device.create_texture(&wgpu::TextureDescriptor {
-        label: Some(label),
-        size,
-        mip_level_count: 1,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D2,
+    let texture = texture_2d(
+        device,
+        label,
+        (TEXTURE_ROW, rows),
         format,
-        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-        view_formats: &[],
-    });
+        wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+    );
     let mut encoder = device.create_command_encoder(&Default::default());
     encoder.copy_buffer_to_texture(
         wgpu::TexelCopyBufferInfo {

@@ -22,7 +22,7 @@ use rayon::prelude::*;
 
 use crate::camera::Camera;
 use crate::discretize::visibility_field::{Field, Slab};
-use crate::discretize::{discretize_ranges, DepthImages};
+use crate::discretize::{discretize_ranges, push_range, DepthImages};
 use crate::error::Result;
 use crate::input_err;
 use crate::scene::Scene;
@@ -176,13 +176,9 @@ pub fn resample(
 /// The face ranges `[a, b)` of the marked cells, consecutive cells merged; `offsets` is the
 /// cells' CSR offsets into the cell-sorted faces.
 pub fn ranges(offsets: &[u32], marked: &[bool]) -> Vec<(u32, u32)> {
-    let mut out: Vec<(u32, u32)> = Vec::new();
+    let mut out = Vec::new();
     for (c, _) in marked.iter().enumerate().filter(|(_, &m)| m) {
-        let (a, b) = (offsets[c], offsets[c + 1]);
-        match out.last_mut() {
-            Some(last) if last.1 == a => last.1 = b,
-            _ => out.push((a, b)),
-        }
+        push_range(&mut out, offsets[c], offsets[c + 1]);
     }
     out
 }

@@ -19,7 +19,7 @@ use crate::camera::{Camera, Projection};
 use crate::discretize::impostors::{
     impostor_camera, lit, shading_normal, vertex_normals, ImpostorProjection, Impostors,
 };
-use crate::discretize::{discretize_ranges, DepthImages};
+use crate::discretize::{discretize_ranges, push_range, DepthImages};
 use crate::error::Result;
 use crate::input_err;
 use crate::scene::Scene;
@@ -155,11 +155,7 @@ pub fn reconstruct(
             left -= n;
             drawn += n;
             used[c] = TRIANGLES;
-            let (a, b) = (imp.offsets[c], imp.offsets[c + 1]);
-            match ranges.last_mut() {
-                Some(r) if r.1 == a => r.1 = b,
-                _ => ranges.push((a, b)),
-            }
+            push_range(&mut ranges, imp.offsets[c], imp.offsets[c + 1]);
         } else {
             // A cell too small on screen is an impostor whatever the budget; the first one
             // that does not fit ends the triangles (the budget is met).
