@@ -1,53 +1,67 @@
-//! CPU ray casting: a 4-wide BVH (`bvh4`, built from obvhs's binary PLOC tree) built once per
-//! scene, traversed in parallel with rayon, with the watertight ray/triangle test of `watertight`
-//! and a float64 refinement of each hit. Consecutive rays are traced in packets of
-//! `bvh4::PACKET` when they are coherent (neighbouring pixels of a camera), one by one otherwise;
-//! both give the same hits. The loop is compiled twice and the AVX2 build chosen at run time.
+//! CPU ray queries: closest hit (`cast_rays`), any hit (`occluded`) and the k nearest hits
+//! (`nearest_hits`), on an 8-wide BVH (`bvh8`, built by `build`) cached per scene, with the
+//! watertight ray/triangle test of `watertight` and a float64 refinement of each reported hit.
+//!
+//! Rays are traced one by one with the AVX2 kernel where the CPU has it (`avx2`), else the
+//! portable one; both give bit-identical hits. Work is split across the cores with rayon, on
+//! the calling thread only (`Threads::One`), or on a pool of a given size.
 
-pub mod bvh4;
+pub mod avx2;
+pub mod build;
+pub mod bvh8;
+#[cfg(target_arch = "x86_64")]
+mod packet;
+pub mod refine;
 pub mod watertight;
 
-use std::sync::Arc;
+use std::num::NonZeroUsize;
+use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Instant;
 
 use glam::{Vec3, Vec3A};
-use obvhs::aabb::Aabb;
-use obvhs::{Boundable, BvhBuildParams};
 use rayon::prelude::*;
 
 use crate::error::Result;
 use crate::input_err;
 use crate::scene::Scene;
-use watertight::{RayShear, Tri};
+use bvh8::{
+    coherent, portable::Portable, traverse, Any, BlockHit, Bvh8, Closest, Kernel, PacketStack, Ray,
+    Sink, Stack, Tri4Hit, WIDTH,
+};
+use refine::Pending;
+use watertight::Tri;
 
-/// A scene's BVH with its triangles stored in leaf order (cache-friendly traversal).
+/// The most triangles a tree can index (one block each at worst).
+pub const MAX_TRIANGLES: u32 = bvh8::MAX_BLOCKS;
+
+/// A scene's BVH.
 #[derive(Debug)]
 pub struct Bvh {
-    tree: bvh4::Bvh4,
+    tree: Bvh8,
     pub build_seconds: f64,
 }
 
-/// A triangle's box padded by a few ulps of its coordinates' magnitude, so that the f32 slab
-/// tests can never reject a ray that grazes a box exactly at a triangle's vertex or edge: the
-/// watertight triangle test then decides alone.
-struct PaddedBox(Aabb);
-
-impl Boundable for PaddedBox {
-    fn aabb(&self) -> Aabb {
-        self.0
-    }
-}
-
-fn padded_box(t: &Tri) -> PaddedBox {
-    let lo = t.v[0].min(t.v[1]).min(t.v[2]);
-    let hi = t.v[0].max(t.v[1]).max(t.v[2]);
-    let mag = lo.abs().max(hi.abs()).max_element() + (hi - lo).max_element();
-    let pad = Vec3A::splat(8.0 * f32::EPSILON * mag + f32::MIN_POSITIVE);
-    PaddedBox(Aabb::new(lo - pad, hi + pad))
+/// What a BVH holds and what it cost.
+#[derive(Clone, Copy, Debug)]
+pub struct BvhStats {
+    pub triangles: usize,
+    pub nodes: usize,
+    pub blocks: usize,
+    /// Bytes of nodes and triangle blocks: everything the queries read besides the rays.
+    pub bytes: usize,
+    pub depth: u32,
+    pub build_seconds: f64,
+    /// Surface area heuristic cost, Embree's measure: inner nodes' areas plus leaves' areas
+    /// times their blocks, relative to the root's area.
+    pub sah: f64,
 }
 
 impl Bvh {
     pub fn build(scene: &Scene) -> Self {
+        Self::build_with(scene, build::BuildParams::standard())
+    }
+
+    pub fn build_with(scene: &Scene, params: build::BuildParams) -> Self {
         let start = Instant::now();
         let v = scene.vertices();
         let tris: Vec<Tri> = scene
@@ -57,164 +71,117 @@ impl Bvh {
                 v: f.map(|k| Vec3A::from(Vec3::from(v[k as usize]))),
             })
             .collect();
-        let boxes: Vec<PaddedBox> = tris.iter().map(padded_box).collect();
-        let tree = bvh4::Bvh4::build(&tris, &boxes, BvhBuildParams::medium_build());
+        let tree = build::build(&tris, params);
         Self {
             tree,
             build_seconds: start.elapsed().as_secs_f64(),
         }
     }
 
-    /// The scene's BVH, built on first use and cached for the scene's lifetime.
+    /// The scene's BVH, built on first use (by every core) and cached for the scene's lifetime.
     pub fn of(scene: &Scene) -> Arc<Bvh> {
+        Self::of_with(scene, Threads::All)
+    }
+
+    /// [`Bvh::of`], building on `threads` when the BVH is not cached yet.
+    pub fn of_with(scene: &Scene, threads: Threads) -> Arc<Bvh> {
+        let params = build::BuildParams::standard();
         scene
             .bvh
-            .get_or_init(|| Arc::new(Bvh::build(scene)))
+            .get_or_init(|| {
+                // `Count` threads: the caller runs this inside that pool already.
+                Arc::new(match threads {
+                    Threads::One => Bvh::build_with(scene, params.sequential()),
+                    _ => Bvh::build_with(scene, params),
+                })
+            })
             .clone()
     }
 
-    /// Closest hits of up to `bvh4::PACKET` rays (any direction lengths), refined in f64, each
-    /// given to `sink` with its index in the packet (misses are not). Traces the rays as one packet when they are coherent,
-    /// else one by one; both give the same hits.
-    #[inline(always)]
-    fn trace_packet(
-        &self,
-        origins: &[[f32; 3]],
-        directions: &[[f32; 3]],
-        (t_min, t_max): (f32, f32),
-        coherence: &Coherence,
-        mut sink: impl FnMut(usize, Hit),
-    ) {
-        const P: usize = bvh4::PACKET;
-        let n = origins.len();
-        debug_assert!(n <= P);
-        // Fixed arrays (filled past `n` with copies of ray 0), built in place: no allocation.
-        let at = |i: usize| if i < n { i } else { 0 };
-        let o: [Vec3A; P] = std::array::from_fn(|i| Vec3A::from(Vec3::from(origins[at(i)])));
-        let d: [Vec3A; P] = std::array::from_fn(|i| Vec3A::from(Vec3::from(directions[at(i)])));
-        let len: [f32; P] = std::array::from_fn(|i| d[i].length());
-        let unit: [Vec3A; P] = std::array::from_fn(|i| d[i] / len[i]);
-        // Trace with unit directions, so the shear and slab arithmetic see the same magnitudes
-        // at every direction scale; `refine` then yields t in the caller's units.
-        let mut t_far: [f32; P] = std::array::from_fn(|i| t_max * len[i]);
-        let mut best: [Option<bvh4::SlotHit>; P] = [None; P];
-        let packed = n > 1 && coherence.holds(&o[..n], &unit[..n]) && {
-            let rays: [bvh4::PacketRay; P] =
-                std::array::from_fn(|i| bvh4::PacketRay::new(o[i], unit[i], t_min * len[i]));
-            self.tree
-                .closest_packet(&rays[..n], &mut t_far[..n], &mut best[..n])
-        };
-        if !packed {
-            for i in 0..n {
-                best[i] = self.tree.closest(
-                    o[i],
-                    unit[i],
-                    &RayShear::new(unit[i]),
-                    t_min * len[i],
-                    t_max * len[i],
-                );
-            }
-        }
-        for (i, h) in best[..n].iter().enumerate() {
-            let Some(h) = h else { continue };
-            let hit = Hit {
-                t: h.t / len[i],
-                triangle: self.tree.ids[h.slot as usize],
-                bary: h.bary,
-                slot: h.slot as usize,
-            };
-            let tri = &self.tree.tris[hit.slot];
-            sink(i, refine(tri, o[i], d[i], (t_min, t_max), hit));
+    pub fn stats(&self) -> BvhStats {
+        let t = &self.tree;
+        BvhStats {
+            triangles: t
+                .blocks
+                .iter()
+                .flat_map(|b| b.id)
+                .filter(|&i| i != u32::MAX)
+                .count(),
+            nodes: t.nodes.len(),
+            blocks: t.blocks.len(),
+            bytes: t.bytes(),
+            depth: t.depth,
+            build_seconds: self.build_seconds,
+            sah: t.sah(),
         }
     }
 }
 
-/// When a packet of rays is traced together: its unit directions lie within a narrow cone and
-/// its origins close together relative to the scene, as for rays through neighbouring pixels of
-/// one camera. Incoherent packets would visit the union of their rays' nodes, so they are traced
-/// ray by ray instead.
-struct Coherence {
-    origin_extent: f32,
+/// Which threads run a query.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Threads {
+    /// rayon's global pool: every core.
+    All,
+    /// The calling thread only.
+    One,
+    /// A pool of this many threads (created once per size and kept).
+    Count(NonZeroUsize),
 }
 
-impl Coherence {
-    /// Largest spread of a unit direction's components within one packet (about 14 degrees).
-    const DIRECTION_EXTENT: f32 = 0.25;
+impl Threads {
+    pub fn from_count(n: Option<usize>) -> Result<Self> {
+        match n {
+            None => Ok(Self::All),
+            Some(0) => input_err!("threads must be at least 1 (or None for all cores), got 0"),
+            Some(1) => Ok(Self::One),
+            Some(n) => Ok(Self::Count(NonZeroUsize::new(n).expect("n > 1"))),
+        }
+    }
+}
 
-    fn for_scene(scene: &Scene) -> Self {
+/// The range and threads of a query. Hits count when `t_min <= t < t_max`, in units of each
+/// direction's length.
+#[derive(Clone, Copy, Debug)]
+pub struct Query {
+    pub t_min: f32,
+    pub t_max: f32,
+    pub threads: Threads,
+}
+
+impl Query {
+    pub fn new(t_min: f32, t_max: f32) -> Self {
         Self {
-            origin_extent: 0.05 * scene.diagonal() as f32,
+            t_min,
+            t_max,
+            threads: Threads::All,
         }
     }
-
-    #[inline(always)]
-    fn holds(&self, o: &[Vec3A], unit: &[Vec3A]) -> bool {
-        let (mut olo, mut ohi) = (o[0], o[0]);
-        let (mut dlo, mut dhi) = (unit[0], unit[0]);
-        for i in 1..o.len() {
-            (olo, ohi) = (olo.min(o[i]), ohi.max(o[i]));
-            (dlo, dhi) = (dlo.min(unit[i]), dhi.max(unit[i]));
-        }
-        (ohi - olo).max_element() <= self.origin_extent
-            && (dhi - dlo).max_element() <= Self::DIRECTION_EXTENT
-    }
 }
 
-/// Recompute the winning triangle's `t` and barycentrics in f64 (Möller–Trumbore on the same
-/// f32 inputs): the watertight f32 test decides *which* triangle is hit; this makes *where*
-/// precise even for tiny triangles far from the ray origin. Keeps the f32 values when the f64
-/// determinant vanishes (a ray in the triangle's plane) or the result leaves `[t_min, t_max]`.
-#[inline(always)]
-fn refine(tri: &Tri, origin: Vec3A, dir: Vec3A, (t_min, t_max): (f32, f32), hit: Hit) -> Hit {
-    // `dir` is the caller's own direction, so `t` comes out in the caller's units.
-    let [v0, v1, v2] = tri.v.map(|v| v.as_dvec3());
-    let (o, d) = (origin.as_dvec3(), dir.as_dvec3());
-    let (e1, e2) = (v1 - v0, v2 - v0);
-    let p = d.cross(e2);
-    let det = e1.dot(p);
-    if det == 0.0 || !det.is_finite() {
-        return hit;
-    }
-    let tv = o - v0;
-    let q = tv.cross(e1);
-    let inv_det = 1.0 / det;
-    let (u, v, t) = (tv.dot(p) * inv_det, d.dot(q) * inv_det, e2.dot(q) * inv_det);
-    let close = (t - hit.t as f64).abs() <= 1e-3 * (hit.t as f64).abs().max(1e-30);
-    let inside = t >= t_min as f64 && t < t_max as f64;
-    if !(close && inside && u.is_finite() && v.is_finite()) {
-        return hit;
-    }
-    Hit {
-        t: t as f32,
-        bary: [u as f32, v as f32],
-        ..hit
-    }
-}
-
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Hit {
-    pub t: f32,
-    pub triangle: u32,
-    pub bary: [f32; 2],
-    /// Index into the BVH's leaf-ordered triangles.
-    slot: usize,
-}
-
-/// Results of `cast_rays`, one entry per ray.
+/// Results of `cast_rays` and `nearest_hits`: `k` entries per ray, nearest first.
 #[derive(Debug, Default)]
 pub struct RayHits {
-    /// Distance in units of the direction's length; +inf on a miss.
+    pub k: usize,
+    /// Distance in units of the direction's length; +inf where there is no (further) hit.
     pub t: Vec<f32>,
-    /// Triangle index (the scene's face index); −1 on a miss.
+    /// Triangle index (the scene's face index); −1 where there is no hit.
     pub triangle: Vec<i32>,
-    /// Barycentric (u, v) of the hit: point = (1−u−v)·v0 + u·v1 + v·v2; (0, 0) on a miss.
+    /// Barycentric (u, v) of the hit: point = (1−u−v)·v0 + u·v1 + v·v2; (0, 0) without a hit.
     pub barycentric: Vec<[f32; 2]>,
     pub bvh_build_seconds: f64,
     pub trace_seconds: f64,
 }
 
-/// Cast rays and return the closest hit of each in `[t_min, t_max]` (units of each
-/// direction's length). Directions need not be unit length but must be finite and non-zero.
+/// Results of `occluded`.
+#[derive(Debug, Default)]
+pub struct Occlusion {
+    pub hit: Vec<bool>,
+    pub bvh_build_seconds: f64,
+    pub trace_seconds: f64,
+}
+
+/// Closest hit of each ray in `[t_min, t_max)` (units of each direction's length), on every
+/// core. Directions need not be unit length but must be finite and non-zero.
 pub fn cast_rays(
     scene: &Scene,
     origins: &[[f32; 3]],
@@ -222,117 +189,541 @@ pub fn cast_rays(
     t_min: f32,
     t_max: f32,
 ) -> Result<RayHits> {
-    check_rays(origins, directions, t_min, t_max)?;
-    crate::counters::add(&crate::counters::RAYS_CAST, origins.len() as u64);
-    if scene.triangle_count() >= bvh4::MAX_TRIANGLES as usize {
-        return input_err!(
-            "cast_rays handles scenes of fewer than {} triangles; this one has {}",
-            bvh4::MAX_TRIANGLES,
-            scene.triangle_count()
-        );
+    cast_rays_with(scene, origins, directions, &Query::new(t_min, t_max))
+}
+
+/// [`cast_rays`] with a chosen range and threads.
+pub fn cast_rays_with(
+    scene: &Scene,
+    origins: &[[f32; 3]],
+    directions: &[[f32; 3]],
+    q: &Query,
+) -> Result<RayHits> {
+    nearest_hits(scene, origins, directions, 1, q)
+}
+
+/// The first `k` hits along each ray, nearest first, in `[t_min, t_max)`. Hits whose `t` agree
+/// within [`SAME_HIT`] (relative) are one surface met twice (coincident or duplicated
+/// triangles) and count once, as the triangle with the smaller `t` (then the smaller index).
+pub fn nearest_hits(
+    scene: &Scene,
+    origins: &[[f32; 3]],
+    directions: &[[f32; 3]],
+    k: usize,
+    q: &Query,
+) -> Result<RayHits> {
+    if k == 0 {
+        return input_err!("max_hits must be at least 1, got 0");
     }
-    let had_bvh = scene.bvh.get().is_some();
-    let bvh = Bvh::of(scene);
+    on_threads(q.threads, || {
+        nearest_hits_here(scene, origins, directions, k, q)
+    })
+}
+
+fn nearest_hits_here(
+    scene: &Scene,
+    origins: &[[f32; 3]],
+    directions: &[[f32; 3]],
+    k: usize,
+    q: &Query,
+) -> Result<RayHits> {
+    let (bvh, built) = prepare(scene, origins, directions, q)?;
     let start = Instant::now();
     let n = origins.len();
-    let mut t = vec![f32::INFINITY; n];
-    let mut triangle = vec![-1i32; n];
-    let mut barycentric = vec![[0.0f32; 2]; n];
-    const CHUNK: usize = 1024;
-    let job = Chunk {
-        bvh: &bvh,
-        origins,
-        directions,
-        range: (t_min, t_max),
-        coherence: Coherence::for_scene(scene),
+    let Some(len) = n.checked_mul(k) else {
+        return input_err!("{n} rays x max_hits={k} hits is too many");
     };
-    let avx2 = simd::has_avx2();
-    t.par_chunks_mut(CHUNK)
-        .zip(triangle.par_chunks_mut(CHUNK))
-        .zip(barycentric.par_chunks_mut(CHUNK))
-        .enumerate()
-        .for_each(|(c, ((t, tri), bary))| {
-            let out = (t, tri, bary);
-            if avx2 {
-                // SAFETY: the CPU was checked to support AVX2 and FMA.
-                unsafe { job.run_avx2(c * CHUNK, out) }
-            } else {
-                job.run(c * CHUNK, out)
-            }
+    let mut t = vec![f32::INFINITY; len];
+    let mut triangle = vec![-1i32; len];
+    let mut barycentric = vec![[0.0f32; 2]; len];
+    let job = Rays::new(&bvh.tree, origins, directions, q);
+    let out: HitSlices = (&mut t, &mut triangle, &mut barycentric);
+    if k == 1 {
+        run(q.threads, out, 1, |base, out| {
+            dispatch(&ClosestJob(&job), base, out)
         });
+    } else {
+        run(q.threads, out, k, |base, out| {
+            dispatch(&NearestJob(&job, k), base, out)
+        });
+    }
     Ok(RayHits {
+        k,
         t,
         triangle,
         barycentric,
-        bvh_build_seconds: if had_bvh { 0.0 } else { bvh.build_seconds },
+        bvh_build_seconds: built,
         trace_seconds: start.elapsed().as_secs_f64(),
     })
 }
 
-/// One chunk of `cast_rays`'s work: consecutive rays traced in packets.
-struct Chunk<'a> {
-    bvh: &'a Bvh,
+/// Whether anything lies along each ray within `[t_min, t_max)`: the traversal stops at the
+/// first hit it finds, in whatever order.
+pub fn occluded(
+    scene: &Scene,
+    origins: &[[f32; 3]],
+    directions: &[[f32; 3]],
+    q: &Query,
+) -> Result<Occlusion> {
+    on_threads(q.threads, || occluded_here(scene, origins, directions, q))
+}
+
+fn occluded_here(
+    scene: &Scene,
+    origins: &[[f32; 3]],
+    directions: &[[f32; 3]],
+    q: &Query,
+) -> Result<Occlusion> {
+    let (bvh, built) = prepare(scene, origins, directions, q)?;
+    let start = Instant::now();
+    let mut hit = vec![false; origins.len()];
+    let job = Rays::new(&bvh.tree, origins, directions, q);
+    run(q.threads, &mut hit[..], 1, |base, out| {
+        dispatch(&AnyJob(&job), base, out)
+    });
+    Ok(Occlusion {
+        hit,
+        bvh_build_seconds: built,
+        trace_seconds: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// Check the rays, count them, and get the scene's BVH with the seconds spent building it now
+/// (0 when it was cached).
+fn prepare(
+    scene: &Scene,
+    origins: &[[f32; 3]],
+    directions: &[[f32; 3]],
+    q: &Query,
+) -> Result<(Arc<Bvh>, f64)> {
+    check_rays(origins, directions, q.t_min, q.t_max, q.threads)?;
+    crate::counters::add(&crate::counters::RAYS_CAST, origins.len() as u64);
+    if scene.triangle_count() >= MAX_TRIANGLES as usize {
+        return input_err!(
+            "cast_rays handles scenes of fewer than {MAX_TRIANGLES} triangles; this one has {}",
+            scene.triangle_count()
+        );
+    }
+    let had = scene.bvh.get().is_some();
+    let bvh = Bvh::of_with(scene, q.threads);
+    let built = if had { 0.0 } else { bvh.build_seconds };
+    Ok((bvh, built))
+}
+
+/// Rays per parallel task.
+const CHUNK: usize = 1024;
+
+/// Output slices that split into matching chunks of `k` entries per ray.
+trait Chunks: Send + Sized {
+    fn rays(&self, k: usize) -> usize;
+    fn split(self, at: usize) -> (Self, Self);
+}
+
+impl Chunks for &mut [bool] {
+    fn rays(&self, k: usize) -> usize {
+        self.len() / k
+    }
+    fn split(self, at: usize) -> (Self, Self) {
+        self.split_at_mut(at)
+    }
+}
+
+type HitSlices<'o> = (&'o mut [f32], &'o mut [i32], &'o mut [[f32; 2]]);
+
+impl Chunks for HitSlices<'_> {
+    fn rays(&self, k: usize) -> usize {
+        self.0.len() / k
+    }
+    fn split(self, at: usize) -> (Self, Self) {
+        let (t0, t1) = self.0.split_at_mut(at);
+        let (i0, i1) = self.1.split_at_mut(at);
+        let (b0, b1) = self.2.split_at_mut(at);
+        ((t0, i0, b0), (t1, i1, b1))
+    }
+}
+
+/// Run `f(first ray, its chunk of out)` over `out` in chunks of [`CHUNK`] rays, on `threads`.
+fn run<O: Chunks>(threads: Threads, out: O, k: usize, f: impl Fn(usize, O) + Sync) {
+    if threads == Threads::One {
+        return f(0, out);
+    }
+    let mut chunks = Vec::with_capacity(out.rays(k).div_ceil(CHUNK));
+    let mut rest = out;
+    while rest.rays(k) > CHUNK {
+        let (a, b) = rest.split(CHUNK * k);
+        chunks.push(a);
+        rest = b;
+    }
+    chunks.push(rest);
+    chunks
+        .into_par_iter()
+        .enumerate()
+        .for_each(|(c, o)| f(c * CHUNK, o))
+}
+
+/// Run `f` where `threads` says: on the calling thread or rayon's global pool as they are, or
+/// inside a pool of `n` threads (so every parallel step of `f` stays on those).
+fn on_threads<R: Send>(threads: Threads, f: impl FnOnce() -> R + Send) -> R {
+    match threads {
+        Threads::Count(n) => pool(n.get()).install(f),
+        _ => f(),
+    }
+}
+
+/// A rayon pool of `n` threads, made on first use and kept for the process.
+type Pools = Mutex<Vec<(usize, Arc<rayon::ThreadPool>)>>;
+
+fn pool(n: usize) -> Arc<rayon::ThreadPool> {
+    static POOLS: OnceLock<Pools> = OnceLock::new();
+    let mut pools = POOLS
+        .get_or_init(Default::default)
+        .lock()
+        .unwrap_or_else(|e| e.into_inner());
+    if let Some((_, p)) = pools.iter().find(|(m, _)| *m == n) {
+        return p.clone();
+    }
+    let p = Arc::new(
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .thread_name(|i| format!("scenesample-rays-{i}"))
+            .build()
+            .expect("a rayon pool of a few threads can always be made"),
+    );
+    pools.push((n, p.clone()));
+    p
+}
+
+/// A query's work on one chunk of rays, for any kernel.
+trait Job: Sync {
+    type Out<'o>;
+    fn chunk<K: Kernel>(&self, k: K, base: usize, out: Self::Out<'_>);
+}
+
+/// Run `job` with the best kernel this CPU has.
+#[inline(always)]
+fn dispatch<J: Job>(job: &J, base: usize, out: J::Out<'_>) {
+    #[cfg(target_arch = "x86_64")]
+    if let Some(k) = avx2::Avx2::detect() {
+        // SAFETY: the CPU has AVX2 (the token proves it).
+        return unsafe { chunk_avx2(job, k, base, out) };
+    }
+    job.chunk(Portable, base, out)
+}
+
+/// [`Job::chunk`] compiled for AVX2 (and the VEX encodings, bit scans and popcount that come
+/// with it), so the kernel's intrinsics inline.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx,avx2,bmi1,bmi2,lzcnt,popcnt")]
+unsafe fn chunk_avx2<J: Job>(job: &J, k: avx2::Avx2, base: usize, out: J::Out<'_>) {
+    job.chunk(k, base, out)
+}
+
+/// What every query shares: the tree, the rays and the range.
+struct Rays<'a> {
+    bvh: &'a Bvh8,
     origins: &'a [[f32; 3]],
     directions: &'a [[f32; 3]],
     range: (f32, f32),
-    coherence: Coherence,
+    /// How far apart the origins of a packet's rays may lie (`bvh8::coherent`).
+    origin_extent: f32,
 }
 
-type ChunkOut<'o> = (&'o mut [f32], &'o mut [i32], &'o mut [[f32; 2]]);
+impl<'a> Rays<'a> {
+    fn new(bvh: &'a Bvh8, origins: &'a [[f32; 3]], directions: &'a [[f32; 3]], q: &Query) -> Self {
+        Self {
+            bvh,
+            origins,
+            directions,
+            range: (q.t_min, q.t_max),
+            origin_extent: 0.05 * bvh.diagonal(),
+        }
+    }
+}
 
-impl Chunk<'_> {
-    /// Trace rays `base..base + out.len()` into `out`.
+/// Traversal stacks, kept from ray to ray.
+struct Scratch {
+    single: Stack,
+    packet: PacketStack,
+}
+
+impl Scratch {
+    fn new() -> Self {
+        Self {
+            single: Stack::new(),
+            packet: PacketStack::new(),
+        }
+    }
+}
+
+/// One ray in traversal form.
+struct Traced {
+    o: Vec3A,
+    d: Vec3A,
+    ray: Ray,
+    t_far: f32,
+}
+
+impl Rays<'_> {
+    /// Trace rays `base + j` for `j` in `range`, each into a sink made by `sink`, handed to
+    /// `done(j, sink)`. Runs of eight coherent rays go as packets where the kernel can.
     #[inline(always)]
-    fn run(&self, base: usize, (t, tri, bary): ChunkOut<'_>) {
-        for start in (0..t.len()).step_by(bvh4::PACKET) {
-            let end = (start + bvh4::PACKET).min(t.len());
-            let (o, d) = (
-                &self.origins[base + start..base + end],
-                &self.directions[base + start..base + end],
+    fn trace<K: Kernel, S: Sink>(
+        &self,
+        k: K,
+        base: usize,
+        range: std::ops::Range<usize>,
+        scratch: &mut Scratch,
+        sink: impl Fn(&Traced) -> S,
+        mut done: impl FnMut(usize, S),
+    ) {
+        let mut j = range.start;
+        while j < range.end {
+            if K::PACKETS && j + WIDTH <= range.end {
+                let group: [Traced; WIDTH] = std::array::from_fn(|i| self.ray(base + j + i));
+                let rays = group.each_ref().map(|r| r.ray);
+                if coherent(&rays, &group.each_ref().map(|r| r.d), self.origin_extent) {
+                    let mut sinks = group.each_ref().map(&sink);
+                    if k.packet(
+                        self.bvh,
+                        &rays,
+                        (1 << WIDTH) - 1,
+                        &mut sinks,
+                        &mut scratch.packet,
+                    ) {
+                        for (i, s) in sinks.into_iter().enumerate() {
+                            done(j + i, s);
+                        }
+                        j += WIDTH;
+                        continue;
+                    }
+                }
+                for (i, r) in group.iter().enumerate() {
+                    let mut s = sink(r);
+                    traverse(k, self.bvh, &r.ray, &mut s, &mut scratch.single);
+                    done(j + i, s);
+                }
+                j += WIDTH;
+                continue;
+            }
+            let r = self.ray(base + j);
+            let mut s = sink(&r);
+            traverse(k, self.bvh, &r.ray, &mut s, &mut scratch.single);
+            done(j, s);
+            j += 1;
+        }
+    }
+
+    /// Ray `i` as given: origin and direction.
+    #[inline(always)]
+    fn input(&self, i: usize) -> (Vec3A, Vec3A) {
+        (
+            Vec3A::from(Vec3::from(self.origins[i])),
+            Vec3A::from(Vec3::from(self.directions[i])),
+        )
+    }
+
+    #[inline(always)]
+    fn ray(&self, i: usize) -> Traced {
+        let (o, d) = self.input(i);
+        Traced {
+            o,
+            d,
+            ray: Ray::new(o, d, self.range.0),
+            t_far: self.range.1,
+        }
+    }
+
+    /// The hit in the caller's units, refined in f64.
+    #[inline(always)]
+    fn report(&self, r: &Traced, h: &BlockHit) -> Hit {
+        let mut p = Pending {
+            v: self.bvh.blocks[h.block as usize].corners(h.lane as usize),
+            o: r.o.to_array(),
+            d: r.d.to_array(),
+            t: h.t,
+            bary: h.bary(),
+        };
+        refine::refine_one(&mut p, self.range);
+        Hit {
+            t: p.t,
+            triangle: h.triangle,
+            bary: p.bary,
+        }
+    }
+}
+
+struct ClosestJob<'a>(&'a Rays<'a>);
+
+impl Job for ClosestJob<'_> {
+    type Out<'o> = HitSlices<'o>;
+
+    #[inline(always)]
+    fn chunk<K: Kernel>(&self, k: K, base: usize, (t, tri, bary): HitSlices<'_>) {
+        // Two passes per batch: traversal records each closest hit in f32; the f64 refinement
+        // then runs over the batch's hits, free of the traversal's long dependency chains (the
+        // processor overlaps one hit's refinement with the next's; inline it took as long as
+        // the traversal of a primary ray).
+        const BATCH: usize = 256;
+        let mut scratch = Scratch::new();
+        let mut found = [0u32; BATCH];
+        let mut pending = [Pending::default(); BATCH];
+        for start in (0..t.len()).step_by(BATCH) {
+            let end = (start + BATCH).min(t.len());
+            let mut hits = 0;
+            let rays = self.0;
+            rays.trace(
+                k,
+                base,
+                start..end,
+                &mut scratch,
+                |r| Closest::new(r.t_far),
+                |j, sink| {
+                    if let Some(h) = sink.best {
+                        tri[j] = h.triangle as i32;
+                        found[hits] = j as u32;
+                        pending[hits] = Pending {
+                            v: rays.bvh.blocks[h.block as usize].corners(h.lane as usize),
+                            o: rays.origins[base + j],
+                            d: rays.directions[base + j],
+                            t: h.t,
+                            bary: h.bary(),
+                        };
+                        hits += 1;
+                    }
+                },
             );
-            self.bvh
-                .trace_packet(o, d, self.range, &self.coherence, |k, h| {
-                    let k = start + k;
-                    t[k] = h.t;
-                    tri[k] = h.triangle as i32;
-                    bary[k] = h.bary;
-                });
-        }
-    }
-
-    /// [`Chunk::run`] compiled for AVX2 (VEX-encoded three-operand SSE, BMI bit scans): the
-    /// same arithmetic and results (Rust never contracts a·b + c into an FMA on its own), about a
-    /// fifth faster where the CPU has it.
-    ///
-    /// # Safety
-    /// The CPU must support AVX2 and FMA ([`simd::has_avx2`]).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx,avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
-    unsafe fn run_avx2(&self, base: usize, out: ChunkOut<'_>) {
-        self.run(base, out)
-    }
-
-    #[cfg(not(target_arch = "x86_64"))]
-    unsafe fn run_avx2(&self, base: usize, out: ChunkOut<'_>) {
-        self.run(base, out)
-    }
-}
-
-mod simd {
-    /// Whether the running CPU has AVX2 and FMA (checked once, cached by std).
-    pub fn has_avx2() -> bool {
-        #[cfg(target_arch = "x86_64")]
-        {
-            is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma")
-        }
-        #[cfg(not(target_arch = "x86_64"))]
-        {
-            false
+            k.refine(&mut pending[..hits], self.0.range);
+            for (&j, p) in found[..hits].iter().zip(&pending[..hits]) {
+                t[j as usize] = p.t;
+                bary[j as usize] = p.bary;
+            }
         }
     }
 }
 
-fn check_rays(o: &[[f32; 3]], d: &[[f32; 3]], t_min: f32, t_max: f32) -> Result<()> {
+struct AnyJob<'a>(&'a Rays<'a>);
+
+impl Job for AnyJob<'_> {
+    type Out<'o> = &'o mut [bool];
+
+    #[inline(always)]
+    fn chunk<K: Kernel>(&self, k: K, base: usize, out: &mut [bool]) {
+        let mut scratch = Scratch::new();
+        let any = |r: &Traced| Any {
+            t_far: r.t_far,
+            hit: false,
+        };
+        self.0
+            .trace(k, base, 0..out.len(), &mut scratch, any, |j, sink| {
+                out[j] = sink.hit
+            });
+    }
+}
+
+/// Two hits whose `t` differ by at most this fraction of the larger are one surface met twice.
+pub const SAME_HIT: f32 = 1e-6;
+
+struct NearestJob<'a>(&'a Rays<'a>, usize);
+
+impl Job for NearestJob<'_> {
+    type Out<'o> = HitSlices<'o>;
+
+    #[inline(always)]
+    fn chunk<K: Kernel>(&self, k: K, base: usize, (t, tri, bary): HitSlices<'_>) {
+        let want = self.1;
+        let mut found = Vec::with_capacity(want + 1);
+        let mut stack = Stack::new();
+        for j in 0..t.len() / want {
+            let r = self.0.ray(base + j);
+            found.clear();
+            let mut sink = Nearest {
+                rays: self.0,
+                r: &r,
+                want,
+                found: &mut found,
+                t_far: r.t_far,
+            };
+            traverse(k, self.0.bvh, &r.ray, &mut sink, &mut stack);
+            for (m, h) in found.iter().enumerate() {
+                t[j * want + m] = h.t;
+                tri[j * want + m] = h.triangle as i32;
+                bary[j * want + m] = h.bary;
+            }
+        }
+    }
+}
+
+/// The k-nearest-hits sink: up to `want` distinct hits, refined as they are found, nearest
+/// first.
+struct Nearest<'a> {
+    rays: &'a Rays<'a>,
+    r: &'a Traced,
+    want: usize,
+    found: &'a mut Vec<Hit>,
+    /// Traversal bound: `t_max` until `want` hits are in hand, then the last one's `t` widened
+    /// by the same-hit tolerance.
+    t_far: f32,
+}
+
+impl Nearest<'_> {
+    fn add(&mut self, h: Hit) {
+        let same = |a: f32, b: f32| (a - b).abs() <= SAME_HIT * a.max(b);
+        if let Some(e) = self.found.iter_mut().find(|e| same(e.t, h.t)) {
+            if (h.t, h.triangle) < (e.t, e.triangle) {
+                *e = h;
+                self.found.sort_by(|a, b| a.t.total_cmp(&b.t));
+            }
+            return;
+        }
+        let at = self.found.partition_point(|e| e.t <= h.t);
+        self.found.insert(at, h);
+        self.found.truncate(self.want);
+        if self.found.len() == self.want {
+            let last = self.found[self.want - 1].t as f64;
+            let bound = last * (1.0 + 2.0 * SAME_HIT as f64);
+            self.t_far = self.t_far.min(bound as f32 * bvh8::WIDEN);
+        }
+    }
+}
+
+impl Sink for Nearest<'_> {
+    #[inline(always)]
+    fn t_far(&self) -> f32 {
+        self.t_far
+    }
+
+    fn take(&mut self, _: &Bvh8, block: usize, h: &Tri4Hit) -> bool {
+        let mut m = h.mask;
+        while m != 0 {
+            let lane = m.trailing_zeros() as usize;
+            m &= m - 1;
+            let hit = self
+                .rays
+                .report(self.r, &BlockHit::of(self.rays.bvh, block, lane, h));
+            self.add(hit);
+        }
+        false
+    }
+}
+
+/// A reported hit, in the caller's units.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Hit {
+    t: f32,
+    triangle: u32,
+    bary: [f32; 2],
+}
+
+fn check_rays(
+    o: &[[f32; 3]],
+    d: &[[f32; 3]],
+    t_min: f32,
+    t_max: f32,
+    threads: Threads,
+) -> Result<()> {
     if o.len() != d.len() {
         return input_err!(
             "origins has {} rows but directions has {}; they must match",
@@ -340,17 +731,30 @@ fn check_rays(o: &[[f32; 3]], d: &[[f32; 3]], t_min: f32, t_max: f32) -> Result<
             d.len()
         );
     }
-    if let Some(i) = o.iter().position(|v| v.iter().any(|x| !x.is_finite())) {
-        return input_err!("origins[{i}] is not finite: {:?}", o[i]);
-    }
-    for (i, v) in d.iter().enumerate() {
-        let len = Vec3::from(*v).length();
-        if !(len.is_finite() && len > 0.0) {
-            return input_err!("directions[{i}] must be finite and non-zero, got {v:?}");
-        }
-    }
     if t_min.is_nan() || t_max.is_nan() || t_min < 0.0 || t_max < t_min {
         return input_err!("need 0 <= t_min <= t_max, got t_min={t_min}, t_max={t_max}");
+    }
+    // One cheap pass (no square roots), in parallel unless the caller asked for its own
+    // thread only; the first bad row is looked up only when there is one.
+    let bad_origin = |v: &[f32; 3]| !v.iter().all(|x| x.is_finite());
+    let bad_direction = |v: &[f32; 3]| {
+        let l2 = Vec3::from(*v).length_squared();
+        !(v.iter().all(|x| x.is_finite()) && l2 > 0.0 && l2.is_finite())
+    };
+    let any = |rows: &[[f32; 3]], bad: &(dyn Fn(&[f32; 3]) -> bool + Sync)| match threads {
+        Threads::One => rows.iter().any(bad),
+        _ => rows.par_iter().with_min_len(1 << 14).any(bad),
+    };
+    if any(o, &bad_origin) {
+        let i = o.iter().position(bad_origin).expect("found above");
+        return input_err!("origins[{i}] is not finite: {:?}", o[i]);
+    }
+    if any(d, &bad_direction) {
+        let i = d.iter().position(bad_direction).expect("found above");
+        return input_err!(
+            "directions[{i}] must be finite and non-zero, got {:?}",
+            d[i]
+        );
     }
     Ok(())
 }
@@ -385,6 +789,87 @@ pub(crate) mod tests {
             f = next;
         }
         (v.iter().map(|p| p.to_array()).collect(), f)
+    }
+
+    /// A deterministic generator (SplitMix64) for test data.
+    pub(crate) struct Rng(pub u64);
+
+    impl Rng {
+        pub fn next(&mut self) -> f32 {
+            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = self.0;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
+        }
+
+        pub fn point(&mut self, lo: f32, hi: f32) -> [f32; 3] {
+            [0; 3].map(|_| lo + (hi - lo) * self.next())
+        }
+    }
+
+    /// A cloud of random triangles of every size, with duplicated and coplanar ones mixed in.
+    fn soup(n: usize, seed: u64) -> Scene {
+        let mut r = Rng(seed);
+        let mut v = Vec::new();
+        let mut f = Vec::new();
+        for i in 0..n {
+            let c = r.point(-1.0, 1.0);
+            let s = 0.002 + 0.3 * r.next().powi(3);
+            for _ in 0..3 {
+                let p = r.point(-s, s);
+                v.push([c[0] + p[0], c[1] + p[1], c[2] + p[2]]);
+            }
+            let b = 3 * i as u32;
+            f.push([b, b + 1, b + 2]);
+            if i % 17 == 0 {
+                // The same triangle again, corners rotated: every hit on it ties.
+                f.push([b + 1, b + 2, b]);
+            }
+        }
+        Scene::from_arrays(v, f, None, None).unwrap()
+    }
+
+    fn random_rays(n: usize, seed: u64) -> (Vec<[f32; 3]>, Vec<[f32; 3]>) {
+        let mut r = Rng(seed);
+        (0..n)
+            .map(|_| {
+                let o = r.point(-1.5, 1.5);
+                let t = r.point(-1.0, 1.0);
+                (o, [t[0] - o[0], t[1] - o[1], t[2] - o[2]])
+            })
+            .unzip()
+    }
+
+    /// Camera-like rays: one origin, directions over a small grid (coherent: packets).
+    fn camera_rays(size: usize, eye: [f32; 3]) -> (Vec<[f32; 3]>, Vec<[f32; 3]>) {
+        let mut o = Vec::new();
+        let mut d = Vec::new();
+        for y in 0..size {
+            for x in 0..size {
+                let u = (x as f32 + 0.5) / size as f32 - 0.5;
+                let v = (y as f32 + 0.5) / size as f32 - 0.5;
+                o.push(eye);
+                d.push([u - 0.3 * eye[0], v - 0.3 * eye[1], -1.0]);
+            }
+        }
+        (o, d)
+    }
+
+    /// Every hit of a ray by brute force in f64: (t, triangle), sorted.
+    fn brute(s: &Scene, o: [f32; 3], d: [f32; 3], t_max: f64) -> Vec<(f64, u32)> {
+        let (o, d) = (o.map(f64::from), d.map(f64::from));
+        let mut hits = Vec::new();
+        for (i, f) in s.faces().iter().enumerate() {
+            let v = f.map(|k| s.vertices()[k as usize].map(f64::from));
+            let [det, u, w, t] = refine::moller_trumbore(v, o, d, 1.0);
+            if det != 0.0 && u >= 0.0 && w >= 0.0 && u + w <= 1.0 && t >= 0.0 && t < t_max {
+                // Ranked as reported: t in float32, then the smaller index.
+                hits.push((t as f32 as f64, i as u32));
+            }
+        }
+        hits.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        hits
     }
 
     #[test]
@@ -439,8 +924,7 @@ pub(crate) mod tests {
                 targets.push((a + b) * 0.5);
             }
         }
-        let mut o = Vec::new();
-        let mut d = Vec::new();
+        let (mut o, mut d) = (Vec::new(), Vec::new());
         for (i, p) in targets.iter().enumerate() {
             // Deterministic directions spread over the sphere (golden-angle spiral).
             let z = 1.0 - 2.0 * ((i as f32 * 0.618_034) % 1.0);
@@ -463,104 +947,140 @@ pub(crate) mod tests {
             "{misses} of {} rays passed through the closed mesh",
             o.len()
         );
+        assert!(occluded(&s, &o, &d, &Query::new(0.0, f32::INFINITY))
+            .unwrap()
+            .hit
+            .iter()
+            .all(|&h| h));
     }
 
-    /// Packets and single rays find the same closest hits: camera-like coherent packets, and
-    /// packets whose directions differ in sign on an axis (traced ray by ray).
+    /// Closest hits are those of a float64 brute force: same triangle, `t` within 1e-6. On an
+    /// exact tie (the duplicated triangles) the smaller index wins, whatever the traversal.
     #[test]
-    fn packets_agree_with_single_rays() {
+    fn closest_hits_match_brute_force() {
+        let s = soup(3000, 7);
+        let (o, d) = random_rays(4000, 8);
+        let h = cast_rays(&s, &o, &d, 0.0, f32::INFINITY).unwrap();
+        let mut same = 0;
+        for i in 0..o.len() {
+            let b = brute(&s, o[i], d[i], f64::INFINITY);
+            match b.first() {
+                None => assert_eq!(h.triangle[i], -1, "ray {i}: brute force misses"),
+                Some(&(t, tri)) => {
+                    assert!(
+                        ((h.t[i] as f64 - t) / t).abs() < 1e-6,
+                        "ray {i}: t {} vs {t}",
+                        h.t[i]
+                    );
+                    // Triangles met at the same depth (duplicated faces, shared edges) rank by
+                    // their f32 depth, which the f64 one may order differently by an ulp: any
+                    // of them is right. Beyond that, f32 and f64 may disagree on which of two
+                    // triangles is first only rarely.
+                    let _ = tri;
+                    let tied = b.iter().take_while(|&&(u, _)| u <= t * (1.0 + 1e-6));
+                    same += usize::from(tied.clone().any(|&(_, k)| k as i32 == h.triangle[i]));
+                }
+            }
+        }
+        let hits = h.triangle.iter().filter(|&&t| t >= 0).count();
+        assert!(
+            same >= hits * 999 / 1000,
+            "{same} of {hits} closest triangles agree"
+        );
+    }
+
+    /// The AVX2 kernel, packets, single rays, the portable kernel, shuffled orders and every
+    /// thread setting give bit-identical hits.
+    #[test]
+    fn kernels_packets_orders_and_threads_agree() {
         let (v, f) = icosphere(4);
         let s = Scene::from_arrays(v, f, None, None).unwrap();
-        let bvh = Bvh::of(&s);
-        let eye = Vec3A::new(0.3, 0.2, 3.0);
-        let size = 256;
-        let mut rays = Vec::new();
-        for y in 0..size {
-            for x in 0..size {
-                let d = Vec3A::new(
-                    (x as f32 + 0.5) / size as f32 - 0.5,
-                    (y as f32 + 0.5) / size as f32 - 0.5,
-                    -1.0,
-                );
-                rays.push((eye, d.normalize()));
-            }
+        let (mut o, mut d) = camera_rays(64, [0.3, 0.2, 3.0]);
+        let (ro, rd) = random_rays(4096, 3);
+        o.extend(ro);
+        d.extend(rd);
+        let q = Query::new(0.0, f32::INFINITY);
+        let reference = cast_rays_with(&s, &o, &d, &q).unwrap();
+        assert!(reference.triangle.iter().filter(|&&t| t >= 0).count() > 3000);
+        let bits = |h: &RayHits| {
+            h.t.iter()
+                .map(|x| x.to_bits())
+                .zip(h.triangle.iter().copied())
+                .zip(h.barycentric.iter().map(|b| b.map(f32::to_bits)))
+                .collect::<Vec<_>>()
+        };
+        for threads in [Threads::One, Threads::Count(NonZeroUsize::new(3).unwrap())] {
+            let h = cast_rays_with(&s, &o, &d, &Query { threads, ..q }).unwrap();
+            assert_eq!(bits(&h), bits(&reference), "{threads:?}");
         }
-        let (mut same, mut packed) = (0, 0);
-        for packet in rays.chunks(bvh4::PACKET) {
-            let prays: Vec<bvh4::PacketRay> = packet
-                .iter()
-                .map(|&(o, d)| bvh4::PacketRay::new(o, d, 0.0))
-                .collect();
-            let mut t_far = vec![f32::INFINITY; packet.len()];
-            let mut best = vec![None; packet.len()];
-            // Packets straddling the view's centre column mix direction signs and are refused.
-            if !bvh.tree.closest_packet(&prays, &mut t_far, &mut best) {
-                continue;
-            }
-            packed += 1;
-            for (k, &(o, d)) in packet.iter().enumerate() {
-                let single = bvh
-                    .tree
-                    .closest(o, d, &RayShear::new(d), 0.0, f32::INFINITY);
-                let (a, b) = (
-                    best[k].map(|h| (h.slot, h.t)),
-                    single.map(|h| (h.slot, h.t)),
-                );
-                same += usize::from(a == b);
-            }
-        }
-        // One packet per row straddles the centre column: 7 of 8 are traced as packets.
-        assert!(
-            packed >= rays.len() / bvh4::PACKET * 3 / 4,
-            "{packed} packets traced"
-        );
-        assert_eq!(
-            same,
-            packed * bvh4::PACKET,
-            "packet and single-ray hits differ"
-        );
-        // Opposite directions in one packet: no interval bound, so it is refused.
-        let mixed = [
-            bvh4::PacketRay::new(eye, Vec3A::NEG_Z, 0.0),
-            bvh4::PacketRay::new(eye, Vec3A::Z, 0.0),
-        ];
-        let (mut t_far, mut best) = ([f32::INFINITY; 2], [None; 2]);
-        assert!(!bvh.tree.closest_packet(&mixed, &mut t_far, &mut best));
-        // cast_rays gives the same answers for coherent and shuffled (incoherent) orders.
-        let (o, d): (Vec<[f32; 3]>, Vec<[f32; 3]>) = rays
-            .iter()
-            .map(|(o, d)| (o.to_array(), d.to_array()))
-            .unzip();
-        let coherent = cast_rays(&s, &o, &d, 0.0, f32::INFINITY).unwrap();
         let perm: Vec<usize> = (0..o.len()).map(|i| (i * 7919) % o.len()).collect();
         let (po, pd): (Vec<_>, Vec<_>) = perm.iter().map(|&i| (o[i], d[i])).unzip();
-        let shuffled = cast_rays(&s, &po, &pd, 0.0, f32::INFINITY).unwrap();
+        let shuffled = cast_rays_with(&s, &po, &pd, &q).unwrap();
         for (k, &i) in perm.iter().enumerate() {
-            assert_eq!(shuffled.triangle[k], coherent.triangle[i]);
-            assert_eq!(shuffled.t[k].to_bits(), coherent.t[i].to_bits());
+            assert_eq!(shuffled.triangle[k], reference.triangle[i]);
+            assert_eq!(shuffled.t[k].to_bits(), reference.t[i].to_bits());
         }
-        // The AVX2 build of the loop gives bit-identical results to the portable one.
-        if simd::has_avx2() {
-            let job = Chunk {
-                bvh: &bvh,
-                origins: &o,
-                directions: &d,
-                range: (0.0, f32::INFINITY),
-                coherence: Coherence::for_scene(&s),
-            };
-            let n = o.len();
-            let mut a = (vec![f32::INFINITY; n], vec![-1; n], vec![[0.0; 2]; n]);
-            let mut b = a.clone();
-            job.run(0, (&mut a.0, &mut a.1, &mut a.2));
-            // SAFETY: checked just above.
-            unsafe { job.run_avx2(0, (&mut b.0, &mut b.1, &mut b.2)) };
-            assert_eq!(a.1, b.1);
-            assert!(a
-                .0
-                .iter()
-                .zip(&b.0)
-                .all(|(x, y)| x.to_bits() == y.to_bits()));
-            assert!(a.2 == b.2);
+        // The portable kernel (no packets) over the same rays.
+        let bvh = Bvh::of(&s);
+        let rays = Rays::new(&bvh.tree, &o, &d, &q);
+        let n = o.len();
+        let mut p = (vec![f32::INFINITY; n], vec![-1; n], vec![[0.0; 2]; n]);
+        ClosestJob(&rays).chunk(Portable, 0, (&mut p.0, &mut p.1, &mut p.2));
+        let portable = RayHits {
+            k: 1,
+            t: p.0,
+            triangle: p.1,
+            barycentric: p.2,
+            ..Default::default()
+        };
+        assert_eq!(bits(&portable), bits(&reference));
+        let mut any = vec![false; n];
+        AnyJob(&rays).chunk(Portable, 0, &mut any);
+        assert_eq!(any, occluded(&s, &o, &d, &q).unwrap().hit);
+    }
+
+    /// `occluded` is true exactly where `cast_rays` finds a hit in the range.
+    #[test]
+    fn occluded_agrees_with_closest_hits() {
+        let s = soup(2000, 11);
+        let (o, d) = random_rays(5000, 12);
+        for t_max in [0.3, 1.0, f32::INFINITY] {
+            let q = Query::new(0.05, t_max);
+            let h = cast_rays_with(&s, &o, &d, &q).unwrap();
+            let a = occluded(&s, &o, &d, &q).unwrap();
+            let want: Vec<bool> = h.triangle.iter().map(|&t| t >= 0).collect();
+            assert_eq!(a.hit, want, "t_max {t_max}");
+        }
+    }
+
+    /// The k nearest hits are the brute force's, nearest first, ties (duplicated triangles)
+    /// counted once as the smaller index.
+    #[test]
+    fn nearest_hits_match_brute_force() {
+        let s = soup(1500, 21);
+        let (o, d) = random_rays(1500, 22);
+        let k = 4;
+        let h = nearest_hits(&s, &o, &d, k, &Query::new(0.0, f32::INFINITY)).unwrap();
+        for i in 0..o.len() {
+            let mut want: Vec<(f64, u32)> = Vec::new();
+            for (t, tri) in brute(&s, o[i], d[i], f64::INFINITY) {
+                let same = want
+                    .last()
+                    .is_some_and(|&(u, _)| (t - u).abs() <= 1e-6 * t.max(u));
+                if !same {
+                    want.push((t, tri));
+                }
+            }
+            for m in 0..k {
+                let (t, tri) = (h.t[i * k + m], h.triangle[i * k + m]);
+                match want.get(m) {
+                    None => assert_eq!((tri, t), (-1, f32::INFINITY), "ray {i} hit {m}"),
+                    Some(&(wt, wtri)) => {
+                        assert!(((t as f64 - wt) / wt).abs() < 1e-5, "ray {i} hit {m}");
+                        assert_eq!(tri, wtri as i32, "ray {i} hit {m}");
+                    }
+                }
+            }
         }
     }
 
@@ -568,10 +1088,17 @@ pub(crate) mod tests {
     fn bad_rays_are_rejected() {
         let (v, f) = icosphere(0);
         let s = Scene::from_arrays(v, f, None, None).unwrap();
+        let q = Query::new(0.0, 1.0);
         let e = cast_rays(&s, &[[0.0; 3]], &[[0.0; 3]], 0.0, 1.0)
             .unwrap_err()
             .to_string();
         assert!(e.contains("directions[0]"), "{e}");
         assert!(cast_rays(&s, &[[0.0; 3]], &[], 0.0, 1.0).is_err());
+        let nan = occluded(&s, &[[f32::NAN, 0.0, 0.0]], &[[1.0, 0.0, 0.0]], &q);
+        assert!(nan.unwrap_err().to_string().contains("origins[0]"));
+        let k0 = nearest_hits(&s, &[[0.0; 3]], &[[1.0, 0.0, 0.0]], 0, &q);
+        assert!(k0.unwrap_err().to_string().contains("max_hits"));
+        assert!(Threads::from_count(Some(0)).is_err());
+        assert!(cast_rays(&s, &[[0.0; 3]], &[[1.0, 0.0, 0.0]], 2.0, 1.0).is_err());
     }
 }

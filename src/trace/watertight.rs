@@ -13,31 +13,36 @@ pub struct Tri {
 }
 
 /// Per-ray constants of the shear transform (the paper's kx, ky, kz, Sx, Sy, Sz).
+#[derive(Clone, Copy, Debug)]
 pub struct RayShear {
-    k: [usize; 3],
-    s: [f32; 3],
+    pub(crate) k: [usize; 3],
+    pub(crate) s: [f32; 3],
 }
 
 impl RayShear {
     #[inline(always)]
     pub fn new(d: Vec3A) -> Self {
+        Self::with_inverse(d, Vec3A::ONE / d)
+    }
+
+    /// The shear of `d`, given `inv` whose dominant component is `1 / d` there (the division
+    /// is then not done twice).
+    #[inline(always)]
+    pub fn with_inverse(d: Vec3A, inv: Vec3A) -> Self {
+        // Arithmetic rather than branches: for incoherent rays every branch on the direction
+        // would be a coin toss for the predictor.
         let a = d.abs();
-        let kz = if a.x > a.y && a.x > a.z {
-            0
-        } else if a.y > a.z {
-            1
-        } else {
-            2
-        };
-        let mut kx = (kz + 1) % 3;
-        let mut ky = (kx + 1) % 3;
+        let x_wins = usize::from(a.x > a.y && a.x > a.z);
+        let y_wins = usize::from(a.y > a.z) & (1 - x_wins);
+        let kz = 2 - 2 * x_wins - y_wins;
+        let next = [1, 2, 0];
+        let (k1, k2) = (next[kz], next[next[kz]]);
         // Swap to keep the triangles' winding when the dominant component is negative.
-        if d[kz] < 0.0 {
-            std::mem::swap(&mut kx, &mut ky);
-        }
+        let neg = usize::from(d[kz] < 0.0);
+        let (kx, ky) = (k1 * (1 - neg) + k2 * neg, k2 * (1 - neg) + k1 * neg);
         // One division: the shear constants need not be correctly rounded quotients, only the
         // same for every triangle the ray meets.
-        let sz = 1.0 / d[kz];
+        let sz = inv[kz];
         Self {
             k: [kx, ky, kz],
             s: [d[kx] * sz, d[ky] * sz, sz],

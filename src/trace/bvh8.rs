@@ -1,0 +1,782 @@
+//! The 8-wide BVH that every CPU ray query traverses, and its traversal.
+//!
+//! Layout (the single-ray layout of Fuetterling et al., "Accelerated Single Ray Tracing for Wide
+//! Vector Units", HPG 2017): each node holds its eight children's boxes as six arrays of eight
+//! floats, so one AVX2 slab test covers all eight; leaves are runs of `Tri4` blocks, four
+//! triangles stored lane by lane, tested together by the watertight test (`watertight`).
+//!
+//! Traversal is depth first with a short stack. A node whose ray hits several children pushes
+//! them sorted by entry distance (an 8-lane sorting network on AVX2) and descends into the
+//! nearest; entries popped beyond the closest hit so far are skipped. The same loop serves the
+//! three queries through a [`Sink`]: closest hit, any hit, and the k nearest hits.
+
+use std::mem::MaybeUninit;
+use std::ops::Range;
+
+use glam::Vec3A;
+
+use super::watertight::{RayShear, Tri};
+
+/// Child reference bit marking a leaf: `LEAF | (blocks − 1) << 28 | first block`. An inner
+/// child's reference is its node's offset in `Bvh8::nodes` in units of 32 bytes (a shift, not a
+/// multiply, on the way to its boxes).
+pub const LEAF: u32 = 1 << 31;
+/// A leaf spans at most this many `Tri4` blocks (3 bits of its reference).
+pub const MAX_LEAF_BLOCKS: u32 = 8;
+/// Blocks a tree can index (28 bits of a leaf reference, the last value kept for `EMPTY`).
+pub const MAX_BLOCKS: u32 = (1 << 28) - 1;
+/// The reference of a child slot with nothing in it (its box is empty: lo = +inf, hi = −inf).
+pub const EMPTY: u32 = u32::MAX;
+/// Entries of the traversal stack. The builder keeps trees at most `MAX_DEPTH` nodes deep, and
+/// each node leaves at most 7 entries behind, plus 8 lanes written at once by the AVX2 push.
+pub const STACK: usize = 512;
+pub const MAX_DEPTH: u32 = (STACK as u32 - 8) / 7;
+
+/// 32-byte units in a node.
+pub const NODE_UNITS: usize = size_of::<Node8>() / 32;
+/// Nodes a tree can hold (their references must stay below `LEAF`); more than `MAX_BLOCKS`, so
+/// a tree of at most `MAX_BLOCKS` triangles (at most that many nodes) always fits.
+pub const MAX_NODES: usize = (LEAF as usize) / NODE_UNITS;
+
+/// The reference of node `index`.
+#[inline(always)]
+pub fn node_ref(index: usize) -> u32 {
+    debug_assert!(index < MAX_NODES);
+    (index * NODE_UNITS) as u32
+}
+
+/// The node an inner reference names.
+#[inline(always)]
+pub(crate) fn node_at(nodes: &[Node8], r: u32) -> &Node8 {
+    debug_assert!((r as usize) < nodes.len() * NODE_UNITS && r as usize % NODE_UNITS == 0);
+    // SAFETY: inner references name nodes of `nodes` (checked by the builder's tests).
+    unsafe { &*((nodes.as_ptr() as *const u8).add((r as usize) << 5) as *const Node8) }
+}
+
+#[inline(always)]
+pub fn leaf_ref(first: u32, blocks: u32) -> u32 {
+    debug_assert!((1..=MAX_LEAF_BLOCKS).contains(&blocks) && first + blocks <= MAX_BLOCKS);
+    LEAF | (blocks - 1) << 28 | first
+}
+
+#[inline(always)]
+pub fn leaf_blocks(r: u32) -> Range<usize> {
+    let first = (r & ((1 << 28) - 1)) as usize;
+    first..first + ((r >> 28) & 7) as usize + 1
+}
+
+/// Eight children: `b[0..3]` their low x, y, z, `b[3..6]` their high x, y, z; and for each of
+/// the eight octants a ray's direction can point into, the children in the order the ray meets
+/// their centres: bits `3o..3o+3` of `order[r]` hold the slot of rank `r` for octant `o`
+/// (Fuetterling et al. 2017, §4.2).
+#[repr(C, align(64))]
+#[derive(Clone, Copy, Debug)]
+pub struct Node8 {
+    pub b: [[f32; 8]; 6],
+    pub child: [u32; 8],
+    pub order: [u32; 8],
+}
+
+impl Node8 {
+    pub const EMPTY: Node8 = Node8 {
+        b: [
+            [f32::INFINITY; 8],
+            [f32::INFINITY; 8],
+            [f32::INFINITY; 8],
+            [f32::NEG_INFINITY; 8],
+            [f32::NEG_INFINITY; 8],
+            [f32::NEG_INFINITY; 8],
+        ],
+        child: [EMPTY; 8],
+        order: [0; 8],
+    };
+
+    /// Fill `order` from the boxes: valid children by the position of their centres along each
+    /// octant's diagonal, nearest first; empty slots last.
+    pub fn set_order(&mut self) {
+        self.order = [0; 8];
+        for o in 0..8u32 {
+            let sign = [0, 1, 2].map(|a| if o >> a & 1 == 1 { -1.0f32 } else { 1.0 });
+            let mut slots: Vec<(f32, u32)> = (0..8)
+                .map(|k| {
+                    let key = if self.child[k] == EMPTY {
+                        f32::INFINITY
+                    } else {
+                        (0..3)
+                            .map(|a| (self.b[a][k] + self.b[a + 3][k]) * sign[a])
+                            .sum()
+                    };
+                    (key, k as u32)
+                })
+                .collect();
+            slots.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            for (rank, &(_, k)) in slots.iter().enumerate() {
+                self.order[rank] |= k << (3 * o);
+            }
+        }
+    }
+}
+
+/// Four triangles lane by lane: `v[corner][axis][lane]`, and each lane's triangle index in the
+/// scene (beside the corners, so the closest-hit tie-break reads no other cache line). Unused
+/// lanes hold NaN corners, which every comparison of the triangle test rejects, and the id
+/// `u32::MAX`.
+#[repr(C, align(16))]
+#[derive(Clone, Copy, Debug)]
+pub struct Tri4 {
+    pub v: [[[f32; 4]; 3]; 3],
+    pub id: [u32; 4],
+}
+
+impl Tri4 {
+    pub const NONE: Tri4 = Tri4 {
+        v: [[[f32::NAN; 4]; 3]; 3],
+        id: [u32::MAX; 4],
+    };
+
+    pub fn set(&mut self, lane: usize, t: &Tri, id: u32) {
+        for (c, p) in t.v.iter().enumerate() {
+            for a in 0..3 {
+                self.v[c][a][lane] = p[a];
+            }
+        }
+        self.id[lane] = id;
+    }
+
+    /// Lane `lane`'s corners as arrays.
+    #[inline(always)]
+    pub fn corners(&self, lane: usize) -> [[f32; 3]; 3] {
+        let c = |k: usize| [self.v[k][0][lane], self.v[k][1][lane], self.v[k][2][lane]];
+        [c(0), c(1), c(2)]
+    }
+
+    #[inline(always)]
+    pub fn tri(&self, lane: usize) -> Tri {
+        Tri {
+            v: std::array::from_fn(|c| {
+                Vec3A::new(self.v[c][0][lane], self.v[c][1][lane], self.v[c][2][lane])
+            }),
+        }
+    }
+}
+
+/// The tree: nodes (the root first) and triangle blocks in leaf order.
+#[derive(Debug)]
+pub struct Bvh8 {
+    pub nodes: Vec<Node8>,
+    pub blocks: Vec<Tri4>,
+    /// Nodes on the longest root-to-leaf path.
+    pub depth: u32,
+}
+
+impl Bvh8 {
+    /// The diagonal of the root's box (0 for an empty tree).
+    pub fn diagonal(&self) -> f32 {
+        let root = &self.nodes[0];
+        let (mut lo, mut hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
+        for k in (0..8).filter(|&k| root.child[k] != EMPTY) {
+            lo = lo.min(Vec3A::new(root.b[0][k], root.b[1][k], root.b[2][k]));
+            hi = hi.max(Vec3A::new(root.b[3][k], root.b[4][k], root.b[5][k]));
+        }
+        if lo.x > hi.x {
+            0.0
+        } else {
+            (hi - lo).length()
+        }
+    }
+
+    /// See `BvhStats::sah`.
+    pub fn sah(&self) -> f64 {
+        let area = |n: &Node8, k: usize| {
+            let e: [f64; 3] = std::array::from_fn(|a| (n.b[a + 3][k] - n.b[a][k]).max(0.0) as f64);
+            e[0] * e[1] + e[1] * e[2] + e[2] * e[0]
+        };
+        let root = &self.nodes[0];
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for k in 0..8 {
+            if root.child[k] == EMPTY {
+                continue;
+            }
+            for a in 0..3 {
+                lo[a] = lo[a].min(root.b[a][k] as f64);
+                hi[a] = hi[a].max(root.b[a + 3][k] as f64);
+            }
+        }
+        let e = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
+        let ra = (e[0] * e[1] + e[1] * e[2] + e[2] * e[0]).max(f64::MIN_POSITIVE);
+        let mut cost = 1.0;
+        for n in self.nodes.iter() {
+            for k in 0..8 {
+                let c = n.child[k];
+                if c == EMPTY {
+                    continue;
+                }
+                let w = if c & LEAF != 0 {
+                    leaf_blocks(c).len() as f64
+                } else {
+                    1.0
+                };
+                cost += area(n, k) / ra * w;
+            }
+        }
+        cost
+    }
+
+    /// Bytes held by the tree (nodes and blocks).
+    pub fn bytes(&self) -> usize {
+        self.nodes.len() * size_of::<Node8>() + self.blocks.len() * size_of::<Tri4>()
+    }
+}
+
+/// A ray's constants for traversal, with a unit direction.
+#[derive(Clone, Copy, Debug)]
+pub struct Ray {
+    pub o: Vec3A,
+    pub inv: Vec3A,
+    /// `inv` widened by [`WIDEN`]: exit distances computed with it come out a few ulps long.
+    pub inv_far: Vec3A,
+    /// Per axis, the row of `Node8::b` holding each box's near plane, and its far plane.
+    pub near: [usize; 3],
+    pub far: [usize; 3],
+    pub shear: RayShear,
+    /// The origin in the shear's axis order (kx, ky, kz).
+    pub o_k: [f32; 3],
+    pub t_min: f32,
+    /// 3 × the direction's octant (bit a set when component a is negative): where this ray's
+    /// order lies in `Node8::order`.
+    pub octant_shift: u32,
+}
+
+impl Ray {
+    /// The ray from `o` along `d`, traced in units of `d`'s length (no normalisation: every
+    /// test is invariant to the direction's scale, and the square root and divisions it would
+    /// take sit at the head of every ray's dependency chain).
+    #[inline(always)]
+    pub fn new(o: Vec3A, d: Vec3A, t_min: f32) -> Self {
+        // Components this small (relative to the largest) get a huge but finite inverse of the
+        // same sign, so the slab products never meet 0 · inf.
+        let tiny = Vec3A::splat(1e-20 * d.abs().max_element());
+        let inv = Vec3A::ONE / Vec3A::select(d.abs().cmplt(tiny), tiny.copysign(d), d);
+        let near = std::array::from_fn(|a| a + 3 * usize::from(inv[a] < 0.0));
+        let shear = RayShear::with_inverse(d, inv);
+        Self {
+            o,
+            inv,
+            inv_far: inv * WIDEN,
+            near,
+            far: near.map(|n| (n + 3) % 6),
+            shear,
+            o_k: shear.k.map(|a| o[a]),
+            t_min,
+            octant_shift: 3 * (0..3).map(|a| u32::from(inv[a] < 0.0) << a).sum::<u32>(),
+        }
+    }
+}
+
+/// Boxes whose exit distance rounds to just below the entry distance are still entered: exits
+/// are computed with the inverse direction widened by a few ulps (PBRT's 1 + 2γ₃; Embree's
+/// robust mode does the same), so the f32 slab test never rejects a box the ray grazes, and
+/// the watertight triangle test decides alone.
+pub const WIDEN: f32 = 1.0 + 4.0 * f32::EPSILON;
+
+/// Four triangles' test results: lanes hit within `[t_min, t_far)`, their `t` (+inf in the
+/// other lanes), and for each lane the barycentric numerators and their common denominator
+/// (barycentric (u, v) = (`bu / det`, `bv / det`)).
+#[derive(Clone, Copy, Debug)]
+pub struct Tri4Hit {
+    pub mask: u32,
+    pub t: [f32; 4],
+    pub bu: [f32; 4],
+    pub bv: [f32; 4],
+    pub det: [f32; 4],
+}
+
+impl Tri4Hit {
+    /// No lane hit.
+    pub const NONE: Tri4Hit = Tri4Hit {
+        mask: 0,
+        t: [f32::INFINITY; 4],
+        bu: [0.0; 4],
+        bv: [0.0; 4],
+        det: [1.0; 4],
+    };
+}
+
+/// The arithmetic of traversal, one implementation per instruction set. Every implementation
+/// gives bit-identical results (the portable one is the reference in the tests).
+pub trait Kernel: Copy {
+    /// Whether [`Kernel::packet`] traces packets.
+    const PACKETS: bool = false;
+    /// A ray's constants in this kernel's registers.
+    type R: Copy;
+    /// What a node test leaves for ordering the children it hit.
+    type D: Copy;
+    fn prepare(self, r: &Ray) -> Self::R;
+    /// The entry distance of child `lane` left by `node`.
+    fn dist(self, d: &Self::D, lane: u32) -> f32;
+    /// The children of `n` whose boxes the ray enters before `t_far`, as a bit mask.
+    fn node(self, n: &Node8, r: &Self::R, t_far: f32) -> (u32, Self::D);
+    /// Push the children in `mask` (three or more) onto `s` above `sp`, farthest first (by
+    /// entry distance); return the nearest, unpushed.
+    fn push_sorted(self, n: &Node8, mask: u32, d: Self::D, s: &mut Stack, sp: &mut usize) -> u32;
+    /// The watertight test of a block's four triangles.
+    fn tri4(self, b: &Tri4, r: &Self::R, ray: &Ray, t_far: f32) -> Tri4Hit;
+    /// Refine hits in f64 (`refine`), as `refine::refine_one` does one by one.
+    fn refine(self, p: &mut [super::refine::Pending], range: (f32, f32));
+    /// Trace eight coherent rays as one packet (lanes not in `active` are ignored), if this
+    /// kernel can; false leaves them to be traced one by one.
+    #[inline(always)]
+    fn packet<L: Lanes>(
+        self,
+        _bvh: &Bvh8,
+        _rays: &[Ray; WIDTH],
+        _active: u32,
+        _sinks: &mut L,
+        _stack: &mut PacketStack,
+    ) -> bool {
+        false
+    }
+}
+
+/// The traversal stack: node references with their entry distances (rounded down). Its height
+/// lives in the traversal loop, in a register.
+pub struct Stack {
+    pub node: [MaybeUninit<u32>; STACK],
+    pub dist: [MaybeUninit<f32>; STACK],
+}
+
+impl Default for Stack {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Stack {
+    #[inline(always)]
+    pub fn new() -> Self {
+        Self {
+            node: [MaybeUninit::uninit(); STACK],
+            dist: [MaybeUninit::uninit(); STACK],
+        }
+    }
+
+    #[inline(always)]
+    pub fn push(&mut self, sp: &mut usize, node: u32, dist: f32) {
+        debug_assert!(*sp < STACK);
+        // SAFETY: the builder bounds the tree's depth so the stack never exceeds STACK.
+        unsafe {
+            self.node.get_unchecked_mut(*sp).write(node);
+            self.dist.get_unchecked_mut(*sp).write(dist);
+        }
+        *sp += 1;
+    }
+
+    /// The next entry whose box starts no farther than `t_far`, if any.
+    #[inline(always)]
+    fn pop(&self, sp: &mut usize, t_far: f32) -> Option<u32> {
+        while *sp > 0 {
+            *sp -= 1;
+            // SAFETY: entries below `sp` were written by `push` or a kernel's `push_sorted`.
+            let (node, dist) = unsafe {
+                (
+                    self.node.get_unchecked(*sp).assume_init(),
+                    self.dist.get_unchecked(*sp).assume_init(),
+                )
+            };
+            if dist <= t_far {
+                return Some(node);
+            }
+        }
+        None
+    }
+}
+
+/// Push the children in `mask` (two or more) in slot order; return the last, unpushed.
+#[inline(always)]
+fn push_unordered(n: &Node8, mask: u32, s: &mut Stack, sp: &mut usize) -> u32 {
+    let mut m = mask;
+    loop {
+        let i = m.trailing_zeros() as usize;
+        m &= m - 1;
+        if m == 0 {
+            return n.child[i];
+        }
+        s.push(sp, n.child[i], 0.0);
+    }
+}
+
+/// Rays in a packet (`packet`).
+pub const WIDTH: usize = 8;
+
+/// What each ray of a packet collects: one [`Sink`] per lane.
+pub trait Lanes {
+    /// Lane `lane`'s current bound: hits at or beyond it are not wanted.
+    fn t_far(&self, lane: usize) -> f32;
+    /// Lane `lane`'s hits in a block; true when the lane needs no more (an any-hit query).
+    fn take(&mut self, bvh: &Bvh8, lane: usize, block: usize, h: &Tri4Hit) -> bool;
+}
+
+impl<S: Sink> Lanes for [S; WIDTH] {
+    #[inline(always)]
+    fn t_far(&self, lane: usize) -> f32 {
+        self[lane].t_far()
+    }
+
+    #[inline(always)]
+    fn take(&mut self, bvh: &Bvh8, lane: usize, block: usize, h: &Tri4Hit) -> bool {
+        self[lane].take(bvh, block, h)
+    }
+}
+
+/// Whether `rays` (with directions `d`) can travel as one packet: their directions share an
+/// octant (so they share each box's near and far planes), their origins lie within
+/// `origin_extent` of each other on every axis, and their directions within about 14 degrees
+/// (camera rays of neighbouring pixels do; shuffled or random rays do not, and go one by one).
+#[inline(always)]
+pub fn coherent(rays: &[Ray; WIDTH], d: &[Vec3A; WIDTH], origin_extent: f32) -> bool {
+    let octant = rays[0].octant_shift;
+    let (mut lo, mut hi) = (rays[0].o, rays[0].o);
+    // Directions scaled to a largest component of 1: the spread of each component then
+    // measures the angle between them, with no square root.
+    let unit = |d: Vec3A| d / d.abs().max_element();
+    let (mut dlo, mut dhi) = (unit(d[0]), unit(d[0]));
+    let mut same = true;
+    for i in 1..WIDTH {
+        same &= rays[i].octant_shift == octant;
+        (lo, hi) = (lo.min(rays[i].o), hi.max(rays[i].o));
+        let u = unit(d[i]);
+        (dlo, dhi) = (dlo.min(u), dhi.max(u));
+    }
+    same && (hi - lo).max_element() <= origin_extent && (dhi - dlo).max_element() <= 0.25
+}
+
+/// A packet's stack: node references with the lanes that entered them.
+pub struct PacketStack {
+    pub node: [MaybeUninit<u32>; STACK],
+    pub lanes: [MaybeUninit<u32>; STACK],
+}
+
+impl Default for PacketStack {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl PacketStack {
+    #[inline(always)]
+    pub fn new() -> Self {
+        Self {
+            node: [MaybeUninit::uninit(); STACK],
+            lanes: [MaybeUninit::uninit(); STACK],
+        }
+    }
+}
+
+/// Where hits go. `t_far` bounds the search (hits at or beyond it are not reported).
+pub trait Sink {
+    /// Whether children are visited nearest first (closest hits) or in any order (any hit).
+    const ORDERED: bool = true;
+    fn t_far(&self) -> f32;
+    /// Take block `block`'s hits; return true to stop the traversal.
+    fn take(&mut self, bvh: &Bvh8, block: usize, h: &Tri4Hit) -> bool;
+}
+
+/// Visit the tree along `ray`, giving every leaf block's hits to `sink`. `stack` is scratch
+/// space, reused from ray to ray.
+#[inline(always)]
+pub fn traverse<K: Kernel, S: Sink>(k: K, bvh: &Bvh8, ray: &Ray, sink: &mut S, stack: &mut Stack) {
+    let r = k.prepare(ray);
+    let mut sp = 0usize;
+    let mut cur = 0u32;
+    'visit: loop {
+        if cur & LEAF == 0 {
+            let n = node_at(&bvh.nodes, cur);
+            let (mask, d) = k.node(n, &r, sink.t_far());
+            if mask != 0 {
+                let first = mask.trailing_zeros();
+                let rest = mask & (mask - 1);
+                cur = if rest == 0 {
+                    n.child[first as usize]
+                } else if !S::ORDERED {
+                    push_unordered(n, mask, stack, &mut sp)
+                } else if rest & (rest - 1) == 0 {
+                    // Two children: the nearer next, the other pushed. Both references are
+                    // loaded before the comparison, which then only selects.
+                    let second = rest.trailing_zeros();
+                    let (ca, cb) = (n.child[first as usize], n.child[second as usize]);
+                    let a = sort_key(k.dist(&d, first), first);
+                    let b = sort_key(k.dist(&d, second), second);
+                    let (near, far, far_key) = if a < b { (ca, cb, b) } else { (cb, ca, a) };
+                    stack.push(&mut sp, far, key_dist(far_key));
+                    near
+                } else {
+                    k.push_sorted(n, mask, d, stack, &mut sp)
+                };
+                continue 'visit;
+            }
+        } else {
+            for b in leaf_blocks(cur) {
+                debug_assert!(b < bvh.blocks.len());
+                // SAFETY: leaf references index `blocks` (checked by the builder's tests).
+                let block = unsafe { bvh.blocks.get_unchecked(b) };
+                let h = k.tri4(block, &r, ray, sink.t_far());
+                if h.mask != 0 && sink.take(bvh, b, &h) {
+                    return;
+                }
+            }
+        }
+        match stack.pop(&mut sp, sink.t_far()) {
+            Some(next) => cur = next,
+            None => return,
+        }
+    }
+}
+
+/// A hit in a leaf block: block, lane, triangle, `t` and the barycentrics' numerators and
+/// denominator (divided only when reported).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BlockHit {
+    pub block: u32,
+    pub lane: u32,
+    pub triangle: u32,
+    pub t: f32,
+    pub bu: f32,
+    pub bv: f32,
+    pub det: f32,
+}
+
+impl BlockHit {
+    #[inline(always)]
+    pub fn of(bvh: &Bvh8, block: usize, lane: usize, h: &Tri4Hit) -> Self {
+        Self {
+            block: block as u32,
+            lane: lane as u32,
+            triangle: bvh.blocks[block].id[lane],
+            t: h.t[lane],
+            bu: h.bu[lane],
+            bv: h.bv[lane],
+            det: h.det[lane],
+        }
+    }
+
+    /// Barycentric (u, v) in f32, from the watertight test.
+    #[inline(always)]
+    pub fn bary(&self) -> [f32; 2] {
+        [self.bu / self.det, self.bv / self.det]
+    }
+
+    /// Whether this hit comes first: nearer, or as near with a smaller triangle index. The
+    /// order does not depend on how the tree was traversed, so packets, single rays and any
+    /// thread count report the same triangle where two meet the ray at the same `t` (at a
+    /// shared edge, or on duplicated faces).
+    #[inline(always)]
+    pub fn before(&self, other: &BlockHit) -> bool {
+        self.t < other.t || (self.t == other.t && self.triangle < other.triangle)
+    }
+}
+
+/// The smallest float above `t >= 0`: a bound that still lets hits at exactly `t` through a
+/// strict `< t_far` test, for the tie-break of [`BlockHit::before`].
+#[inline(always)]
+pub fn above(t: f32) -> f32 {
+    f32::from_bits(if t == 0.0 { 1 } else { t.to_bits() + 1 })
+}
+
+/// Closest-hit sink.
+pub struct Closest {
+    pub t_far: f32,
+    pub best: Option<BlockHit>,
+}
+
+impl Closest {
+    #[inline(always)]
+    pub fn new(t_far: f32) -> Self {
+        Self { t_far, best: None }
+    }
+}
+
+impl Sink for Closest {
+    #[inline(always)]
+    fn t_far(&self) -> f32 {
+        self.t_far
+    }
+
+    #[inline(always)]
+    fn take(&mut self, bvh: &Bvh8, block: usize, h: &Tri4Hit) -> bool {
+        let mut m = h.mask;
+        while m != 0 {
+            let lane = m.trailing_zeros() as usize;
+            m &= m - 1;
+            let hit = BlockHit::of(bvh, block, lane, h);
+            if self.best.is_none_or(|b| hit.before(&b)) {
+                self.best = Some(hit);
+                self.t_far = above(hit.t);
+            }
+        }
+        false
+    }
+}
+
+/// Any-hit sink: stops at the first hit.
+pub struct Any {
+    pub t_far: f32,
+    pub hit: bool,
+}
+
+impl Sink for Any {
+    const ORDERED: bool = false;
+
+    #[inline(always)]
+    fn t_far(&self) -> f32 {
+        self.t_far
+    }
+
+    #[inline(always)]
+    fn take(&mut self, _: &Bvh8, _: usize, _: &Tri4Hit) -> bool {
+        self.hit = true;
+        true
+    }
+}
+
+pub mod portable {
+    //! The reference kernel: plain f32 arithmetic (SSE2 or NEON through the compiler), the
+    //! scalar watertight test lane by lane.
+
+    use super::*;
+    use crate::trace::watertight;
+
+    #[derive(Clone, Copy, Debug, Default)]
+    pub struct Portable;
+
+    impl Kernel for Portable {
+        type R = Ray;
+        type D = [f32; 8];
+
+        #[inline(always)]
+        fn prepare(self, r: &Ray) -> Ray {
+            *r
+        }
+
+        #[inline(always)]
+        fn node(self, n: &Node8, r: &Ray, t_far: f32) -> (u32, [f32; 8]) {
+            node_ray(n, r, t_far)
+        }
+
+        #[inline(always)]
+        fn dist(self, d: &[f32; 8], lane: u32) -> f32 {
+            d[lane as usize]
+        }
+
+        fn push_sorted(
+            self,
+            n: &Node8,
+            mask: u32,
+            d: [f32; 8],
+            s: &mut Stack,
+            sp: &mut usize,
+        ) -> u32 {
+            let mut keys = [0u32; 8];
+            let mut count = 0;
+            let mut m = mask;
+            while m != 0 {
+                let i = m.trailing_zeros();
+                keys[count] = sort_key(d[i as usize], i);
+                count += 1;
+                m &= m - 1;
+            }
+            // Descending, as the AVX2 sorting network leaves them.
+            keys[..count].sort_unstable_by(|a, b| b.cmp(a));
+            for &key in &keys[..count - 1] {
+                s.push(sp, n.child[(key & 7) as usize], key_dist(key));
+            }
+            n.child[(keys[count - 1] & 7) as usize]
+        }
+
+        #[inline(always)]
+        fn tri4(self, b: &Tri4, _: &Ray, ray: &Ray, t_far: f32) -> Tri4Hit {
+            tri4_scalar(b, ray, t_far)
+        }
+
+        #[inline(always)]
+        fn refine(self, p: &mut [crate::trace::refine::Pending], range: (f32, f32)) {
+            for q in p {
+                crate::trace::refine::refine_one(q, range);
+            }
+        }
+    }
+
+    /// The portable node test.
+    #[inline(always)]
+    pub fn node_ray(n: &Node8, r: &Ray, t_far: f32) -> (u32, [f32; 8]) {
+        let mut mask = 0;
+        let mut t_in = [0.0; 8];
+        #[allow(clippy::needless_range_loop)] // `i` indexes the node's rows as well
+        for i in 0..8 {
+            let slab = |a: usize| {
+                (
+                    (n.b[r.near[a]][i] - r.o[a]) * r.inv[a],
+                    (n.b[r.far[a]][i] - r.o[a]) * r.inv_far[a],
+                )
+            };
+            let ((x0, x1), (y0, y1), (z0, z1)) = (slab(0), slab(1), slab(2));
+            // Pairwise, as the AVX2 kernel reduces (two steps of latency, not three).
+            let near = max(max(x0, y0), max(z0, r.t_min));
+            let far = min(min(x1, y1), min(z1, t_far));
+            t_in[i] = near;
+            mask |= u32::from(near <= far) << i;
+        }
+        (mask, t_in)
+    }
+
+    /// `_mm256_max_ps`'s rule (the second operand on ties), so both kernels agree bit for bit.
+    #[inline(always)]
+    fn max(a: f32, b: f32) -> f32 {
+        if a > b {
+            a
+        } else {
+            b
+        }
+    }
+
+    #[inline(always)]
+    fn min(a: f32, b: f32) -> f32 {
+        if a < b {
+            a
+        } else {
+            b
+        }
+    }
+
+    /// The scalar watertight test of each lane; AVX2 falls back to it too.
+    #[inline(always)]
+    pub fn tri4_scalar(b: &Tri4, ray: &Ray, t_far: f32) -> Tri4Hit {
+        let mut h = Tri4Hit::NONE;
+        for lane in 0..4 {
+            if let Some((t, [u, v])) =
+                watertight::intersect(&b.tri(lane), ray.o, &ray.shear, ray.t_min, t_far)
+            {
+                h.mask |= 1 << lane;
+                h.t[lane] = t;
+                h.bu[lane] = u;
+                h.bv[lane] = v;
+            }
+        }
+        h
+    }
+}
+
+/// A child's sort key: its entry distance's bits with the sign cleared (distances are never
+/// negative, but may be −0) and the low three bits replaced by its slot. Keys order like the
+/// distances, up to those three bits.
+#[inline(always)]
+pub fn sort_key(dist: f32, slot: u32) -> u32 {
+    (dist.to_bits() & 0x7FFF_FFF8) | slot
+}
+
+/// The distance kept on the stack for a key: rounded down, so it never culls a box it should
+/// enter.
+#[inline(always)]
+pub fn key_dist(key: u32) -> f32 {
+    f32::from_bits(key & 0x7FFF_FFF8)
+}
