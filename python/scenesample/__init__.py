@@ -14,7 +14,7 @@ Conventions (shared by every function):
 from __future__ import annotations
 
 from . import errors, plot, references, scenes
-from ._api import cast_rays, device_info, discretize, reconstruct
+from ._api import device_info, discretize, reconstruct
 from ._core import Camera
 from ._core import __version__ as __version__
 from ._epr import Points, Reflector, SplatBuffers, cube_resolution, splat
@@ -23,6 +23,7 @@ from ._field import FieldView, Slab, VisibilityField
 from ._impostors import Impostors, ImpostorView
 from ._omni import OmniShadowResult, omni_shadows
 from ._plan import Effect, Frame, plan, render
+from ._rays import bvh_stats, cast_rays, occluded
 from ._reflections import ReflectionResult, reflection_reference, reflections
 from ._scene import Scene
 from ._shadows import AreaLight, ShadowResult, soft_shadows
@@ -69,6 +70,7 @@ __all__ = [
     "SplatBuffers",
     "VisibilityField",
     "ScenesampleError",
+    "bvh_stats",
     "cast_rays",
     "cube_resolution",
     "device_info",
@@ -76,6 +78,7 @@ __all__ = [
     "errors",
     "evaluate",
     "intermediate_cameras",
+    "occluded",
     "omni_shadows",
     "plan",
     "plot",

@@ -1,5 +1,5 @@
-"""The verbs ``discretize`` and ``reconstruct``, and ray casting (``evaluate`` lives in
-``_evaluate``, ``splat`` in ``_epr``)."""
+"""The verbs ``discretize`` and ``reconstruct`` (``evaluate`` lives in ``_evaluate``, ``splat`` in
+``_epr``, ray queries in ``_rays``)."""
 
 from __future__ import annotations
 
@@ -15,9 +15,9 @@ from ._impostors import Impostors, ImpostorView, impostor_view, impostors
 from ._omni import shadow_points
 from ._scene import Scene
 from .errors import InputError
-from .results import DepthImages, Mesh, RayHits
+from .results import DepthImages, Mesh
 
-__all__ = ["discretize", "reconstruct", "cast_rays", "device_info"]
+__all__ = ["discretize", "reconstruct", "device_info"]
 
 Camera = _core.Camera
 DISCRETIZE_METHODS = (
@@ -433,51 +433,6 @@ def offset_images(images: DepthImages, scene: Optional[Scene] = None) -> DepthIm
     if method == "nonredundant":
         return discretize(scene, corners, method, redundancy=redundancy, cull_backfaces=cull)
     return discretize(scene, corners, "conventional", cull_backfaces=cull)
-
-
-def cast_rays(
-    scene: Scene,
-    origins: Any,
-    directions: Any,
-    *,
-    t_min: float = 0.0,
-    t_max: float = float("inf"),
-) -> RayHits:
-    """Closest hit of each ray, on the CPU (a 4-wide BVH built once per scene and cached; all cores;
-    GIL released; float32 C-contiguous inputs are read in place, without a copy).
-
-    Consecutive rays that are coherent (e.g. neighbouring pixels of ``Camera.pixel_rays``) are
-    traced together as packets of 32 (1M primary rays in image order took 80 ms here, the same
-    rays shuffled 198 ms); incoherent runs of rays are traced one by one. The hits are the same
-    either way, so passing rays in image order is only a matter of speed.
-
-    The triangle test is watertight (Woop, Benthin and Wald 2013): a ray through a shared edge
-    or vertex of a closed mesh never slips through. Both faces of a triangle count. The hit's
-    ``t`` and barycentrics are then recomputed in float64 from the given direction.
-
-    Parameters
-    ----------
-    scene : Scene
-    origins : (N, 3) array_like of float
-    directions : (N, 3) array_like of float
-        Finite and non-zero; need not be unit length.
-    t_min, t_max : float
-        Accept hits with ``t_min <= t < t_max``, in units of each direction's length.
-
-    Returns
-    -------
-    RayHits
-        ``t`` (N,) float32 (+inf on a miss), ``triangle`` (N,) int32 (-1), ``barycentric``
-        (N, 2) float32, ``timings``.
-    """
-    o = np.asarray(origins)
-    d = np.asarray(directions)
-    if o.ndim == 1 and o.shape[:1] == (3,):
-        o = o[None]
-    if d.ndim == 1 and d.shape[:1] == (3,):
-        d = d[None]
-    r = _core.cast_rays(_scene_core(scene), o, d, float(t_min), float(t_max))
-    return RayHits(**r)
 
 
 def device_info() -> dict[str, Any]:

@@ -11,6 +11,7 @@ __all__ = [
     "Camera",
     "Impostors",
     "Scene",
+    "bvh_stats",
     "cast_rays",
     "counters",
     "default_slab",
@@ -24,6 +25,7 @@ __all__ = [
     "impostor_directions",
     "impostor_view",
     "impostors",
+    "occluded",
     "omni_shadows",
     "read_exr",
     "reflections",
@@ -317,7 +319,18 @@ def cast_rays(
     directions: ArrayLike,
     t_min: float = 0.0,
     t_max: float = ...,
+    max_hits: int = 1,
+    threads: Optional[int] = None,
 ) -> dict[str, Any]: ...
+def occluded(
+    scene: Scene,
+    origins: ArrayLike,
+    directions: ArrayLike,
+    t_min: float = 0.0,
+    t_max: float = ...,
+    threads: Optional[int] = None,
+) -> dict[str, Any]: ...
+def bvh_stats(scene: Scene) -> dict[str, Any]: ...
 def device_info() -> dict[str, Any]: ...
 def counters() -> dict[str, int]: ...
 def write_exr(

@@ -334,7 +334,8 @@ def field_view(
 
 def cells_metric(view: FieldView, scene: Scene, camera: Optional[Camera] = None) -> dict[str, Any]:
     """``evaluate(view, scene, "cells")``: see :func:`scenesample.evaluate`."""
-    from ._api import cast_rays, discretize
+    from ._api import discretize
+    from ._rays import cast_rays
 
     if not isinstance(view, FieldView):
         raise InputError(f"metric='cells' measures a FieldView, got {type(view).__name__}")

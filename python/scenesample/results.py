@@ -145,15 +145,16 @@ class DepthImages:
 
 @dataclass(eq=False, repr=False)
 class RayHits:
-    """Closest hits of a batch of rays.
+    """Hits of a batch of rays (see :func:`scenesample.cast_rays`).
 
     Attributes
     ----------
-    t : (N,) float32
-        Hit distance in units of each direction's length; ``+inf`` on a miss.
-    triangle : (N,) int32
+    t : (N,) float32, or (N, k) with ``max_hits=k > 1``
+        Hit distance in units of each direction's length; ``+inf`` on a miss (and past the
+        last hit of a ray with fewer than k).
+    triangle : (N,) or (N, k) int32
         Scene face index; -1 on a miss.
-    barycentric : (N, 2) float32
+    barycentric : (N, 2) or (N, k, 2) float32
         (u, v) with hit point = (1-u-v)*v0 + u*v1 + v*v2 (Embree's convention); 0 on a miss.
     timings : dict of str to float
         ``bvh_build`` (0 when the scene's BVH was cached) and ``trace`` seconds.
@@ -167,7 +168,14 @@ class RayHits:
     @property
     def hit(self) -> np.ndarray:
         """(N,) bool: rays that hit a triangle."""
-        return self.triangle >= 0
+        first = self.triangle if self.triangle.ndim == 1 else self.triangle[:, 0]
+        return first >= 0
+
+    @property
+    def count(self) -> np.ndarray:
+        """(N,) int: hits reported per ray (at most 1, or k with ``max_hits=k``)."""
+        per_ray = self.triangle.reshape(len(self), -1)
+        return (per_ray >= 0).sum(axis=1)
 
     def __len__(self) -> int:
         return int(self.t.shape[0])

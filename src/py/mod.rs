@@ -9,6 +9,7 @@ mod errors;
 mod evaluate;
 mod field;
 mod impostors;
+mod rays;
 mod reconstruct;
 mod render;
 mod scene;
@@ -24,7 +25,9 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(render::discretize_conventional, m)?)?;
     m.add_function(wrap_pyfunction!(render::discretize_nonredundant, m)?)?;
     m.add_function(wrap_pyfunction!(render::discretize_peeling, m)?)?;
-    m.add_function(wrap_pyfunction!(render::cast_rays, m)?)?;
+    m.add_function(wrap_pyfunction!(rays::cast_rays, m)?)?;
+    m.add_function(wrap_pyfunction!(rays::occluded, m)?)?;
+    m.add_function(wrap_pyfunction!(rays::bvh_stats, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate::sampling_metrics, m)?)?;
     m.add_function(wrap_pyfunction!(reconstruct::reconstruct, m)?)?;
     m.add_function(wrap_pyfunction!(shadows::soft_shadows, m)?)?;

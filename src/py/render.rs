@@ -7,7 +7,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use super::camera::PyCamera;
-use super::convert::{array, borrow_rows, flat_i32, named, rows_array_of, rows_f32, rows_owned};
+use super::convert::{array, flat_i32, named, rows_f32, rows_owned};
 use super::errors::{input, IntoPy};
 use super::scene::PyScene;
 use crate::discretize::DepthImages;
@@ -75,39 +75,6 @@ pub fn discretize_peeling<'py>(
         .detach(|| crate::discretize::discretize_peeling(&s, &camera.inner, layers, cull_backfaces))
         .py_err(py)?;
     images_dict(py, img)
-}
-
-#[pyfunction]
-#[pyo3(signature = (scene, origins, directions, t_min=0.0, t_max=f32::INFINITY))]
-pub fn cast_rays<'py>(
-    py: Python<'py>,
-    scene: &PyScene,
-    origins: &Bound<'py, PyAny>,
-    directions: &Bound<'py, PyAny>,
-    t_min: f32,
-    t_max: f32,
-) -> PyResult<Bound<'py, PyDict>> {
-    // Borrowed, not copied: numpy's float32 rows are read in place while the GIL is released.
-    let o = rows_array_of::<f32, 3>(origins, "origins", "float32")?;
-    let dirs = rows_array_of::<f32, 3>(directions, "directions", "float32")?;
-    let (o, dirs) = (
-        borrow_rows::<f32, 3>(&o, "origins")?,
-        borrow_rows::<f32, 3>(&dirs, "directions")?,
-    );
-    let s = scene.inner.clone();
-    let hits = py
-        .detach(|| crate::trace::cast_rays(&s, o, dirs, t_min, t_max))
-        .py_err(py)?;
-    let n = hits.t.len();
-    let d = PyDict::new(py);
-    d.set_item("t", array(py, hits.t, &[n])?)?;
-    d.set_item("triangle", array(py, hits.triangle, &[n])?)?;
-    d.set_item("barycentric", rows_owned(py, hits.barycentric, &[n, 2])?)?;
-    let t = PyDict::new(py);
-    t.set_item("bvh_build", hits.bvh_build_seconds)?;
-    t.set_item("trace", hits.trace_seconds)?;
-    d.set_item("timings", t)?;
-    Ok(d)
 }
 
 #[pyfunction]

@@ -1,0 +1,115 @@
+//! CPU ray queries (`trace`): closest and k nearest hits, any hit, and the BVH's statistics.
+
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use super::convert::{array, borrow_rows, rows_array_of, rows_owned};
+use super::errors::IntoPy;
+use super::scene::PyScene;
+use crate::trace::{self, Query, Threads};
+
+/// Borrowed, not copied: numpy's float32 rows are read in place while the GIL is released.
+macro_rules! rays {
+    ($o:ident, $d:ident) => {
+        let $o = rows_array_of::<f32, 3>($o, "origins", "float32")?;
+        let $d = rows_array_of::<f32, 3>($d, "directions", "float32")?;
+        let ($o, $d) = (
+            borrow_rows::<f32, 3>(&$o, "origins")?,
+            borrow_rows::<f32, 3>(&$d, "directions")?,
+        );
+    };
+}
+
+fn query(py: Python<'_>, t_min: f32, t_max: f32, threads: Option<usize>) -> PyResult<Query> {
+    Ok(Query {
+        t_min,
+        t_max,
+        threads: Threads::from_count(threads).py_err(py)?,
+    })
+}
+
+fn timings<'py>(py: Python<'py>, build: f64, trace: f64) -> PyResult<Bound<'py, PyDict>> {
+    let t = PyDict::new(py);
+    t.set_item("bvh_build", build)?;
+    t.set_item("trace", trace)?;
+    Ok(t)
+}
+
+#[pyfunction]
+#[pyo3(signature = (scene, origins, directions, t_min=0.0, t_max=f32::INFINITY, max_hits=1, threads=None))]
+#[allow(clippy::too_many_arguments)]
+pub fn cast_rays<'py>(
+    py: Python<'py>,
+    scene: &PyScene,
+    origins: &Bound<'py, PyAny>,
+    directions: &Bound<'py, PyAny>,
+    t_min: f32,
+    t_max: f32,
+    max_hits: usize,
+    threads: Option<usize>,
+) -> PyResult<Bound<'py, PyDict>> {
+    rays!(origins, directions);
+    let q = query(py, t_min, t_max, threads)?;
+    let s = scene.inner.clone();
+    let hits = py
+        .detach(|| trace::nearest_hits(&s, origins, directions, max_hits, &q))
+        .py_err(py)?;
+    let n = origins.len();
+    // One hit per ray keeps the flat shapes (N,), (N, 2); k hits add an axis.
+    let (shape, bary): (Vec<usize>, Vec<usize>) = if max_hits == 1 {
+        (vec![n], vec![n, 2])
+    } else {
+        (vec![n, max_hits], vec![n, max_hits, 2])
+    };
+    let d = PyDict::new(py);
+    d.set_item("t", array(py, hits.t, &shape)?)?;
+    d.set_item("triangle", array(py, hits.triangle, &shape)?)?;
+    d.set_item("barycentric", rows_owned(py, hits.barycentric, &bary)?)?;
+    d.set_item(
+        "timings",
+        timings(py, hits.bvh_build_seconds, hits.trace_seconds)?,
+    )?;
+    Ok(d)
+}
+
+#[pyfunction]
+#[pyo3(signature = (scene, origins, directions, t_min=0.0, t_max=f32::INFINITY, threads=None))]
+pub fn occluded<'py>(
+    py: Python<'py>,
+    scene: &PyScene,
+    origins: &Bound<'py, PyAny>,
+    directions: &Bound<'py, PyAny>,
+    t_min: f32,
+    t_max: f32,
+    threads: Option<usize>,
+) -> PyResult<Bound<'py, PyDict>> {
+    rays!(origins, directions);
+    let q = query(py, t_min, t_max, threads)?;
+    let s = scene.inner.clone();
+    let r = py
+        .detach(|| trace::occluded(&s, origins, directions, &q))
+        .py_err(py)?;
+    let n = r.hit.len();
+    let d = PyDict::new(py);
+    d.set_item("hit", array(py, r.hit, &[n])?)?;
+    d.set_item(
+        "timings",
+        timings(py, r.bvh_build_seconds, r.trace_seconds)?,
+    )?;
+    Ok(d)
+}
+
+#[pyfunction]
+pub fn bvh_stats<'py>(py: Python<'py>, scene: &PyScene) -> PyResult<Bound<'py, PyDict>> {
+    let s = scene.inner.clone();
+    let st = py.detach(|| trace::Bvh::of(&s).stats());
+    let d = PyDict::new(py);
+    d.set_item("triangles", st.triangles)?;
+    d.set_item("nodes", st.nodes)?;
+    d.set_item("blocks", st.blocks)?;
+    d.set_item("bytes", st.bytes)?;
+    d.set_item("depth", st.depth)?;
+    d.set_item("sah", st.sah)?;
+    d.set_item("build_seconds", st.build_seconds)?;
+    Ok(d)
+}
