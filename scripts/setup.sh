@@ -1,13 +1,13 @@
 #!/usr/bin/env bash
 # Set up a fresh Debian/Ubuntu machine: system packages (Mesa's software Vulkan driver for the GPU
-# path, EGL for pyrender), then scenesample built in release mode with the test extras.
+# path, EGL for pyrender, libusb for Open3D), then scenesample built in release mode with the test extras.
 # Idempotent: installs only what is missing, so `make demo` and `make test` can both call it.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 SUDO=""
 if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
-PACKAGES="mesa-vulkan-drivers libvulkan1 libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri libglx-mesa0"
+PACKAGES="mesa-vulkan-drivers libvulkan1 libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri libglx-mesa0 libusb-1.0-0"
 missing=""
 for p in $PACKAGES; do
     dpkg -s "$p" >/dev/null 2>&1 || missing="$missing $p"

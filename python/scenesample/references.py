@@ -1,6 +1,7 @@
-"""Adapters to the tools users cross-check against: pyrender (OpenGL raster) and raw Embree
-(through embreex). Tests and ``scenesample.bench`` use these, so each tool's quirks are handled
-in exactly one place. Both tools are optional dependencies (``pip install scenesample[test]``).
+"""Adapters to the tools users cross-check against: pyrender (OpenGL raster), raw Embree
+(through embreex) and Open3D's ``RaycastingScene`` (Embree on every core). Tests and
+``scenesample.bench`` use these, so each tool's quirks are handled in exactly one place. All are
+optional dependencies (``pip install scenesample[test]``).
 
 Quirks handled here:
 
@@ -14,7 +15,13 @@ Quirks handled here:
 - pyrender computes ``view @ model @ p`` in float32 on the GPU; for scenes far from the origin it
   is given vertices and camera relative to ``origin`` (computed in float64), so it renders
   exactly the same float32 geometry without losing precision to the offset.
-- Embree (via trimesh) rescales rays; the raw ``EmbreeScene.run`` does not.
+- Embree (via trimesh) rescales rays; the raw ``EmbreeScene.run`` does not. It builds its BVH
+  lazily, on the first ``run``; it always starts rays at ``t = 0`` (no ``t_min``); its occlusion
+  query answers 0 for occluded and -1 for free.
+- Open3D reports misses with the id ``2**32 - 1`` (uint32), takes rays as one (N, 6) tensor, and
+  also builds lazily. Importing it needs the Debian package ``libusb-1.0-0``.
+- Embree's memory is read from its own memory monitor (``rtcSetDeviceMemoryMonitorFunction``),
+  called through ctypes on the library embreex ships.
 """
 
 from __future__ import annotations
@@ -29,7 +36,13 @@ import numpy as np
 from ._core import Camera
 from ._scene import Scene
 
-__all__ = ["PyrenderReference", "pyrender_depth", "EmbreeReference"]
+__all__ = [
+    "PyrenderReference",
+    "pyrender_depth",
+    "EmbreeReference",
+    "Open3DReference",
+    "embree_memory",
+]
 
 
 def _import_pyrender() -> Any:
@@ -192,3 +205,118 @@ class EmbreeReference:
             "triangle": np.where(hit, tri, -1),
             "barycentric": np.where(hit[:, None], bary, 0),
         }
+
+    def occluded(self, origins: np.ndarray, directions: np.ndarray, t_max: float) -> np.ndarray:
+        """(N,) bool: anything on each ray within ``0 <= t < t_max``."""
+        o = np.ascontiguousarray(origins, dtype=np.float32)
+        d = np.ascontiguousarray(directions, dtype=np.float32)
+        far = np.full(len(o), t_max, dtype=np.float32)
+        return np.asarray(self._scene.run(o, d, dists=far, query="OCCLUDED")) == 0
+
+    def commit(self) -> None:
+        """Build the BVH now (embreex builds it on the first query)."""
+        self.cast(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32))
+
+
+class Open3DReference:
+    """Open3D's ``RaycastingScene`` (Embree, robust mode, on every core) on a scene's triangles."""
+
+    def __init__(self, scene: Scene) -> None:
+        import open3d as o3d
+
+        self._o3d = o3d
+        self._scene = o3d.t.geometry.RaycastingScene()
+        self._scene.add_triangles(
+            o3d.core.Tensor(np.ascontiguousarray(scene.vertices, dtype=np.float32)),
+            o3d.core.Tensor(np.ascontiguousarray(scene.faces, dtype=np.uint32)),
+        )
+
+    def _rays(self, origins: np.ndarray, directions: np.ndarray) -> Any:
+        rays = np.concatenate([origins, directions], axis=1).astype(np.float32)
+        return self._o3d.core.Tensor(rays)
+
+    def cast(self, origins: np.ndarray, directions: np.ndarray) -> dict[str, np.ndarray]:
+        """Closest hits: ``t`` (+inf on a miss), ``triangle`` (-1), ``barycentric`` (u, v)."""
+        r = self._scene.cast_rays(self._rays(origins, directions))
+        ids = r["primitive_ids"].numpy()
+        hit = ids != np.iinfo(np.uint32).max
+        return {
+            "t": np.where(hit, r["t_hit"].numpy(), np.float32(np.inf)),
+            "triangle": np.where(hit, ids.astype(np.int64), -1).astype(np.int32),
+            "barycentric": np.where(hit[:, None], r["primitive_uvs"].numpy(), 0),
+        }
+
+    def occluded(self, origins: np.ndarray, directions: np.ndarray, t_max: float) -> np.ndarray:
+        """(N,) bool: anything on each ray within ``0 <= t < t_max``."""
+        r = self._scene.test_occlusions(self._rays(origins, directions), tfar=t_max)
+        return r.numpy().astype(bool)
+
+    def commit(self) -> None:
+        """Build the BVH now (Open3D builds it on the first query)."""
+        self.cast(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32))
+
+
+def embree_memory(scene: Scene) -> int:
+    """Bytes Embree holds for the BVH it builds over ``scene`` with embreex's settings (robust
+    mode, default quality), read from Embree's memory monitor. The geometry is shared, not
+    copied, so the figure is the acceleration structure alone."""
+    import ctypes
+    import glob
+
+    import embreex
+
+    libs = os.path.join(os.path.dirname(embreex.__file__), "..", "embreex.libs", "libembree4*")
+    found = sorted(glob.glob(libs))
+    if not found:
+        raise RuntimeError(f"no Embree library beside embreex ({libs})")
+    lib = ctypes.CDLL(found[0])
+    vp = ctypes.c_void_p
+    monitor_t = ctypes.CFUNCTYPE(ctypes.c_bool, vp, ctypes.c_ssize_t, ctypes.c_bool)
+    lib.rtcNewDevice.restype = vp
+    lib.rtcNewDevice.argtypes = [ctypes.c_char_p]
+    lib.rtcNewScene.restype = vp
+    lib.rtcNewScene.argtypes = [vp]
+    lib.rtcNewGeometry.restype = vp
+    lib.rtcNewGeometry.argtypes = [vp, ctypes.c_int]
+    lib.rtcSetSceneFlags.argtypes = [vp, ctypes.c_int]
+    lib.rtcSetDeviceMemoryMonitorFunction.argtypes = [vp, monitor_t, vp]
+    lib.rtcSetSharedGeometryBuffer.argtypes = [vp, ctypes.c_int, ctypes.c_uint, ctypes.c_int, vp]
+    lib.rtcSetSharedGeometryBuffer.argtypes += [ctypes.c_size_t] * 3
+    lib.rtcAttachGeometry.argtypes = [vp, vp]
+    lib.rtcGetDeviceError.argtypes = [vp]
+    for f in ("rtcCommitGeometry", "rtcReleaseGeometry", "rtcCommitScene", "rtcReleaseScene"):
+        getattr(lib, f).argtypes = [vp]
+    lib.rtcReleaseDevice.argtypes = [vp]
+    held = [0]
+
+    @monitor_t
+    def monitor(_user: Any, nbytes: int, _post: bool) -> bool:
+        held[0] += nbytes
+        return True
+
+    # Embree reads vertex buffers 16 bytes at a time: pad the last vertex (its documented rule).
+    vertices = np.zeros(scene.vertices.size + 1, dtype=np.float32)
+    vertices[:-1] = scene.vertices.ravel()
+    faces = np.ascontiguousarray(scene.faces, dtype=np.uint32)
+    device = lib.rtcNewDevice(None)
+    try:
+        handle = lib.rtcNewScene(device)
+        lib.rtcSetSceneFlags(handle, 1 << 2)  # RTC_SCENE_FLAG_ROBUST, as embreex sets it
+        geom = lib.rtcNewGeometry(device, 0)  # RTC_GEOMETRY_TYPE_TRIANGLE
+        nv, nf = len(scene.vertices), len(faces)
+        # RTC_BUFFER_TYPE_VERTEX = 1 with RTC_FORMAT_FLOAT3; RTC_BUFFER_TYPE_INDEX = 0, UINT3.
+        lib.rtcSetSharedGeometryBuffer(geom, 1, 0, 0x9003, vertices.ctypes.data, 0, 12, nv)
+        lib.rtcSetSharedGeometryBuffer(geom, 0, 0, 0x5003, faces.ctypes.data, 0, 12, nf)
+        lib.rtcCommitGeometry(geom)
+        lib.rtcAttachGeometry(handle, geom)
+        lib.rtcReleaseGeometry(geom)
+        lib.rtcSetDeviceMemoryMonitorFunction(device, monitor, None)
+        lib.rtcCommitScene(handle)
+        error = lib.rtcGetDeviceError(device)
+        built = held[0]
+        lib.rtcReleaseScene(handle)
+    finally:
+        lib.rtcReleaseDevice(device)
+    if error:
+        raise RuntimeError(f"Embree reported error {error} while building")
+    return built
