@@ -8,7 +8,6 @@
 //!   the camera, projecting inside the image), the resolution-free limit of pixel redundancy.
 
 use glam::{DVec2, DVec3};
-use rayon::prelude::*;
 
 use crate::camera::{Camera, Projection};
 use crate::error::Result;
@@ -59,9 +58,10 @@ pub fn pixel_redundant(s: &Sample, cam: &Camera, ids: &[i32]) -> bool {
 
 /// Algorithm 2 for many samples at once: whether each sample is inside `cam`'s view volume and
 /// unoccluded from its viewpoint (for an orthographic camera, along its view direction). One
-/// ray from the viewpoint to the sample; the sample is visible when the first hit is its own
-/// triangle, or lies within `tolerance` of the sample (a neighbour sharing the point).
-/// `tolerance` is a world distance; see [`tolerance`].
+/// any-hit ray from the viewpoint toward the sample, stopped `tolerance` (plus a relative
+/// `DEPTH_TOLERANCE`) short of it: the sample is visible when nothing lies on that segment (its
+/// own triangle and neighbours sharing the point lie beyond it). `tolerance` is a world
+/// distance; see [`tolerance`].
 pub fn visible_from(
     scene: &Scene,
     samples: &[Sample],
@@ -82,32 +82,26 @@ pub fn visible_from(
             Projection::Orthographic { .. } => s.point - fwd * (s.point - cam.eye()).dot(fwd),
         };
         let d = s.point - origin;
-        if d.length_squared() == 0.0 {
+        let len = d.length();
+        // The segment stops this far short of the sample: what lies within it of the sample
+        // (its own triangle, a neighbour sharing the point) does not hide it.
+        let keep = 1.0 - (tolerance + DEPTH_TOLERANCE * len) / len;
+        if len == 0.0 || keep <= 0.0 {
             visible[i] = true;
             continue;
         }
         which.push(i);
         origins.push(origin.as_vec3().to_array());
-        dirs.push(d.as_vec3().to_array());
+        dirs.push((d * keep).as_vec3().to_array());
     }
     if which.is_empty() {
         return Ok(visible);
     }
-    // Hits past the sample cannot occlude it; t is in units of the segment's length.
-    let hits = trace::cast_rays(scene, &origins, &dirs, 0.0, 1.0 + 1e-3)?;
-    let verdicts: Vec<bool> = which
-        .par_iter()
-        .enumerate()
-        .map(|(k, &i)| {
-            let tri = hits.triangle[k];
-            let len = DVec3::from_array(dirs[k].map(f64::from)).length();
-            tri < 0
-                || tri == samples[i].triangle
-                || (1.0 - hits.t[k] as f64) * len <= tolerance + DEPTH_TOLERANCE * len
-        })
-        .collect();
+    // An any-hit query: only whether something lies on the segment matters.
+    let q = trace::Query::new(0.0, 1.0);
+    let hidden = trace::occluded(scene, &origins, &dirs, &q)?.hit;
     for (k, &i) in which.iter().enumerate() {
-        visible[i] = verdicts[k];
+        visible[i] = !hidden[k];
     }
     Ok(visible)
 }

@@ -414,32 +414,31 @@ pub(crate) fn raytraced(
     let words = points.len().div_ceil(32).max(1);
     let mut bits = vec![0u32; words * samples.len()];
     let eps = gpu::shadow::ABS_BIAS * diagonal;
+    let q = crate::trace::Query::new(0.0, 1.0);
     for (s, &l) in samples.iter().enumerate() {
-        let usable: Vec<bool> = points
+        // Only points facing the sample, and not within twice the offset of it, get a ray.
+        let (traced, (origins, dirs)): (Vec<usize>, (Vec<[f32; 3]>, Vec<[f32; 3]>)) = points
             .iter()
             .zip(normals)
-            .map(|(&p, &n)| n.dot(l - p) > 0.0 && (p - l).length() > 2.0 * eps)
-            .collect();
-        // Rays of points facing away are never traced: give them a harmless direction.
-        let (origins, dirs): (Vec<[f32; 3]>, Vec<[f32; 3]>) = points
-            .iter()
-            .zip(&usable)
-            .map(|(&p, &u)| {
+            .enumerate()
+            .filter(|&(_, (&p, &n))| n.dot(l - p) > 0.0 && (p - l).length() > 2.0 * eps)
+            .map(|(k, (&p, _))| {
                 let r = p - l;
                 let len = r.length();
-                if !u {
-                    return (l.as_vec3().to_array(), [0.0, 0.0, 1.0]);
-                }
                 let unit = r / len;
                 (
-                    (l + unit * eps).as_vec3().to_array(),
-                    (unit * (len - 2.0 * eps)).as_vec3().to_array(),
+                    k,
+                    (
+                        (l + unit * eps).as_vec3().to_array(),
+                        (unit * (len - 2.0 * eps)).as_vec3().to_array(),
+                    ),
                 )
             })
             .unzip();
-        let hits = crate::trace::cast_rays(scene, &origins, &dirs, 0.0, 1.0)?;
-        for (k, &u) in usable.iter().enumerate() {
-            if u && hits.triangle[k] < 0 {
+        // Any hit on the segment blocks the sample: an any-hit query.
+        let blocked = crate::trace::occluded(scene, &origins, &dirs, &q)?.hit;
+        for (&k, &b) in traced.iter().zip(&blocked) {
+            if !b {
                 bits[s * words + k / 32] |= 1 << (k % 32);
             }
         }
