@@ -8,6 +8,7 @@ import pytest
 
 def test_bench_all_quick_writes_a_summary(tmp_path, capsys):
     pytest.importorskip("embreex")
+    pytest.importorskip("open3d")
     pytest.importorskip("pyrender")
     from scenesample import bench
 
@@ -15,7 +16,9 @@ def test_bench_all_quick_writes_a_summary(tmp_path, capsys):
     bench.main(["all", "--quick", "--repeats", "1", "--out", str(out)])
     md = out.read_text()
     for row in (
-        "cast_rays per core vs Embree",
+        "rays, primary: 1 thread vs embreex",
+        "rays, occlusion: all cores vs Open3D",
+        "rays, BVH memory / Embree's",
         "depth images vs pyrender",
         "non-redundant / conventional time",
         "EPR speedup over MVR",
@@ -23,5 +26,25 @@ def test_bench_all_quick_writes_a_summary(tmp_path, capsys):
         "field (1 id) speedup over drawing everything",
     ):
         assert row in md, row
-    assert md.count("| met |") + md.count("| NOT met |") >= 5
+    assert md.count("| met |") + md.count("| NOT met |") >= 14
     assert "wrote" in capsys.readouterr().out
+
+
+def test_bench_rays_quick_measures_every_shared_scene(tmp_path, capsys):
+    """`bench rays` covers each shared scene of >= 10K triangles (those over 500K skipped when
+    quick) and the procedural one, with all four ray sets and build and memory columns."""
+    pytest.importorskip("embreex")
+    pytest.importorskip("open3d")
+    import scenesample as ss
+    from scenesample import _bench_rays, bench
+
+    out = tmp_path / "rays.md"
+    bench.main(["rays", "--quick", "--scenes", "bunny,shapes", "--out", str(out)])
+    md = out.read_text()
+    for section in ("## primary", "## shuffled", "## incoherent", "## occlusion", "## BVH build"):
+        assert section in md
+    names = [n for n in ss.scenes.shared_scene_files() if "bunny" in n] + ["procedural"]
+    for name in names:
+        assert md.count(name) >= 5, name  # one row per table
+    rows = _bench_rays.summary_rows(_bench_rays.run(True, 1, ["shapes"]))
+    assert len(rows) == 10 and all(r[2] > 0 for r in rows)

@@ -146,3 +146,150 @@ def test_bad_rays_raise_input_error(origins, directions, kwargs, match) -> None:
 def test_empty_batch() -> None:
     hits = ss.cast_rays(ss.scenes.icosphere(0), np.zeros((0, 3)), np.zeros((0, 3)))
     assert hits.t.shape == (0,) and hits.barycentric.shape == (0, 2)
+
+
+def duplicated_soup(n: int, seed: int) -> ss.Scene:
+    """Random triangles of many sizes; every fifth one also appears again with its corners
+    rotated (a duplicated face: every ray through it meets two triangles at one depth)."""
+    rng = np.random.default_rng(seed)
+    centres = rng.uniform(-1, 1, (n, 1, 3))
+    size = 0.02 + 0.3 * rng.uniform(0, 1, (n, 1, 1)) ** 3
+    v = (centres + rng.uniform(-1, 1, (n, 3, 3)) * size).reshape(-1, 3)
+    f = np.arange(3 * n).reshape(n, 3)
+    dup = f[::5][:, [1, 2, 0]]
+    return ss.Scene.from_arrays(v.astype(np.float32), np.concatenate([f, dup]))
+
+
+def all_hits_float64(scene: ss.Scene, o: np.ndarray, d: np.ndarray) -> list[list[tuple]]:
+    """Every hit of every ray by brute force in float64 (Moeller-Trumbore), sorted by
+    (float32 t, triangle): (t, triangle) lists."""
+    v = scene.vertices.astype(np.float64)[scene.faces.astype(np.int64)]
+    e1, e2 = v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]
+    out = []
+    for oi, di in zip(o.astype(np.float64), d.astype(np.float64)):
+        p = np.cross(di, e2)
+        det = np.sum(e1 * p, axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tv = oi - v[:, 0]
+            u = np.sum(tv * p, axis=1) / det
+            q = np.cross(tv, e1)
+            w = (q @ di) / det
+            t = np.sum(e2 * q, axis=1) / det
+        ok = (det != 0) & (u >= 0) & (w >= 0) & (u + w <= 1) & (t >= 0)
+        hits = sorted((float(np.float32(t[i])), int(i)) for i in np.flatnonzero(ok))
+        out.append(hits)
+    return out
+
+
+def test_max_hits_are_the_k_nearest_surfaces() -> None:
+    """k nearest hits against a float64 brute force: nearest first, padded with +inf / -1,
+    and two faces at the same depth (duplicated triangles) counted once, as the smaller index."""
+    s = duplicated_soup(400, seed=5)
+    o, d = random_rays(s, 400, seed=6)
+    k = 5
+    h = ss.cast_rays(s, o, d, max_hits=k)
+    assert h.t.shape == (400, k) and h.triangle.shape == (400, k)
+    assert h.barycentric.shape == (400, k, 2) and h.t.dtype == np.float32
+    later = np.isfinite(h.t[:, 1:])
+    assert (h.t[:, 1:][later] > h.t[:, :-1][later]).all(), "hits strictly increase"
+    merged = 0
+    for i, hits in enumerate(all_hits_float64(s, o, d)):
+        want: list[tuple] = []
+        for t, tri in hits:
+            if want and t - want[-1][0] <= 1e-6 * t:
+                merged += 1
+                continue
+            want.append((t, tri))
+        want = want[:k]
+        got_tri = h.triangle[i][: len(want)]
+        np.testing.assert_array_equal(got_tri, [tri for _, tri in want], err_msg=f"ray {i}")
+        np.testing.assert_allclose(h.t[i][: len(want)], [t for t, _ in want], rtol=1e-5)
+        assert (h.triangle[i][len(want) :] == -1).all() and np.isinf(h.t[i][len(want) :]).all()
+    assert merged > 10, "the duplicated faces were met"
+    # The first of k hits is the closest hit; `count` says how many each ray got.
+    one = ss.cast_rays(s, o, d)
+    np.testing.assert_array_equal(h.t[:, 0], one.t)
+    assert (h.count == (h.triangle >= 0).sum(axis=1)).all() and h.hit.shape == (400,)
+
+
+def test_occluded_agrees_with_cast_rays_and_embree() -> None:
+    pytest.importorskip("embreex")
+    s = ss.scenes.shapes(seed=4, detail=3)
+    o, d = random_rays(s, 100_000, seed=4)
+    for t_max in (0.5, 1.0, np.inf):
+        occ = ss.occluded(s, o, d, t_max=t_max)
+        assert occ.dtype == bool and occ.shape == (len(o),)
+        np.testing.assert_array_equal(occ, ss.cast_rays(s, o, d, t_max=t_max).hit)
+        ref = EmbreeReference(s).occluded(o, d, t_max)
+        assert (occ == ref).mean() >= 0.9999, f"t_max {t_max}: {(occ != ref).sum()} differ"
+    # t_min applies too.
+    near = ss.occluded(s, o, d, t_min=0.7, t_max=0.8)
+    np.testing.assert_array_equal(near, ss.cast_rays(s, o, d, t_min=0.7, t_max=0.8).hit)
+
+
+def test_every_thread_setting_gives_the_same_hits() -> None:
+    s = ss.scenes.shapes(seed=2, detail=2)
+    cam = orbit_cameras(s, 1, 200, 150, seed=2)[0]
+    o, d = (a.reshape(-1, 3) for a in cam.pixel_rays())
+    ro, rd = random_rays(s, 30_000, seed=2)
+    o, d = np.concatenate([o, ro]), np.concatenate([d, rd])
+    every = ss.cast_rays(s, o, d)
+    for threads in (1, 2, 3):
+        h = ss.cast_rays(s, o, d, threads=threads)
+        for a, b in zip(
+            (h.t, h.triangle, h.barycentric), (every.t, every.triangle, every.barycentric)
+        ):
+            np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(ss.occluded(s, o, d, threads=threads), every.hit)
+    # A fresh scene's BVH built on the calling thread only is the same tree.
+    fresh = ss.Scene.from_arrays(s.vertices, s.faces)
+    np.testing.assert_array_equal(ss.cast_rays(fresh, o, d, threads=1).triangle, every.triangle)
+
+
+def test_hits_agree_with_open3d() -> None:
+    pytest.importorskip("open3d")
+    from scenesample.references import Open3DReference
+
+    s = ss.scenes.shapes(seed=6, detail=3)
+    o, d = random_rays(s, 50_000, seed=6)
+    ours, ref = ss.cast_rays(s, o, d), Open3DReference(s).cast(o, d)
+    assert (ours.triangle == ref["triangle"]).mean() >= 0.999
+    both = (ours.triangle >= 0) & (ours.triangle == ref["triangle"])
+    np.testing.assert_allclose(ours.t[both], ref["t"][both], rtol=1e-4)
+
+
+def test_bvh_stats_and_memory() -> None:
+    s = ss.scenes.shapes(seed=1, detail=2)
+    st = ss.bvh_stats(s)
+    assert st["triangles"] == s.triangle_count and st["nodes"] >= 1
+    assert 4 * st["blocks"] >= s.triangle_count and st["depth"] >= 1
+    # Nodes of 256 and blocks of 160 bytes, nothing else.
+    assert st["bytes"] == 256 * st["nodes"] + 160 * st["blocks"]
+    assert 20 < st["bytes"] / s.triangle_count < 100 and st["sah"] > 1
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"threads": 0}, "threads must be an integer >= 1"),
+        ({"threads": -2}, "threads must be an integer >= 1"),
+        ({"threads": 1.5}, "threads must be an integer >= 1"),
+        ({"threads": True}, "threads must be an integer >= 1"),
+        ({"max_hits": 0}, "max_hits must be an integer >= 1"),
+        ({"max_hits": 2.0}, "max_hits must be an integer >= 1"),
+    ],
+)
+def test_bad_query_options_raise_input_error(kwargs, match) -> None:
+    s = ss.scenes.icosphere(0)
+    with pytest.raises(ss.InputError, match=match):
+        ss.cast_rays(s, [[0, 0, 3]], [[0, 0, -1]], **kwargs)
+    if "threads" in kwargs:
+        with pytest.raises(ss.InputError, match=match):
+            ss.occluded(s, [[0, 0, 3]], [[0, 0, -1]], **kwargs)
+
+
+def test_occluded_rejects_bad_rays_like_cast_rays() -> None:
+    s = ss.scenes.icosphere(0)
+    with pytest.raises(ss.InputError, match=r"directions\[1\] must be finite and non-zero"):
+        ss.occluded(s, [[0, 0, 3]] * 2, [[0, 0, -1], [0, np.nan, 0]])
+    assert ss.occluded(s, np.zeros((0, 3)), np.zeros((0, 3))).shape == (0,)
