@@ -60,11 +60,11 @@ impl Kernel for Avx2 {
                 let o = _mm256_broadcast_ss(&$o);
                 (
                     _mm256_mul_ps(
-                        _mm256_sub_ps(_mm256_load_ps(n.b[r.near[$a]].as_ptr()), o),
+                        _mm256_sub_ps(_mm256_load_ps(n.row(r.near[$a]).as_ptr()), o),
                         _mm256_broadcast_ss(&$inv),
                     ),
                     _mm256_mul_ps(
-                        _mm256_sub_ps(_mm256_load_ps(n.b[r.far[$a]].as_ptr()), o),
+                        _mm256_sub_ps(_mm256_load_ps(n.row(r.far[$a]).as_ptr()), o),
                         _mm256_broadcast_ss(&$inv_far),
                     ),
                 )
@@ -170,29 +170,28 @@ impl Kernel for Avx2 {
             let v = _mm_sub_ps(_mm_mul_ps(ax, cy), _mm_mul_ps(ay, cx));
             let w = _mm_sub_ps(_mm_mul_ps(bx, ay), _mm_mul_ps(by, ax));
             let zero = _mm_setzero_ps();
-            let any_zero = _mm_or_ps(
-                _mm_or_ps(_mm_cmpeq_ps(u, zero), _mm_cmpeq_ps(v, zero)),
-                _mm_cmpeq_ps(w, zero),
-            );
-            let neg = _mm_or_ps(
-                _mm_or_ps(_mm_cmplt_ps(u, zero), _mm_cmplt_ps(v, zero)),
-                _mm_cmplt_ps(w, zero),
-            );
-            let pos = _mm_or_ps(
-                _mm_or_ps(_mm_cmpgt_ps(u, zero), _mm_cmpgt_ps(v, zero)),
-                _mm_cmpgt_ps(w, zero),
-            );
-            // Inside all three edges (or on one), and not an unused (NaN) lane.
-            let inside = _mm_andnot_ps(_mm_and_ps(neg, pos), _mm_cmpord_ps(u, u));
+            // Not inside when two edge functions have opposite (nonzero) signs: an f32 edge
+            // function may round to zero but never to the wrong sign. Unused lanes are NaN,
+            // and min/max pass the NaN through (they return their second operand), so their
+            // comparisons are false.
+            let lo = _mm_min_ps(_mm_min_ps(u, v), w);
+            let hi = _mm_max_ps(_mm_max_ps(u, v), w);
+            let maybe = _mm_or_ps(_mm_cmpge_ps(lo, zero), _mm_cmple_ps(hi, zero));
             // Most blocks end here, before the depth and its division (as Embree's early out).
-            // A lane with a zero edge function stays in play: its f64 redo may move it inside.
-            if _mm_movemask_ps(_mm_or_ps(inside, any_zero)) == 0 {
+            if _mm_movemask_ps(maybe) == 0 {
                 return Tri4Hit::NONE;
             }
+            // A lane still in play with an edge function of zero: the scalar test redoes its
+            // edge functions in f64, which may move it inside or out.
+            let any_zero = _mm_and_ps(
+                maybe,
+                _mm_or_ps(_mm_cmpeq_ps(lo, zero), _mm_cmpeq_ps(hi, zero)),
+            );
             if _mm_movemask_ps(any_zero) != 0 {
-                // An edge function rounded to zero: the scalar test redoes it in f64.
                 return portable::tri4_scalar(b, ray, t_far);
             }
+            // Three nonzero edge functions of one sign: inside, and their sum is nonzero.
+            let inside = maybe;
             let det = _mm_add_ps(_mm_add_ps(u, v), w);
             let scaled = _mm_add_ps(
                 _mm_add_ps(_mm_mul_ps(u, az), _mm_mul_ps(v, bz)),
@@ -203,10 +202,7 @@ impl Kernel for Avx2 {
                 _mm_cmpge_ps(t, _mm_broadcast_ss(&r.t_min)),
                 _mm_cmplt_ps(t, _mm_set1_ps(t_far)),
             );
-            let ok = _mm_and_ps(
-                inside,
-                _mm_and_ps(_mm_cmp_ps::<_CMP_NEQ_UQ>(det, zero), in_range),
-            );
+            let ok = _mm_and_ps(inside, in_range);
             let mut h = Tri4Hit {
                 mask: _mm_movemask_ps(ok) as u32,
                 t: [0.0; 4],

@@ -77,7 +77,22 @@ pub struct Node8 {
     pub order: [u32; 8],
 }
 
+/// The size of one row of `Node8::b`.
+pub const ROW_BYTES: usize = std::mem::size_of::<[f32; 8]>();
+
 impl Node8 {
+    /// The row of `b` at byte offset `off` (`Ray::near`, `Ray::far`): an offset, not an index,
+    /// saves the traversal loop a shift per plane.
+    ///
+    /// # Safety
+    /// `off` is `ROW_BYTES * i` for a row `i < 6`, as `Ray::new` makes them.
+    #[inline(always)]
+    pub(crate) unsafe fn row(&self, off: usize) -> &[f32; 8] {
+        debug_assert!(off % ROW_BYTES == 0 && off < std::mem::size_of_val(&self.b));
+        // SAFETY: `b` is the first field (repr(C)); the caller keeps `off` within it.
+        unsafe { &*((self as *const Node8 as *const u8).add(off) as *const [f32; 8]) }
+    }
+
     pub const EMPTY: Node8 = Node8 {
         b: [
             [f32::INFINITY; 8],
@@ -229,16 +244,17 @@ impl Bvh8 {
     }
 }
 
-/// A ray's constants for traversal, with a unit direction.
+/// A ray's constants for traversal (its direction as given, not normalised).
 #[derive(Clone, Copy, Debug)]
 pub struct Ray {
     pub o: Vec3A,
     pub inv: Vec3A,
     /// `inv` widened by [`WIDEN`]: exit distances computed with it come out a few ulps long.
     pub inv_far: Vec3A,
-    /// Per axis, the row of `Node8::b` holding each box's near plane, and its far plane.
-    pub near: [usize; 3],
-    pub far: [usize; 3],
+    /// Per axis, the byte offset in a `Node8` of the row of `b` holding each box's near plane,
+    /// and of its far plane (see [`Node8::row`]).
+    pub(crate) near: [usize; 3],
+    pub(crate) far: [usize; 3],
     pub shear: RayShear,
     /// The origin in the shear's axis order (kx, ky, kz).
     pub o_k: [f32; 3],
@@ -258,14 +274,15 @@ impl Ray {
         // same sign, so the slab products never meet 0 · inf.
         let tiny = Vec3A::splat(1e-20 * d.abs().max_element());
         let inv = Vec3A::ONE / Vec3A::select(d.abs().cmplt(tiny), tiny.copysign(d), d);
-        let near = std::array::from_fn(|a| a + 3 * usize::from(inv[a] < 0.0));
+        let row = |a: usize| a + 3 * usize::from(inv[a] < 0.0);
+        let near = std::array::from_fn(|a| ROW_BYTES * row(a));
         let shear = RayShear::with_inverse(d, inv);
         Self {
             o,
             inv,
             inv_far: inv * WIDEN,
             near,
-            far: near.map(|n| (n + 3) % 6),
+            far: std::array::from_fn(|a| ROW_BYTES * ((row(a) + 3) % 6)),
             shear,
             o_k: shear.k.map(|a| o[a]),
             t_min,
@@ -715,8 +732,8 @@ pub mod portable {
         for i in 0..8 {
             let slab = |a: usize| {
                 (
-                    (n.b[r.near[a]][i] - r.o[a]) * r.inv[a],
-                    (n.b[r.far[a]][i] - r.o[a]) * r.inv_far[a],
+                    (n.b[r.near[a] / ROW_BYTES][i] - r.o[a]) * r.inv[a],
+                    (n.b[r.far[a] / ROW_BYTES][i] - r.o[a]) * r.inv_far[a],
                 )
             };
             let ((x0, x1), (y0, y1), (z0, z1)) = (slab(0), slab(1), slab(2));

@@ -68,11 +68,11 @@ pub fn traverse<S: Lanes>(
                         ($a:expr) => {
                             (
                                 _mm256_mul_ps(
-                                    _mm256_sub_ps(_mm256_set1_ps(n.b[near[$a]][slot]), o[$a]),
+                                    _mm256_sub_ps(_mm256_set1_ps(n.row(near[$a])[slot]), o[$a]),
                                     inv[$a],
                                 ),
                                 _mm256_mul_ps(
-                                    _mm256_sub_ps(_mm256_set1_ps(n.b[far[$a]][slot]), o[$a]),
+                                    _mm256_sub_ps(_mm256_set1_ps(n.row(far[$a])[slot]), o[$a]),
                                     inv_far[$a],
                                 ),
                             )

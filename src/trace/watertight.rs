@@ -73,14 +73,21 @@ pub fn intersect(
     let mut u = cx * by - cy * bx;
     let mut v = ax * cy - ay * cx;
     let mut w = bx * ay - by * ax;
+    let outside =
+        |u: f32, v: f32, w: f32| (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0);
+    // An f32 edge function may round to zero, never to the wrong sign: opposite nonzero signs
+    // are final, and only a zero is redone in f64 (Woop et al. 2013, §4).
+    if outside(u, v, w) {
+        return None;
+    }
     if u == 0.0 || v == 0.0 || w == 0.0 {
         let f = |p: f32, q: f32, r: f32, s: f32| (p as f64 * q as f64 - r as f64 * s as f64) as f32;
         u = f(cx, by, cy, bx);
         v = f(ax, cy, ay, cx);
         w = f(bx, ay, by, ax);
-    }
-    if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
-        return None;
+        if outside(u, v, w) {
+            return None;
+        }
     }
     let det = u + v + w;
     if det == 0.0 {
