@@ -26,6 +26,12 @@ pub enum Error {
     /// An EXR file that could not be written or read back.
     #[error("{path}: {message}")]
     Exr { path: PathBuf, message: String },
+    /// The call was interrupted (Ctrl-C) before it finished; see `process::interruptible`.
+    #[error("interrupted")]
+    Interrupted,
+    /// The operating system refused a resource the call needs (worker threads).
+    #[error("{0}")]
+    System(String),
 }
 
 pub type Result<T> = std::result::Result<T, Error>;

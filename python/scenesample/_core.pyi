@@ -133,6 +133,32 @@ class Camera:
     ) -> list[Camera]: ...
     @staticmethod
     def blend(cameras: list[Camera], weights: Optional[list[float]] = None) -> Camera: ...
+    def __reduce__(
+        self,
+    ) -> tuple[
+        Any,
+        tuple[
+            list[float],
+            str,
+            tuple[float, float],
+            int,
+            int,
+            Optional[float],
+            Optional[float],
+            Optional[str],
+        ],
+    ]: ...
+    @staticmethod
+    def _restore(
+        pose: list[float],
+        kind: str,
+        params: tuple[float, float],
+        width: int,
+        height: int,
+        znear: Optional[float],
+        zfar: Optional[float],
+        name: Optional[str],
+    ) -> Camera: ...
     def with_resolution(self, width: int, height: int) -> Camera: ...
     @property
     def pose(self) -> np.ndarray: ...

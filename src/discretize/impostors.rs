@@ -438,6 +438,7 @@ pub fn build(scene: &Scene, opts: &ImpostorOptions) -> Result<Impostors> {
     let verts = scene.vertices();
     let normals = vertex_normals(scene);
     for (ci, cell) in cells.iter().enumerate() {
+        crate::process::check()?;
         let set: Vec<u32> = if opts.grow {
             let (c, r) = (cell.center(), cell.radius());
             (0..scene.triangle_count() as u32)

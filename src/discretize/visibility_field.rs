@@ -361,6 +361,7 @@ pub fn sample(
     let rays_per_uv = st_count * ss.pow(4);
     for iu in 0..du {
         for iv in 0..dv {
+            crate::process::check()?;
             let start = Instant::now();
             let mut origins = Vec::with_capacity(rays_per_uv);
             let mut dirs = Vec::with_capacity(rays_per_uv);

@@ -196,7 +196,11 @@ pub fn render(
         .lock
         .lock()
         .map_err(|_| Error::Gpu("GPU lock poisoned".into()))?;
-    let cached = scene.gpu.lock().map(|s| s.is_some()).unwrap_or(false);
+    let cached = scene
+        .gpu
+        .lock()
+        .map(|s| s.as_ref().is_some_and(|b| b.serial == ctx.serial))
+        .unwrap_or(false);
     let buffers = SceneBuffers::of(ctx, scene)?;
     let mut stats = RasterStats {
         upload_seconds: if cached { 0.0 } else { buffers.upload_seconds },

@@ -7,6 +7,7 @@ pub mod raster;
 pub mod shadow;
 pub mod splat;
 
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
 
 use crate::error::{Error, Result};
@@ -22,6 +23,9 @@ pub struct GpuContext {
     pub info: wgpu::AdapterInfo,
     pub limits: wgpu::Limits,
     pub timestamps: bool,
+    /// Which context of this process's lineage this is: buffers made for another (a parent's,
+    /// before a fork) are not used with it.
+    pub serial: u64,
     /// Errors wgpu reports asynchronously (validation, out of memory, device loss); drained
     /// after each submission and turned into `Error::Gpu`, so none of them panics.
     errors: Arc<Mutex<Vec<String>>>,
@@ -33,15 +37,34 @@ pub struct GpuContext {
     splat_pipeline: OnceLock<splat::SplatPipeline>,
 }
 
-static CONTEXT: OnceLock<std::result::Result<Arc<GpuContext>, String>> = OnceLock::new();
+/// The context (or why there is none) and the process that made it.
+struct Made {
+    pid: u32,
+    context: std::result::Result<Arc<GpuContext>, String>,
+}
+
+static CONTEXT: Mutex<Option<Made>> = Mutex::new(None);
+
+/// Contexts made so far in this process's lineage; each gets the next number.
+static SERIAL: AtomicU64 = AtomicU64::new(0);
 
 /// The shared GPU context, created on first call. Fails with `GpuUnavailable` when no adapter
-/// with the required features exists.
+/// with the required features exists. A child forked after the parent made its context makes
+/// its own: the driver's threads and the device's state stayed in the parent.
 pub fn context() -> Result<Arc<GpuContext>> {
-    CONTEXT
-        .get_or_init(|| create().map(Arc::new))
-        .clone()
-        .map_err(Error::GpuUnavailable)
+    let pid = std::process::id();
+    let mut slot = CONTEXT.lock().unwrap_or_else(|e| e.into_inner());
+    if slot.as_ref().is_some_and(|m| m.pid != pid) {
+        // Dropping the parent's device would call into a driver whose threads are gone.
+        std::mem::forget(slot.take());
+    }
+    slot.get_or_insert_with(|| Made {
+        pid,
+        context: create().map(Arc::new),
+    })
+    .context
+    .clone()
+    .map_err(Error::GpuUnavailable)
 }
 
 const NO_ADAPTER_HELP: &str = "On a machine without a GPU, Mesa's software Vulkan driver \
@@ -109,6 +132,7 @@ fn create() -> std::result::Result<GpuContext, String> {
         info,
         limits,
         timestamps,
+        serial: SERIAL.fetch_add(1, Ordering::Relaxed) + 1,
         errors,
         lock: Mutex::new(()),
         depth_pipeline: OnceLock::new(),
@@ -187,6 +211,8 @@ pub struct SceneBuffers {
     pub faces: wgpu::Buffer,
     pub triangle_count: u32,
     pub upload_seconds: f64,
+    /// The `GpuContext::serial` of the device they live on.
+    pub serial: u64,
 }
 
 impl SceneBuffers {
@@ -196,8 +222,12 @@ impl SceneBuffers {
             .gpu
             .lock()
             .map_err(|_| Error::Gpu("scene GPU cache poisoned".into()))?;
-        if let Some(b) = slot.as_ref() {
-            return Ok(b.clone());
+        match slot.as_ref() {
+            Some(b) if b.serial == ctx.serial => return Ok(b.clone()),
+            // Made on the parent's device before a fork: leave them be (dropping them would
+            // call into the parent's driver) and upload to this one.
+            Some(_) => std::mem::forget(slot.take()),
+            None => {}
         }
         let b = Arc::new(Self::upload(ctx, scene)?);
         *slot = Some(b.clone());
@@ -262,6 +292,7 @@ impl SceneBuffers {
             faces: faces_buf,
             triangle_count: (faces.len() / 3) as u32,
             upload_seconds: start.elapsed().as_secs_f64(),
+            serial: ctx.serial,
         })
     }
 }

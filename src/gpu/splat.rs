@@ -260,6 +260,8 @@ pub fn splat(
     let mut pending: Option<Pending> = None;
     let mut at_pixel = 0usize;
     for range in chunks {
+        // Ctrl-C between chunks of views (the previous chunk's readback is dropped).
+        crate::process::check()?;
         let start = Instant::now();
         // The chunk's lists one after another, and one dispatch per (view, point chunk, run of
         // at most `per_dispatch` points): (point chunk, uniform).

@@ -25,6 +25,19 @@ impl From<Camera> for PyCamera {
     }
 }
 
+/// What a pickled camera holds: pose (16 float64s, column-major), projection kind and its two
+/// parameters, width, height, znear, zfar, name.
+type CameraState = (
+    Vec<f64>,
+    String,
+    [f64; 2],
+    u32,
+    u32,
+    Option<f64>,
+    Option<f64>,
+    Option<String>,
+);
+
 #[pymethods]
 impl PyCamera {
     #[staticmethod]
@@ -123,6 +136,68 @@ impl PyCamera {
     ) -> PyResult<Vec<Self>> {
         let c = Camera::cube(vec3(center, "center")?, resolution, znear, zfar).py_err(py)?;
         Ok(c.into_iter().map(Self::from).collect())
+    }
+
+    /// Pickling (process pools, dask): the pose's sixteen float64s and the other fields, which
+    /// `_restore` turns back into the same camera, bit for bit.
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<(Bound<'py, PyAny>, CameraState)> {
+        let c = &slf.get().inner;
+        let (kind, params) = match c.projection {
+            Projection::Perspective { yfov } => ("perspective", [yfov, 0.0]),
+            Projection::Orthographic { xmag, ymag } => ("orthographic", [xmag, ymag]),
+        };
+        let state = (
+            c.pose.to_cols_array().to_vec(),
+            kind.to_string(),
+            params,
+            c.width,
+            c.height,
+            c.znear,
+            c.zfar,
+            c.name.clone(),
+        );
+        Ok((slf.get_type().getattr("_restore")?, state))
+    }
+
+    /// The camera `__reduce__` describes.
+    #[staticmethod]
+    #[allow(clippy::too_many_arguments)]
+    fn _restore(
+        py: Python<'_>,
+        pose: Vec<f64>,
+        kind: &str,
+        params: [f64; 2],
+        width: u32,
+        height: u32,
+        znear: Option<f64>,
+        zfar: Option<f64>,
+        name: Option<String>,
+    ) -> PyResult<Self> {
+        let Ok(cols) = <[f64; 16]>::try_from(pose.as_slice()) else {
+            return Err(input(
+                py,
+                format!("a pickled camera's pose has {} values, not 16", pose.len()),
+            ));
+        };
+        let projection = match kind {
+            "perspective" => Projection::Perspective { yfov: params[0] },
+            "orthographic" => Projection::Orthographic {
+                xmag: params[0],
+                ymag: params[1],
+            },
+            _ => return Err(input(py, format!("unknown pickled projection {kind:?}"))),
+        };
+        let mut c = Camera::new(
+            glam::DMat4::from_cols_array(&cols),
+            projection,
+            width,
+            height,
+            znear,
+            zfar,
+        )
+        .py_err(py)?;
+        c.name = name;
+        Ok(Self::from(c))
     }
 
     fn with_resolution(&self, py: Python<'_>, width: u32, height: u32) -> PyResult<Self> {

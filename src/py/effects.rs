@@ -5,7 +5,7 @@ use pyo3::types::PyDict;
 
 use super::camera::PyCamera;
 use super::convert::{array, flat_i32, named, rows_f64, rows_owned};
-use super::errors::{input, IntoPy};
+use super::errors::input;
 use super::scene::PyScene;
 use crate::discretize::epr::Reflector;
 use crate::effects::reflections::{Method, ReflectionOptions};
@@ -83,9 +83,9 @@ pub fn reflections<'py>(
     };
     let s = scene.inner.clone();
     let cam = eye.inner.clone();
-    let r = py
-        .detach(|| crate::effects::reflections::reflections(&s, &cam, &refl, &opts))
-        .py_err(py)?;
+    let r = super::run(py, || {
+        crate::effects::reflections::reflections(&s, &cam, &refl, &opts)
+    })?;
     let (h, w) = (r.height as usize, r.width as usize);
     let d = PyDict::new(py);
     d.set_item("image", rows_owned(py, r.image, &[h, w, 3])?)?;

@@ -21,6 +21,10 @@ pub fn typed(py: Python<'_>, class_name: &str, message: String) -> PyErr {
 
 pub fn to_pyerr(py: Python<'_>, e: Error) -> PyErr {
     let class = match &e {
+        Error::Interrupted => {
+            return pyo3::exceptions::PyKeyboardInterrupt::new_err("interrupted");
+        }
+        Error::System(_) => "ScenesampleError",
         Error::Scene(_) => "SceneError",
         Error::SceneFile { .. } => "SceneFileError",
         Error::Input(_) => "InputError",

@@ -5,7 +5,7 @@ use pyo3::types::PyDict;
 
 use super::camera::PyCamera;
 use super::convert::{array, flat_i32, named, rows_f32};
-use super::errors::{input, IntoPy};
+use super::errors::input;
 use super::scene::PyScene;
 use crate::discretize::DepthImages;
 
@@ -62,11 +62,9 @@ pub fn sampling_metrics<'py>(
     let reference: Vec<_> = reference.into_iter().map(|c| c.inner).collect();
     let frames: Vec<_> = frames.into_iter().map(|c| c.inner).collect();
     let s = scene.inner.clone();
-    let m = py
-        .detach(|| {
-            crate::evaluate::sampling_metrics(&s, &img, &reference, &frames, mode, cull_backfaces)
-        })
-        .py_err(py)?;
+    let m = super::run(py, || {
+        crate::evaluate::sampling_metrics(&s, &img, &reference, &frames, mode, cull_backfaces)
+    })?;
     let n = m.samples.len();
     let d = PyDict::new(py);
     d.set_item("samples", array(py, m.samples, &[n])?)?;

@@ -86,29 +86,27 @@ pub fn visibility_field<'py>(
         return Err(input(py, "at least one slab is needed".to_string()));
     }
     let s = scene.inner.clone();
-    let (cells, fields, sorted, cell_seconds) = py
-        .detach(|| -> crate::error::Result<_> {
-            let start = std::time::Instant::now();
-            let cells = vf::cells(&s, [grid.0, grid.1, grid.2], grouping)?;
-            let sorted = s.permuted(&cells.triangles)?;
-            let cell_seconds = start.elapsed().as_secs_f64();
-            let fields = slabs
-                .iter()
-                .map(|sl| {
-                    vf::sample(
-                        &s,
-                        sl,
-                        [uv.0, uv.1],
-                        [st.0, st.1],
-                        &cells,
-                        ids_per_sample,
-                        supersample,
-                    )
-                })
-                .collect::<crate::error::Result<Vec<_>>>()?;
-            Ok((cells, fields, sorted, cell_seconds))
-        })
-        .py_err(py)?;
+    let (cells, fields, sorted, cell_seconds) = super::run(py, || -> crate::error::Result<_> {
+        let start = std::time::Instant::now();
+        let cells = vf::cells(&s, [grid.0, grid.1, grid.2], grouping)?;
+        let sorted = s.permuted(&cells.triangles)?;
+        let cell_seconds = start.elapsed().as_secs_f64();
+        let fields = slabs
+            .iter()
+            .map(|sl| {
+                vf::sample(
+                    &s,
+                    sl,
+                    [uv.0, uv.1],
+                    [st.0, st.1],
+                    &cells,
+                    ids_per_sample,
+                    supersample,
+                )
+            })
+            .collect::<crate::error::Result<Vec<_>>>()?;
+        Ok((cells, fields, sorted, cell_seconds))
+    })?;
     let d = PyDict::new(py);
     let c = cells.table.len();
     d.set_item("cell_of", array(py, cells.cell_of, &[s.triangle_count()])?)?;
@@ -193,8 +191,8 @@ pub fn field_view<'py>(
     let cell_count = offsets.len().saturating_sub(1);
     let scene = sorted_scene.inner.clone();
     let cam = camera.inner.clone();
-    let (marks, img, drawn, resample_seconds, render_seconds) = py
-        .detach(|| -> crate::error::Result<_> {
+    let (marks, img, drawn, resample_seconds, render_seconds) =
+        super::run(py, || -> crate::error::Result<_> {
             let start = std::time::Instant::now();
             let refs: Vec<(Slab, &Field)> = fields.iter().map(|(s, f)| (*s, f)).collect();
             let marks = rf::resample(&refs, cell_count, &cam, interp, subsample)?;
@@ -209,8 +207,7 @@ pub fn field_view<'py>(
                 resample_seconds,
                 start.elapsed().as_secs_f64(),
             ))
-        })
-        .py_err(py)?;
+        })?;
     let d = PyDict::new(py);
     d.set_item("marked", array(py, marks.marked, &[cell_count])?)?;
     d.set_item("pixels", marks.pixels)?;
@@ -239,8 +236,8 @@ pub fn render_cells<'py>(
     let marked = marked.as_array().to_vec();
     let scene = sorted_scene.inner.clone();
     let cam = camera.inner.clone();
-    let (img, drawn) = py
-        .detach(|| rf::render_marked(&scene, &triangles, &offsets, &marked, &cam))
-        .py_err(py)?;
+    let (img, drawn) = super::run(py, || {
+        rf::render_marked(&scene, &triangles, &offsets, &marked, &cam)
+    })?;
     Ok((super::render::images_dict(py, img)?, drawn))
 }

@@ -7,7 +7,7 @@ use pyo3::types::PyDict;
 
 use super::camera::PyCamera;
 use super::convert::{array, named};
-use super::errors::{input, IntoPy};
+use super::errors::input;
 use super::scene::PyScene;
 use crate::discretize::impostors::{self as di, ImpostorOptions, ImpostorProjection, Impostors};
 use crate::reconstruct::impostors as ri;
@@ -63,13 +63,11 @@ pub fn impostors<'py>(
         grow,
     };
     let s = scene.inner.clone();
-    let (imp, sorted) = py
-        .detach(|| -> crate::error::Result<_> {
-            let imp = di::build(&s, &opts)?;
-            let sorted = s.permuted(&imp.triangles)?;
-            Ok((imp, sorted))
-        })
-        .py_err(py)?;
+    let (imp, sorted) = super::run(py, || -> crate::error::Result<_> {
+        let imp = di::build(&s, &opts)?;
+        let sorted = s.permuted(&imp.triangles)?;
+        Ok((imp, sorted))
+    })?;
     let (c, d, h, w) = (imp.cells.len(), imp.directions.len(), imp.height, imp.width);
     let out = PyDict::new(py);
     let lo: Vec<f64> = imp.cells.iter().flat_map(|x| x.lo.to_array()).collect();
@@ -132,12 +130,10 @@ pub fn impostor_view<'py>(
     let sorted = handle.sorted.clone();
     let proj = handle.projection;
     let cam = camera.inner.clone();
-    let v = py
-        .detach(|| {
-            let s = use_scene.then_some(&*sorted);
-            ri::reconstruct(&imp, proj, s, &cam, triangle_budget, screen_threshold)
-        })
-        .py_err(py)?;
+    let v = super::run(py, || {
+        let s = use_scene.then_some(&*sorted);
+        ri::reconstruct(&imp, proj, s, &cam, triangle_budget, screen_threshold)
+    })?;
     view_dict(py, v)
 }
 
@@ -151,7 +147,7 @@ pub fn render_lit<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     let s = scene.inner.clone();
     let cam = camera.inner.clone();
-    let (color, depth, seconds) = py.detach(|| ri::render_lit(&s, &cam)).py_err(py)?;
+    let (color, depth, seconds) = super::run(py, || ri::render_lit(&s, &cam))?;
     let (h, w) = (cam.height as usize, cam.width as usize);
     let d = PyDict::new(py);
     d.set_item("color", super::convert::rows_owned(py, color, &[h, w, 3])?)?;

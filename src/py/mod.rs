@@ -18,6 +18,42 @@ mod splat;
 
 use pyo3::prelude::*;
 
+use errors::IntoPy;
+
+/// Release the GIL and run `work` on this process's worker pool (`process::interruptible`),
+/// while the calling thread checks for signals every `process::POLL`: Ctrl-C stops the work
+/// within a fraction of a second and raises `KeyboardInterrupt` here (or whatever the signal's
+/// Python handler raises). Calls from threads other than the main one are not interrupted.
+/// `work` may run again if another thread's call was interrupted meanwhile, so it must be free
+/// of side effects.
+pub(crate) fn run<T: Send>(
+    py: Python<'_>,
+    work: impl Fn() -> crate::error::Result<T> + Sync,
+) -> PyResult<T> {
+    let r = py.detach(|| {
+        crate::process::interruptible(&work, || Python::attach(|py| py.check_signals()))
+    });
+    match r {
+        Ok(r) => r.py_err(py),
+        Err(e) => Err(e),
+    }
+}
+
+/// [`run`] for single-threaded work that stays on the calling thread (`threads=1`): it checks
+/// for signals itself, from its loops (`process::interruptible_here`).
+pub(crate) fn run_here<T: Send>(
+    py: Python<'_>,
+    work: impl Fn() -> crate::error::Result<T> + Sync,
+) -> PyResult<T> {
+    let r = py.detach(|| {
+        crate::process::interruptible_here(&work, || Python::attach(|py| py.check_signals()))
+    });
+    match r {
+        Ok(r) => r.py_err(py),
+        Err(e) => Err(e),
+    }
+}
+
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<scene::PyScene>()?;

@@ -51,9 +51,12 @@ pub fn cast_rays<'py>(
     rays!(origins, directions);
     let q = query(py, t_min, t_max, threads)?;
     let s = scene.inner.clone();
-    let hits = py
-        .detach(|| trace::nearest_hits(&s, origins, directions, max_hits, &q))
-        .py_err(py)?;
+    let work = || trace::nearest_hits(&s, origins, directions, max_hits, &q);
+    let hits = if q.threads == trace::Threads::One {
+        super::run_here(py, work)?
+    } else {
+        super::run(py, work)?
+    };
     let n = origins.len();
     // One hit per ray keeps the flat shapes (N,), (N, 2); k hits add an axis.
     let (shape, bary): (Vec<usize>, Vec<usize>) = if max_hits == 1 {
@@ -86,9 +89,12 @@ pub fn occluded<'py>(
     rays!(origins, directions);
     let q = query(py, t_min, t_max, threads)?;
     let s = scene.inner.clone();
-    let r = py
-        .detach(|| trace::occluded(&s, origins, directions, &q))
-        .py_err(py)?;
+    let work = || trace::occluded(&s, origins, directions, &q);
+    let r = if q.threads == trace::Threads::One {
+        super::run_here(py, work)?
+    } else {
+        super::run(py, work)?
+    };
     let n = r.hit.len();
     let d = PyDict::new(py);
     d.set_item("hit", array(py, r.hit, &[n])?)?;
@@ -102,7 +108,7 @@ pub fn occluded<'py>(
 #[pyfunction]
 pub fn bvh_stats<'py>(py: Python<'py>, scene: &PyScene) -> PyResult<Bound<'py, PyDict>> {
     let s = scene.inner.clone();
-    let st = py.detach(|| trace::Bvh::of(&s).stats());
+    let st = super::run(py, || Ok(trace::Bvh::of(&s).stats()))?;
     let d = PyDict::new(py);
     d.set_item("triangles", st.triangles)?;
     d.set_item("nodes", st.nodes)?;

@@ -5,7 +5,7 @@ use pyo3::types::PyDict;
 
 use super::camera::PyCamera;
 use super::convert::{array, flat_i32, named, rows_f32, rows_owned};
-use super::errors::{input, IntoPy};
+use super::errors::input;
 use crate::discretize::DepthImages;
 use crate::reconstruct::{reconstruct_hybrid, reconstruct_mesh, reconstruct_points, Mesh};
 
@@ -68,11 +68,11 @@ pub fn reconstruct<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     let img = depth_images(images, "images")?;
     let m = match (method, offset) {
-        ("mesh", _) => py.detach(|| reconstruct_mesh(&img)),
-        ("points", _) => py.detach(|| reconstruct_points(&img)),
+        ("mesh", _) => super::run(py, || reconstruct_mesh(&img)),
+        ("points", _) => super::run(py, || reconstruct_points(&img)),
         ("hybrid", Some(off)) => {
             let off = depth_images(off, "offset")?;
-            py.detach(|| reconstruct_hybrid(&img, &off))
+            super::run(py, || reconstruct_hybrid(&img, &off))
         }
         ("hybrid", None) => {
             return Err(input(
@@ -86,7 +86,6 @@ pub fn reconstruct<'py>(
                 format!("method must be 'mesh', 'hybrid' or 'points', got {method:?}"),
             ))
         }
-    }
-    .py_err(py)?;
+    }?;
     mesh_dict(py, m)
 }

@@ -8,7 +8,7 @@ use pyo3::types::PyDict;
 
 use super::camera::PyCamera;
 use super::convert::{array, flat_i32, named, rows_f32, rows_owned};
-use super::errors::{input, IntoPy};
+use super::errors::input;
 use super::scene::PyScene;
 use crate::discretize::DepthImages;
 
@@ -37,9 +37,9 @@ pub fn discretize_conventional<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     let cams: Vec<_> = cameras.into_iter().map(|c| c.inner).collect();
     let s = scene.inner.clone();
-    let img = py
-        .detach(|| crate::discretize::discretize_conventional(&s, &cams, cull_backfaces))
-        .py_err(py)?;
+    let img = super::run(py, || {
+        crate::discretize::discretize_conventional(&s, &cams, cull_backfaces)
+    })?;
     images_dict(py, img)
 }
 
@@ -55,9 +55,9 @@ pub fn discretize_nonredundant<'py>(
     let r = super::convert::redundancy(py, redundancy)?;
     let cams: Vec<_> = cameras.into_iter().map(|c| c.inner).collect();
     let s = scene.inner.clone();
-    let img = py
-        .detach(|| crate::discretize::discretize_nonredundant(&s, &cams, r, cull_backfaces))
-        .py_err(py)?;
+    let img = super::run(py, || {
+        crate::discretize::discretize_nonredundant(&s, &cams, r, cull_backfaces)
+    })?;
     images_dict(py, img)
 }
 
@@ -71,15 +71,15 @@ pub fn discretize_peeling<'py>(
     cull_backfaces: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
     let s = scene.inner.clone();
-    let img = py
-        .detach(|| crate::discretize::discretize_peeling(&s, &camera.inner, layers, cull_backfaces))
-        .py_err(py)?;
+    let img = super::run(py, || {
+        crate::discretize::discretize_peeling(&s, &camera.inner, layers, cull_backfaces)
+    })?;
     images_dict(py, img)
 }
 
 #[pyfunction]
 pub fn device_info<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-    let info = py.detach(crate::gpu::device_info).py_err(py)?;
+    let info = super::run(py, crate::gpu::device_info)?;
     let d = PyDict::new(py);
     d.set_item("name", info.name)?;
     d.set_item("backend", info.backend)?;
@@ -143,15 +143,12 @@ pub fn write_exr(
             ));
         }
     }
-    py.detach(|| crate::io::exr::write_depth_images(&path, &img))
-        .py_err(py)
+    super::run(py, || crate::io::exr::write_depth_images(&path, &img))
 }
 
 #[pyfunction]
 pub fn read_exr<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyDict>> {
-    let img = py
-        .detach(|| crate::io::exr::read_depth_images(&path))
-        .py_err(py)?;
+    let img = super::run(py, || crate::io::exr::read_depth_images(&path))?;
     images_dict(py, img)
 }
 

@@ -21,7 +21,7 @@ impl PyScene {
     /// Load a glTF 2.0 file (.gltf or .glb).
     #[staticmethod]
     fn load_gltf(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
-        let scene = py.detach(|| crate::scene::gltf::load(&path)).py_err(py)?;
+        let scene = super::run(py, || crate::scene::gltf::load(&path))?;
         Ok(Self {
             inner: Arc::new(scene),
         })

@@ -61,9 +61,7 @@ pub fn soft_shadows<'py>(
     };
     let s = scene.inner.clone();
     let cam = camera.inner.clone();
-    let r = py
-        .detach(|| shadows::soft_shadows(&s, &cam, &light, &opts))
-        .py_err(py)?;
+    let r = super::run(py, || shadows::soft_shadows(&s, &cam, &light, &opts))?;
     let (h, w) = (r.height as usize, r.width as usize);
     let count = (samples.0 * samples.1) as usize;
     let d = PyDict::new(py);
@@ -109,9 +107,9 @@ pub fn omni_shadows<'py>(
     let center = vec3(center, "light_center")?;
     let s = scene.inner.clone();
     let cam = eye.inner.clone();
-    let r = py
-        .detach(|| crate::effects::omni_shadows::omni_shadows(&s, &cam, center, radius, &opts))
-        .py_err(py)?;
+    let r = super::run(py, || {
+        crate::effects::omni_shadows::omni_shadows(&s, &cam, center, radius, &opts)
+    })?;
     let (h, w) = (r.height as usize, r.width as usize);
     let count = r.samples.len();
     let d = PyDict::new(py);

@@ -34,9 +34,9 @@ pub fn epr_points<'py>(
     let density = parse_density(py, density, rho_scale)?;
     let s = scene.inner.clone();
     let cam = eye.inner.clone();
-    let p = py
-        .detach(|| epr::generate(&s, &cam, &reflectors, &resolutions, density, seed))
-        .py_err(py)?;
+    let p = super::run(py, || {
+        epr::generate(&s, &cam, &reflectors, &resolutions, density, seed)
+    })?;
     let views = epr::cube_views(&reflectors, &resolutions).py_err(py)?;
     points_dict(py, p, views)
 }
@@ -75,15 +75,13 @@ pub fn epr_shadow_points<'py>(
     let near = NEAR * scene.inner.diagonal();
     let s = scene.inner.clone();
     let cam = eye.inner.clone();
-    let (p, resolution) = py
-        .detach(|| {
-            let res = match resolution {
-                0 => eye_resolution(&s, &cam, center, radius, max_resolution)?,
-                r => r,
-            };
-            epr::generate_shadow(&s, &cam, &lights, res, near, density, seed).map(|p| (p, res))
-        })
-        .py_err(py)?;
+    let (p, resolution) = super::run(py, || {
+        let res = match resolution {
+            0 => eye_resolution(&s, &cam, center, radius, max_resolution)?,
+            r => r,
+        };
+        epr::generate_shadow(&s, &cam, &lights, res, near, density, seed).map(|p| (p, res))
+    })?;
     let views = epr::shadow_views(&lights, resolution, near).py_err(py)?;
     points_dict(py, p, views)
 }
@@ -166,9 +164,9 @@ pub fn splat<'py>(
     };
     let cams: Vec<_> = cameras.into_iter().map(|c| c.inner).collect();
     let s = scene.inner.clone();
-    let b = py
-        .detach(|| crate::splat::splat(&s, &points, &cams, clip_to_triangle))
-        .py_err(py)?;
+    let b = super::run(py, || {
+        crate::splat::splat(&s, &points, &cams, clip_to_triangle)
+    })?;
     let shape = [b.views, b.height as usize, b.width as usize];
     let d = PyDict::new(py);
     d.set_item("depth", array(py, b.depth(), &shape)?)?;

@@ -399,6 +399,9 @@ fn shadow_maps(
     Ok(bits)
 }
 
+/// Shadow rays as `occluded` takes them: origins and (segment-long) directions.
+type Segments = (Vec<[f32; 3]>, Vec<[f32; 3]>);
+
 /// Exact visibility: a ray from each light sample toward each point, started
 /// `ABS_BIAS · diagonal` after the sample and stopped as far short of the point (so that
 /// neither the point's own surface nor a surface through the sample blocks it); a hit between
@@ -417,7 +420,7 @@ pub(crate) fn raytraced(
     let q = crate::trace::Query::new(0.0, 1.0);
     for (s, &l) in samples.iter().enumerate() {
         // Only points facing the sample, and not within twice the offset of it, get a ray.
-        let (traced, (origins, dirs)): (Vec<usize>, (Vec<[f32; 3]>, Vec<[f32; 3]>)) = points
+        let (traced, (origins, dirs)): (Vec<usize>, Segments) = points
             .iter()
             .zip(normals)
             .enumerate()

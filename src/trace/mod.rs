@@ -15,7 +15,7 @@ pub mod refine;
 pub mod watertight;
 
 use std::num::NonZeroUsize;
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::Arc;
 use std::time::Instant;
 
 use glam::{Vec3, Vec3A};
@@ -217,7 +217,7 @@ pub fn nearest_hits(
     }
     on_threads(q.threads, || {
         nearest_hits_here(scene, origins, directions, k, q)
-    })
+    })?
 }
 
 fn nearest_hits_here(
@@ -241,11 +241,11 @@ fn nearest_hits_here(
     if k == 1 {
         run(q.threads, out, 1, |base, out| {
             dispatch(&ClosestJob(&job), base, out)
-        });
+        })?;
     } else {
         run(q.threads, out, k, |base, out| {
             dispatch(&NearestJob(&job, k), base, out)
-        });
+        })?;
     }
     Ok(RayHits {
         k,
@@ -265,7 +265,7 @@ pub fn occluded(
     directions: &[[f32; 3]],
     q: &Query,
 ) -> Result<Occlusion> {
-    on_threads(q.threads, || occluded_here(scene, origins, directions, q))
+    on_threads(q.threads, || occluded_here(scene, origins, directions, q))?
 }
 
 fn occluded_here(
@@ -280,7 +280,7 @@ fn occluded_here(
     let job = Rays::new(&bvh.tree, origins, directions, q);
     run(q.threads, &mut hit[..], 1, |base, out| {
         dispatch(&AnyJob(&job), base, out)
-    });
+    })?;
     Ok(Occlusion {
         hit,
         bvh_build_seconds: built,
@@ -342,11 +342,9 @@ impl Chunks for HitSlices<'_> {
     }
 }
 
-/// Run `f(first ray, its chunk of out)` over `out` in chunks of [`CHUNK`] rays, on `threads`.
-fn run<O: Chunks>(threads: Threads, out: O, k: usize, f: impl Fn(usize, O) + Sync) {
-    if threads == Threads::One {
-        return f(0, out);
-    }
+/// Run `f(first ray, its chunk of out)` over `out` in chunks of [`CHUNK`] rays, on `threads`;
+/// every chunk first checks for an interruption (`process::check`).
+fn run<O: Chunks>(threads: Threads, out: O, k: usize, f: impl Fn(usize, O) + Sync) -> Result<()> {
     let mut chunks = Vec::with_capacity(out.rays(k).div_ceil(CHUNK));
     let mut rest = out;
     while rest.rays(k) > CHUNK {
@@ -355,42 +353,26 @@ fn run<O: Chunks>(threads: Threads, out: O, k: usize, f: impl Fn(usize, O) + Syn
         rest = b;
     }
     chunks.push(rest);
-    chunks
-        .into_par_iter()
-        .enumerate()
-        .for_each(|(c, o)| f(c * CHUNK, o))
+    let each = |(c, o): (usize, O)| {
+        crate::process::check()?;
+        f(c * CHUNK, o);
+        Ok(())
+    };
+    if threads == Threads::One {
+        chunks.into_iter().enumerate().try_for_each(each)
+    } else {
+        chunks.into_par_iter().enumerate().try_for_each(each)
+    }
 }
 
-/// Run `f` where `threads` says: on the calling thread or rayon's global pool as they are, or
-/// inside a pool of `n` threads (so every parallel step of `f` stays on those).
-fn on_threads<R: Send>(threads: Threads, f: impl FnOnce() -> R + Send) -> R {
+/// Run `f` where `threads` says: on the calling thread, or inside this process's pool of all
+/// cores or of `n` threads (so every parallel step of `f` stays on those).
+fn on_threads<R: Send>(threads: Threads, f: impl FnOnce() -> R + Send) -> Result<R> {
     match threads {
-        Threads::Count(n) => pool(n.get()).install(f),
-        _ => f(),
+        Threads::One => Ok(f()),
+        Threads::All => crate::process::install(None, f),
+        Threads::Count(n) => crate::process::install(Some(n.get()), f),
     }
-}
-
-/// A rayon pool of `n` threads, made on first use and kept for the process.
-type Pools = Mutex<Vec<(usize, Arc<rayon::ThreadPool>)>>;
-
-fn pool(n: usize) -> Arc<rayon::ThreadPool> {
-    static POOLS: OnceLock<Pools> = OnceLock::new();
-    let mut pools = POOLS
-        .get_or_init(Default::default)
-        .lock()
-        .unwrap_or_else(|e| e.into_inner());
-    if let Some((_, p)) = pools.iter().find(|(m, _)| *m == n) {
-        return p.clone();
-    }
-    let p = Arc::new(
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(n)
-            .thread_name(|i| format!("scenesample-rays-{i}"))
-            .build()
-            .expect("a rayon pool of a few threads can always be made"),
-    );
-    pools.push((n, p.clone()));
-    p
 }
 
 /// A query's work on one chunk of rays, for any kernel.

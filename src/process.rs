@@ -1,0 +1,241 @@
+//! Process-wide state that has to survive what Python does to a process:
+//!
+//! - the rayon pools every parallel step runs in. A child forked after the parent used them
+//!   (`multiprocessing`'s "fork" start method) inherits the pools but not their threads, so
+//!   each pool is tagged with the process id that made it and a forked child makes its own;
+//! - the interruption flag that long loops poll, so Ctrl-C ends a call within a fraction of a
+//!   second ([`interruptible`], [`check`]).
+
+use std::cell::RefCell;
+use std::num::NonZeroUsize;
+use std::rc::Rc;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use crate::error::{Error, Result};
+
+/// This process's pools, by thread count.
+struct Pools {
+    pid: u32,
+    pools: Vec<(usize, Arc<rayon::ThreadPool>)>,
+}
+
+static POOLS: Mutex<Option<Pools>> = Mutex::new(None);
+
+/// The number of threads `None` stands for: one per core.
+pub fn cores() -> usize {
+    std::thread::available_parallelism().map_or(1, NonZeroUsize::get)
+}
+
+/// This process's pool of `n` threads (`None`: one per core), made on first use.
+pub fn pool(n: Option<usize>) -> Result<Arc<rayon::ThreadPool>> {
+    let n = n.unwrap_or_else(cores).max(1);
+    let pid = std::process::id();
+    let mut guard = POOLS.lock().unwrap_or_else(|e| e.into_inner());
+    if guard.as_ref().is_some_and(|p| p.pid != pid) {
+        // Forked: the threads of these pools stayed in the parent. Dropping the pools would
+        // wake threads that do not exist here; leak them instead (a few KB, once per fork).
+        std::mem::forget(guard.take());
+    }
+    let pools = guard.get_or_insert_with(|| Pools {
+        pid,
+        pools: Vec::new(),
+    });
+    if let Some((_, p)) = pools.pools.iter().find(|(m, _)| *m == n) {
+        return Ok(p.clone());
+    }
+    let p = rayon::ThreadPoolBuilder::new()
+        .num_threads(n)
+        .thread_name(|i| format!("scenesample-{i}"))
+        .build()
+        .map_err(|e| Error::System(format!("could not start {n} worker threads: {e}")))?;
+    let p = Arc::new(p);
+    pools.pools.push((n, p.clone()));
+    Ok(p)
+}
+
+/// Run `f` inside this process's pool of `n` threads (`None`: one per core), so every rayon
+/// parallel step of `f` runs on it and never on rayon's global pool, which a fork breaks.
+pub fn install<R: Send>(n: Option<usize>, f: impl FnOnce() -> R + Send) -> Result<R> {
+    Ok(pool(n)?.install(f))
+}
+
+/// Calls being interrupted now. Long loops stop while it is nonzero ([`check`]).
+static INTERRUPTING: AtomicUsize = AtomicUsize::new(0);
+
+/// The poll of a call running on its caller's thread ([`interruptible_here`]), and when it
+/// last ran.
+struct Poller {
+    last: Instant,
+    /// True when the call is to stop.
+    poll: Box<dyn FnMut() -> bool>,
+}
+
+thread_local! {
+    static POLLER: RefCell<Option<Poller>> = const { RefCell::new(None) };
+}
+
+/// `Err(Error::Interrupted)` while a call is being interrupted. Loops that can run for longer
+/// than about a second call this every few milliseconds of work, and pass the error up. On
+/// the thread of an [`interruptible_here`] call it also runs that call's poll, every [`POLL`].
+#[inline]
+pub fn check() -> Result<()> {
+    if INTERRUPTING.load(Ordering::Relaxed) != 0 {
+        return Err(Error::Interrupted);
+    }
+    let stop = POLLER.with(|p| match p.borrow_mut().as_mut() {
+        Some(p) if p.last.elapsed() >= POLL => {
+            p.last = Instant::now();
+            (p.poll)()
+        }
+        _ => false,
+    });
+    if stop {
+        Err(Error::Interrupted)
+    } else {
+        Ok(())
+    }
+}
+
+/// How often the calling thread polls for an interruption while the work runs.
+pub const POLL: Duration = Duration::from_millis(20);
+
+/// Run `work` on this process's pool while the calling thread calls `poll` every [`POLL`].
+/// When `poll` fails, the loops of `work` see [`check`] fail; this waits for `work` to stop
+/// and returns `poll`'s error. A `work` stopped by another call's interruption (calls from
+/// several threads share the flag) runs again once that one has ended, so only the call that
+/// was interrupted fails. `work` must be free of side effects that a rerun would repeat.
+pub fn interruptible<T: Send, E>(
+    work: impl Fn() -> Result<T> + Sync,
+    mut poll: impl FnMut() -> std::result::Result<(), E>,
+) -> std::result::Result<Result<T>, E> {
+    let pool = match pool(None) {
+        Ok(p) => p,
+        Err(e) => return Ok(Err(e)),
+    };
+    let home = std::thread::current();
+    loop {
+        let done = AtomicBool::new(false);
+        let mut out = None;
+        let mut stopped = None;
+        {
+            let (slot, done, home, work) = (&mut out, &done, &home, &work);
+            pool.in_place_scope(|s| {
+                s.spawn(move |_| {
+                    *slot = Some(work());
+                    done.store(true, Ordering::Release);
+                    home.unpark();
+                });
+                while !done.load(Ordering::Acquire) {
+                    std::thread::park_timeout(POLL);
+                    if stopped.is_none() && !done.load(Ordering::Acquire) {
+                        if let Err(e) = poll() {
+                            INTERRUPTING.fetch_add(1, Ordering::SeqCst);
+                            stopped = Some(e);
+                        }
+                    }
+                }
+            });
+        }
+        if let Some(e) = stopped {
+            INTERRUPTING.fetch_sub(1, Ordering::SeqCst);
+            return Err(e);
+        }
+        match out {
+            Some(Err(Error::Interrupted)) => {
+                // Another call's interruption stopped this one: wait for it to end, rerun.
+                while INTERRUPTING.load(Ordering::SeqCst) != 0 {
+                    std::thread::sleep(Duration::from_millis(1));
+                }
+            }
+            Some(r) => return Ok(r),
+            None => {
+                return Ok(Err(Error::System(
+                    "the worker ended without a result".into(),
+                )))
+            }
+        }
+    }
+}
+
+/// [`interruptible`] for single-threaded work that must stay on the calling thread: `work`
+/// runs here, and its loops' [`check`] calls `poll` every [`POLL`]. Only this call stops.
+pub fn interruptible_here<T, E: 'static>(
+    work: impl FnOnce() -> Result<T>,
+    mut poll: impl FnMut() -> std::result::Result<(), E> + 'static,
+) -> std::result::Result<Result<T>, E> {
+    let stopped: Rc<RefCell<Option<E>>> = Rc::new(RefCell::new(None));
+    let slot = stopped.clone();
+    let mine = Poller {
+        last: Instant::now(),
+        poll: Box::new(move || match poll() {
+            Ok(()) => false,
+            Err(e) => {
+                *slot.borrow_mut() = Some(e);
+                true
+            }
+        }),
+    };
+    // A call nested in another's work (none today) keeps the outer poll once it returns.
+    let outer = POLLER.with(|p| p.borrow_mut().replace(mine));
+    let r = work();
+    POLLER.with(|p| *p.borrow_mut() = outer);
+    let e = stopped.borrow_mut().take();
+    match e {
+        Some(e) => Err(e),
+        None => Ok(r),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    // Interruption itself is tested from Python (tests/test_process.py): the flag is
+    // process-wide, and setting it here would stop the other tests' ray casts.
+
+    #[test]
+    fn work_runs_on_the_pool_and_returns() {
+        let r = interruptible(
+            || Ok(rayon::current_thread_index().is_some()),
+            || Ok::<(), ()>(()),
+        );
+        assert!(matches!(r, Ok(Ok(true))));
+    }
+
+    #[test]
+    fn work_here_stays_on_this_thread_and_stops_at_its_poll() {
+        let me = std::thread::current().id();
+        let r = interruptible_here(|| Ok(std::thread::current().id()), || Ok::<(), ()>(()));
+        assert!(matches!(r, Ok(Ok(id)) if id == me));
+        let mut polls = 0;
+        let r = interruptible_here(
+            || -> Result<()> {
+                loop {
+                    check()?;
+                    std::thread::sleep(Duration::from_millis(1));
+                }
+            },
+            move || {
+                polls += 1;
+                if polls >= 3 {
+                    Err("stop")
+                } else {
+                    Ok(())
+                }
+            },
+        );
+        assert!(matches!(r, Err("stop")));
+        // The poll is gone with its call.
+        assert!(check().is_ok());
+    }
+
+    #[test]
+    fn pools_are_made_once_per_size() {
+        let a = pool(Some(2)).unwrap();
+        let b = pool(Some(2)).unwrap();
+        assert!(Arc::ptr_eq(&a, &b));
+        assert_eq!(install(Some(3), rayon::current_num_threads).unwrap(), 3);
+    }
+}
