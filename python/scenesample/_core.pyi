@@ -48,6 +48,8 @@ class Scene:
     @staticmethod
     def load_gltf(path: _Path) -> Scene: ...
     @staticmethod
+    def load_obj(path: _Path) -> Scene: ...
+    @staticmethod
     def from_arrays(
         vertices: ArrayLike,
         faces: ArrayLike,

@@ -45,8 +45,16 @@ class Scene:
         triangle primitive of every mesh instance (node hierarchy flattened with world transforms,
         ``EXT_mesh_gpu_instancing`` expanded; strips and fans converted), metallic-roughness
         materials, ``KHR_lights_punctual`` lights and glTF cameras. Points and lines, missing
-        images and unknown extensions are skipped with a :class:`SceneWarning`. Other formats
-        (OBJ, PLY, STL, ...) are read with trimesh when it is installed.
+        images and unknown extensions are skipped with a :class:`SceneWarning`.
+
+        Wavefront OBJ is read natively too, with its MTL materials: ``Kd`` times the mean texel
+        of ``map_Kd`` as the base colour, ``Ke`` as emissive, roughness from ``Pr`` or else
+        ``1 - sqrt(clamp(Ns, 0, 1000) / 1000)`` (the inverse of Blender's exporter), metallic
+        from ``Pm`` (else 0), alpha from ``d`` or ``1 - Tr``; every OBJ material is double
+        sided. Faces get ``material_ids`` from ``usemtl`` and ``object_ids`` from ``o``/``g``;
+        polygons are fan triangulated. A missing MTL file, texture or material is a
+        :class:`SceneWarning`; names may contain spaces and Windows separators. Other formats
+        (PLY, STL, ...) are read with trimesh when it is installed.
 
         Parameters
         ----------
@@ -62,8 +70,12 @@ class Scene:
             accessors of the wrong type or out of bounds, a required extension we cannot decode).
         """
         p = Path(path)
-        if p.suffix.lower() in _GLTF_SUFFIXES:
-            scene = cls(_core.Scene.load_gltf(str(p)))
+        native = {
+            ".obj": _core.Scene.load_obj,
+            **dict.fromkeys(_GLTF_SUFFIXES, _core.Scene.load_gltf),
+        }
+        if p.suffix.lower() in native:
+            scene = cls(native[p.suffix.lower()](str(p)))
             for message in scene.warnings:
                 warnings.warn(message, SceneWarning, stacklevel=2)
             return scene

@@ -27,6 +27,15 @@ impl PyScene {
         })
     }
 
+    /// Load a Wavefront OBJ file and its MTL materials.
+    #[staticmethod]
+    fn load_obj(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
+        let scene = super::run(py, || crate::scene::obj::load(&path))?;
+        Ok(Self {
+            inner: Arc::new(scene),
+        })
+    }
+
     #[staticmethod]
     #[pyo3(signature = (vertices, faces, normals=None, colors=None, material_ids=None, materials=None, object_ids=None, objects=None, lights=None))]
     #[allow(clippy::too_many_arguments)]

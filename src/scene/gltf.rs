@@ -732,7 +732,8 @@ fn triangles(mode: Mode, idx: &[u32]) -> Vec<[u32; 3]> {
     }
 }
 
-fn mean_linear_rgba(img: &image::RgbaImage) -> [f32; 4] {
+/// The mean of an sRGB image's texels, decoded to linear RGB (alpha as stored).
+pub(crate) fn mean_linear_rgba(img: &image::RgbaImage) -> [f32; 4] {
     let lut: Vec<f64> = (0..256)
         .map(|i| {
             let c = i as f64 / 255.0;

@@ -1,8 +1,10 @@
 //! Scene: triangles with per-vertex base colour, per-triangle material and object ids, materials,
-//! lights and cameras. Built from arrays (`from_arrays`) or glTF 2.0 (`gltf::load`); validated
+//! lights and cameras. Built from arrays (`from_arrays`), glTF 2.0 (`gltf::load`) or OBJ+MTL
+//! (`obj::load`); validated
 //! once at construction so every later stage can trust it.
 
 pub mod gltf;
+pub mod obj;
 
 use std::sync::{Arc, Mutex, OnceLock};
 
