@@ -29,6 +29,9 @@ enable primitive_index;
 struct View {
     // clip = proj * view * (p - scene_centre), formed in f64 on the host.
     view_proj: mat4x4<f32>,
+    // For fs_peel, the depth mapping: (a, c, margin, orthographic). Perspective: window depth
+    // z = b / d - a for camera z d; orthographic: z = c - d / (far - near).
+    peel: vec4<f32>,
 };
 
 @group(0) @binding(0) var<uniform> view: View;
@@ -198,8 +201,20 @@ fn fs_peel(
 ) -> @location(0) i32 {
     // Only images after the first use this entry point.
     let previous = textureLoad(previous_depth, vec2<i32>(frag.xy), 0);
-    // Reversed depth: strictly beyond the previous layer means strictly smaller.
-    if !(frag.z < previous) {
+    // A surface within a relative `margin` of the previous layer's camera z is that layer met
+    // again (a duplicated or coplanar face), not the next one: keep only fragments whose camera
+    // z exceeds the previous layer's by that factor. In window depth (reversed: smaller is
+    // farther), z(d (1 + margin)) is, for perspective, (previous + a) / (1 + margin) - a, and
+    // for orthographic previous - margin (c - previous). The margin is `trace::SAME_HIT`; the
+    // host checks the same rule on the exact f64 depths (`discretize::nonredundant`) and
+    // removes what float32 depth misjudged.
+    let a = view.peel.x;
+    let margin = view.peel.z;
+    var limit = (previous + a) / (1.0 + margin) - a;
+    if view.peel.w > 0.5 {
+        limit = previous - margin * (view.peel.y - previous);
+    }
+    if !(frag.z < limit) {
         discard;
     }
     return i32(prim);

@@ -94,7 +94,11 @@ def discretize(
 
         ``"peeling"``: ``layers`` depth-peeling layers from one viewpoint (``camera``, by
         default the centroid of ``cameras`` with their mean orientation, as in §6.1.3); layer
-        i keeps the nearest sample strictly beyond layer i-1's depth at each pixel.
+        i keeps the nearest sample strictly beyond layer i-1's depth at each pixel. Ties: a
+        surface whose depth at the pixel centre is within a relative 1e-5 of layer i-1's (a
+        duplicated or coplanar face) is that layer met again, not a new one, so depths
+        strictly increase along each pixel, as the distinct hits of
+        ``cast_rays(max_hits=k)`` do; the freed last layers of such a pixel are empty.
     redundancy : {"pixel", "visibility"}
         For ``nonredundant``. ``"pixel"`` (Algorithm 3, on the GPU in the same pass): a sample
         is redundant when an earlier image holds its triangle at the pixel it reprojects to.

@@ -60,7 +60,7 @@ def cast_rays(
     max_hits : int
         With 1, the closest hit. With k > 1, the first k hits along each ray, nearest first:
         the ray-cast counterpart of k depth-peeling layers. Two hits whose ``t`` agree within
-        a relative 1e-6 (coincident or duplicated triangles) count once, as the triangle with
+        a relative 1e-5 (coincident or duplicated triangles) count once, as the triangle with
         the smaller ``t``, then the smaller index.
     threads : int, optional
         None: every core. 1: the calling thread only. k: a pool of k threads (made once).

@@ -11,7 +11,9 @@
 //!   from no earlier viewpoint is the pixel's sample. This is the nearest non-redundant sample
 //!   along the ray, which is what Algorithm 1's z-buffer keeps.
 //! - Depth peeling: k passes from one camera, pass i keeping the nearest fragment strictly
-//!   beyond pass i−1's depth at its pixel (`gpu::layered`, `fs_peel`).
+//!   beyond pass i−1's depth at its pixel (`gpu::layered`, `fs_peel`). A surface within a
+//!   relative `trace::SAME_HIT` (1e-5) of the previous layer's depth is that layer met again
+//!   (duplicated and coplanar faces), so depths strictly increase along each pixel.
 //!
 //! All three resolve depth, position, normal and colour from the triangle ids exactly as
 //! conventional images do.
@@ -28,7 +30,7 @@ use crate::error::Result;
 use crate::gpu::layered;
 use crate::input_err;
 use crate::scene::Scene;
-use crate::trace;
+use crate::trace::{self, SAME_HIT};
 
 /// Non-redundant depth images, one per camera (shared resolution), image i free of samples
 /// redundant with images 0..i under `redundancy`.
@@ -62,13 +64,64 @@ pub fn discretize_peeling(
         return input_err!("peeling needs at least one layer, got layers=0");
     }
     let cams = vec![camera.clone(); layers];
-    layered_images(
+    let mut img = layered_images(
         scene,
         &cams,
         layered::LayerTest::Peel,
         cull_backfaces,
         "peeling",
-    )
+    )?;
+    merge_same_surfaces(&mut img);
+    Ok(img)
+}
+
+/// Ties, decided exactly: a layer whose f64 depth at the pixel centre lies within a relative
+/// [`SAME_HIT`] of the previous kept layer's is that surface met again (a duplicated or
+/// coplanar face), so it is removed and the deeper layers move up; the freed last layers are
+/// empty. So is a layer whose exact depth is not beyond the previous one at all (float32
+/// rasterisation misordered two crossing faces there). Depths then strictly increase along each pixel, and the layers are the distinct
+/// hits of `trace::nearest_hits` with the same tolerance. The GPU pass discards such
+/// fragments already, by the same rule on its float32 depth (`fs_peel`), so this only catches
+/// what float32 misjudged (a few 1e-7 relative; more on triangles spanning a large depth
+/// range); where it does, the pixel's last layers are empty.
+fn merge_same_surfaces(img: &mut DepthImages) {
+    let npx = img.width as usize * img.height as usize;
+    let layers = img.n;
+    for p in 0..npx {
+        let mut kept = 0;
+        let mut last = f32::NAN;
+        for i in 0..layers {
+            let at = i * npx + p;
+            let d = img.depth[at];
+            if img.triangle[at] < 0 {
+                continue;
+            }
+            // Not beyond the last kept layer by more than the tolerance: the same surface, or
+            // one the GPU ordered wrongly (its vertices snap to a fixed-point grid, which
+            // moves a steep triangle's depth at the pixel centre; crossing faces can swap).
+            if kept > 0 && d - last <= SAME_HIT * d.max(last) {
+                continue;
+            }
+            last = d;
+            let to = kept * npx + p;
+            if to != at {
+                img.depth[to] = d;
+                img.triangle[to] = img.triangle[at];
+                img.normal[to] = img.normal[at];
+                img.position[to] = img.position[at];
+                img.color[to] = img.color[at];
+            }
+            kept += 1;
+        }
+        for i in kept..layers {
+            let at = i * npx + p;
+            img.depth[at] = f32::INFINITY;
+            img.triangle[at] = -1;
+            img.normal[at] = [0.0; 3];
+            img.position[at] = [f32::NAN; 3];
+            img.color[at] = [0.0; 3];
+        }
+    }
 }
 
 /// The viewpoint depth peeling uses by default (§6.1.3): the centroid of the reference

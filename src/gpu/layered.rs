@@ -24,7 +24,7 @@ use super::raster::{
     TRI_FORMAT,
 };
 use super::{GpuContext, SceneBuffers};
-use crate::camera::Camera;
+use crate::camera::{Camera, Projection};
 use crate::error::{Error, Result};
 use crate::scene::Scene;
 
@@ -44,9 +44,11 @@ pub enum LayerTest {
 #[derive(Clone, Copy, Pod, Zeroable)]
 struct ViewUniform {
     view_proj: [[f32; 4]; 4],
+    /// `fs_peel`'s depth mapping: (a, c, margin, orthographic); see layered.wgsl.
+    peel: [f32; 4],
 }
 const VIEW_SIZE: u64 = std::mem::size_of::<ViewUniform>() as u64;
-const _: () = assert!(VIEW_SIZE == 64);
+const _: () = assert!(VIEW_SIZE == 80);
 
 /// How many earlier images a non-redundant pass can test against: the earlier images are the
 /// layers of one texture array, and WebGPU guarantees 256 layers.
@@ -223,8 +225,22 @@ pub fn render(
     for (i, cam) in cameras.iter().enumerate() {
         let (near, far) = cam.clip_range(bounds);
         let m = cam.projection_matrix(near, far) * cam.view_matrix_relative(centre);
+        let ortho = matches!(cam.projection, Projection::Orthographic { .. });
+        let (a, c) = if ortho {
+            (0.0, far / (far - near))
+        } else if far.is_finite() {
+            (near / (far - near), 0.0)
+        } else {
+            (0.0, 0.0)
+        };
         let u = ViewUniform {
             view_proj: m.as_mat4().to_cols_array_2d(),
+            peel: [
+                a as f32,
+                c as f32,
+                crate::trace::SAME_HIT,
+                f32::from(u8::from(ortho)),
+            ],
         };
         let at = i * stride as usize;
         uniforms[at..at + VIEW_SIZE as usize].copy_from_slice(bytemuck::bytes_of(&u));

@@ -605,8 +605,10 @@ impl Job for AnyJob<'_> {
     }
 }
 
-/// Two hits whose `t` differ by at most this fraction of the larger are one surface met twice.
-pub const SAME_HIT: f32 = 1e-6;
+/// Two hits whose `t` differ by at most this fraction of the larger are one surface met twice
+/// (a duplicated or coplanar face): `nearest_hits` counts them once, and depth peeling makes
+/// them one layer (`discretize::discretize_peeling`).
+pub const SAME_HIT: f32 = 1e-5;
 
 struct NearestJob<'a>(&'a Rays<'a>, usize);
 
