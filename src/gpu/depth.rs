@@ -255,6 +255,7 @@ fn submit_chunk(
     let image_bytes = row_tri * h as u64;
     for i in 0..n {
         let pass = IdPass {
+            faces: None,
             ranges,
             tri_view: &targets.tri_view,
             depth_view: &targets.depth_view,

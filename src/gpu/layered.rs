@@ -204,6 +204,25 @@ pub fn render(
         .map(|s| s.as_ref().is_some_and(|b| b.serial == ctx.serial))
         .unwrap_or(false);
     let buffers = SceneBuffers::of(ctx, scene)?;
+    // Duplicated faces are drawn once; the passes see kept faces' indices, which are mapped
+    // back to triangle ids as each image comes back.
+    let distinct = buffers.distinct(ctx, scene);
+    let mut on_image = |i: usize, ids: &[i32]| match distinct {
+        Some(d) => {
+            let ids: Vec<i32> = ids
+                .iter()
+                .map(|&t| {
+                    if t < 0 {
+                        t
+                    } else {
+                        d.triangles[t as usize] as i32
+                    }
+                })
+                .collect();
+            on_image(i, &ids)
+        }
+        None => on_image(i, ids),
+    };
     let mut stats = RasterStats {
         upload_seconds: if cached { 0.0 } else { buffers.upload_seconds },
         gpu_seconds: ctx.timestamps.then_some(0.0),
@@ -370,6 +389,7 @@ pub fn render(
         });
         let mut encoder = device.create_command_encoder(&Default::default());
         let pass = IdPass {
+            faces: distinct.map(|d| (&d.faces, d.triangles.len() as u32)),
             ranges: None,
             tri_view: &tri_view,
             depth_view: &depth_views[i as usize % 2],

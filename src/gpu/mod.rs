@@ -213,6 +213,20 @@ pub struct SceneBuffers {
     pub upload_seconds: f64,
     /// The `GpuContext::serial` of the device they live on.
     pub serial: u64,
+    /// The faces without their duplicates, made on first use by the layered passes.
+    distinct: OnceLock<Option<Distinct>>,
+}
+
+/// A scene's faces with every duplicate removed (a face with the same three vertex positions
+/// as an earlier one, in any order or winding), as an index buffer, and the triangle id of
+/// each face it keeps. Duplicated faces are one surface: drawn once, a non-redundant pass's
+/// "same triangle at that pixel" test sees them as the same triangle, and a peeling pass
+/// never peels one from under the other.
+#[derive(Debug)]
+pub struct Distinct {
+    pub faces: wgpu::Buffer,
+    /// Triangle id of each kept face (index into the scene's faces).
+    pub triangles: Vec<u32>,
 }
 
 impl SceneBuffers {
@@ -232,6 +246,31 @@ impl SceneBuffers {
         let b = Arc::new(Self::upload(ctx, scene)?);
         *slot = Some(b.clone());
         Ok(b)
+    }
+
+    /// The scene's faces without duplicates; `None` when it has none.
+    pub fn distinct(&self, ctx: &GpuContext, scene: &Scene) -> Option<&Distinct> {
+        self.distinct
+            .get_or_init(|| {
+                use wgpu::util::DeviceExt;
+                let keep = distinct_faces(scene.vertices(), scene.faces())?;
+                let faces: Vec<u32> = keep
+                    .iter()
+                    .flat_map(|&t| scene.faces()[t as usize])
+                    .collect();
+                let faces = ctx
+                    .device
+                    .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                        label: Some("distinct faces"),
+                        contents: bytemuck::cast_slice(&faces),
+                        usage: wgpu::BufferUsages::INDEX,
+                    });
+                Some(Distinct {
+                    faces,
+                    triangles: keep,
+                })
+            })
+            .as_ref()
     }
 
     fn upload(ctx: &GpuContext, scene: &Scene) -> Result<Self> {
@@ -293,6 +332,7 @@ impl SceneBuffers {
             triangle_count: (faces.len() / 3) as u32,
             upload_seconds: start.elapsed().as_secs_f64(),
             serial: ctx.serial,
+            distinct: OnceLock::new(),
         })
     }
 }
@@ -321,5 +361,40 @@ mod tests {
             count += 1;
         }
         assert!(count > 0, "no shaders found in {}", dir.display());
+    }
+}
+
+/// The ids of the faces that are not duplicates of an earlier face (same three vertex
+/// positions, bit for bit, in any order); `None` when no face is a duplicate.
+pub fn distinct_faces(vertices: &[[f32; 3]], faces: &[[u32; 3]]) -> Option<Vec<u32>> {
+    let key = |f: &[u32; 3]| {
+        let mut c = f.map(|i| vertices[i as usize].map(f32::to_bits));
+        c.sort_unstable();
+        c
+    };
+    let mut seen = std::collections::HashSet::with_capacity(faces.len());
+    let keep: Vec<u32> = (0..faces.len() as u32)
+        .filter(|&t| seen.insert(key(&faces[t as usize])))
+        .collect();
+    (keep.len() < faces.len()).then_some(keep)
+}
+
+#[cfg(test)]
+mod distinct_tests {
+    use super::distinct_faces;
+
+    #[test]
+    fn duplicates_in_any_order_or_winding_are_dropped() {
+        let v = [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0],
+        ];
+        // Face 1 repeats face 0 reversed; face 2 names the same corner through vertex 3.
+        let f = [[0, 1, 2], [2, 1, 0], [0, 3, 2], [0, 1, 4]];
+        assert_eq!(distinct_faces(&v, &f), Some(vec![0, 3]));
+        assert_eq!(distinct_faces(&v, &[[0, 1, 2], [0, 1, 4]]), None);
     }
 }

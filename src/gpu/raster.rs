@@ -161,6 +161,9 @@ pub struct IdPass<'a> {
     /// Draw only these triangle ranges `[a, b)` (the shader must add the instance index to its
     /// primitive index, as depth.wgsl does); `None`: every triangle in one draw.
     pub ranges: Option<&'a [(u32, u32)]>,
+    /// Draw this index buffer of `n` triangles instead of the scene's faces (`ranges` unused):
+    /// the scene without its duplicated faces ([`super::Distinct`]).
+    pub faces: Option<(&'a wgpu::Buffer, u32)>,
 }
 
 /// Record pass `i`: clear ids to −1 and depth to far, draw every triangle of the scene.
@@ -206,6 +209,11 @@ pub fn draw_ids(
     rp.set_pipeline(pass.pipeline);
     rp.set_bind_group(0, pass.bind, pass.offsets);
     rp.set_vertex_buffer(0, buffers.positions.slice(..));
+    if let Some((faces, n)) = pass.faces {
+        rp.set_index_buffer(faces.slice(..), wgpu::IndexFormat::Uint32);
+        rp.draw_indexed(0..3 * n, 0, 0..1);
+        return;
+    }
     rp.set_index_buffer(buffers.faces.slice(..), wgpu::IndexFormat::Uint32);
     match pass.ranges {
         None => rp.draw_indexed(0..3 * buffers.triangle_count, 0, 0..1),
