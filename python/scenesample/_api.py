@@ -196,6 +196,12 @@ def discretize(
         ``method``, ``reference`` (= ``cameras``), ``timings``. n is ``len(cameras)``, or
         ``layers`` for peeling.
 
+        At the edges: a camera inside a closed mesh sees its inside on every pixel; with an
+        explicit ``znear`` that cuts through the scene each pixel holds the nearest surface at
+        or beyond the near plane (``cast_rays(t_min=znear)`` along camera-z directions gives
+        the same); a triangle far smaller than a pixel's footprint appears only where it covers
+        a pixel centre; triangle ids stay exact past 2^24 (int32 up to 2^31 - 1).
+
     Raises
     ------
     GpuUnavailableError
