@@ -4,12 +4,14 @@
 //!   (`multiprocessing`'s "fork" start method) inherits the pools but not their threads, so
 //!   each pool is tagged with the process id that made it and a forked child makes its own;
 //! - the interruption flag that long loops poll, so Ctrl-C ends a call within a fraction of a
-//!   second ([`interruptible`], [`check`]).
+//!   second ([`interruptible`], [`check`]);
+//! - the progress of a long call, counted by its loops in real units ([`add_total`],
+//!   [`advance`]) and read by the calling thread, which draws the bar.
 
 use std::cell::RefCell;
 use std::num::NonZeroUsize;
 use std::rc::Rc;
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -61,6 +63,45 @@ pub fn install<R: Send>(n: Option<usize>, f: impl FnOnce() -> R + Send) -> Resul
     Ok(pool(n)?.install(f))
 }
 
+/// Units of work done and to do, counted by a call's loops and read by its caller.
+#[derive(Debug, Default)]
+pub struct Progress {
+    pub done: AtomicU64,
+    pub total: AtomicU64,
+}
+
+thread_local! {
+    /// The progress of the call whose work runs on this thread, if it keeps one.
+    static COUNTING: RefCell<Option<Arc<Progress>>> = const { RefCell::new(None) };
+}
+
+/// Count `n` more units of work for the current call (a no-op when nobody watches).
+pub fn add_total(n: u64) {
+    COUNTING.with(|c| {
+        if let Some(p) = c.borrow().as_ref() {
+            p.total.fetch_add(n, Ordering::Relaxed);
+        }
+    });
+}
+
+/// Count `n` units of the current call's work as done. Call it from the thread that runs the
+/// call's work (its outer loop), not from parallel workers.
+pub fn advance(n: u64) {
+    COUNTING.with(|c| {
+        if let Some(p) = c.borrow().as_ref() {
+            p.done.fetch_add(n, Ordering::Relaxed);
+        }
+    });
+}
+
+/// Run `f` with `progress` counting what it reports on this thread.
+fn counting<R>(progress: Option<&Arc<Progress>>, f: impl FnOnce() -> R) -> R {
+    let outer = COUNTING.with(|c| c.replace(progress.cloned()));
+    let r = f();
+    COUNTING.with(|c| *c.borrow_mut() = outer);
+    r
+}
+
 /// Calls being interrupted now. Long loops stop while it is nonzero ([`check`]).
 static INTERRUPTING: AtomicUsize = AtomicUsize::new(0);
 
@@ -109,6 +150,7 @@ pub const POLL: Duration = Duration::from_millis(20);
 pub fn interruptible<T: Send, E>(
     work: impl Fn() -> Result<T> + Sync,
     mut poll: impl FnMut() -> std::result::Result<(), E>,
+    progress: Option<&Arc<Progress>>,
 ) -> std::result::Result<Result<T>, E> {
     let pool = match pool(None) {
         Ok(p) => p,
@@ -123,7 +165,7 @@ pub fn interruptible<T: Send, E>(
             let (slot, done, home, work) = (&mut out, &done, &home, &work);
             pool.in_place_scope(|s| {
                 s.spawn(move |_| {
-                    *slot = Some(work());
+                    *slot = Some(counting(progress, work));
                     done.store(true, Ordering::Release);
                     home.unpark();
                 });
@@ -164,6 +206,7 @@ pub fn interruptible<T: Send, E>(
 pub fn interruptible_here<T, E: 'static>(
     work: impl FnOnce() -> Result<T>,
     mut poll: impl FnMut() -> std::result::Result<(), E> + 'static,
+    progress: Option<&Arc<Progress>>,
 ) -> std::result::Result<Result<T>, E> {
     let stopped: Rc<RefCell<Option<E>>> = Rc::new(RefCell::new(None));
     let slot = stopped.clone();
@@ -179,7 +222,7 @@ pub fn interruptible_here<T, E: 'static>(
     };
     // A call nested in another's work (none today) keeps the outer poll once it returns.
     let outer = POLLER.with(|p| p.borrow_mut().replace(mine));
-    let r = work();
+    let r = counting(progress, work);
     POLLER.with(|p| *p.borrow_mut() = outer);
     let e = stopped.borrow_mut().take();
     match e {
@@ -200,6 +243,7 @@ mod tests {
         let r = interruptible(
             || Ok(rayon::current_thread_index().is_some()),
             || Ok::<(), ()>(()),
+            None,
         );
         assert!(matches!(r, Ok(Ok(true))));
     }
@@ -207,7 +251,11 @@ mod tests {
     #[test]
     fn work_here_stays_on_this_thread_and_stops_at_its_poll() {
         let me = std::thread::current().id();
-        let r = interruptible_here(|| Ok(std::thread::current().id()), || Ok::<(), ()>(()));
+        let r = interruptible_here(
+            || Ok(std::thread::current().id()),
+            || Ok::<(), ()>(()),
+            None,
+        );
         assert!(matches!(r, Ok(Ok(id)) if id == me));
         let mut polls = 0;
         let r = interruptible_here(
@@ -225,10 +273,33 @@ mod tests {
                     Ok(())
                 }
             },
+            None,
         );
         assert!(matches!(r, Err("stop")));
         // The poll is gone with its call.
         assert!(check().is_ok());
+    }
+
+    #[test]
+    fn progress_counts_on_the_work_thread_only() {
+        let p = Arc::new(Progress::default());
+        let r = interruptible(
+            || {
+                add_total(10);
+                for _ in 0..4 {
+                    advance(2);
+                }
+                Ok(())
+            },
+            || Ok::<(), ()>(()),
+            Some(&p),
+        );
+        assert!(matches!(r, Ok(Ok(()))));
+        assert_eq!(p.total.load(Ordering::Relaxed), 10);
+        assert_eq!(p.done.load(Ordering::Relaxed), 8);
+        // Outside a counted call, nothing is counted.
+        advance(5);
+        assert_eq!(p.done.load(Ordering::Relaxed), 8);
     }
 
     #[test]

@@ -74,6 +74,7 @@ def discretize(
     projection: str = "orthographic",
     fov: Optional[float] = None,
     grow: bool = True,
+    progress: Optional[bool] = None,
 ) -> Union[DepthImages, Points, VisibilityField, list[VisibilityField], Impostors]:
     """Sample a scene with depth images (non-redundant-rendering.txt §3, §6.1) or with points
     for many off-screen views (eye-based-point-rendering.txt §3).
@@ -163,6 +164,11 @@ def discretize(
         every triangle that intersects its bounding sphere; without it only the geometry
         inside the cell, rays clipped to its box). ``resolution`` is the image side (default
         128).
+    progress : bool, optional
+        For the precomputations (``visibility_field``: slab samples; ``impostors``: cells;
+        ``epr``/``ivir`` reflector points: triangles): a tqdm bar when tqdm is installed. None
+        (default): only once the work has run for 2 s; True: at once; False: never. Ctrl-C
+        stops any of them within half a second (``KeyboardInterrupt``).
 
     ``"epr"`` (§3.1-3.4, Eq. 2-4): per triangle, one visibility bit per cube-map view
     (conservative: dropped only when all vertices lie outside one plane of the 20%-enlarged
@@ -225,6 +231,7 @@ def discretize(
             projection=projection,
             fov=fov,
             grow=grow,
+            progress=progress,
         )
     if method == "visibility_field":
         if cameras is not None or eye is not None:
@@ -238,6 +245,7 @@ def discretize(
             ids_per_sample=ids_per_sample,
             supersample=supersample,
             seed=seed if seed else None,
+            progress=progress,
         )
     if method in ("epr", "ivir"):
         if eye is None:
@@ -267,6 +275,7 @@ def discretize(
             seed=seed,
             resolution=resolution,
             density="eye" if method == "epr" else "offscreen",
+            progress=progress,
         )
     if eye is not None or reflectors is not None or resolution is not None or light is not None:
         raise InputError(

@@ -2,7 +2,7 @@
 # with mypy.stubtest.
 from collections.abc import Sequence
 from os import PathLike
-from typing import Any, Optional, Union, final
+from typing import Any, Callable, Optional, Union, final
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -243,6 +243,7 @@ def epr_points(
     density: str,
     rho_scale: float,
     seed: int,
+    progress: Optional[Callable[[int, int], object]] = None,
 ) -> dict[str, Any]: ...
 def epr_shadow_points(
     scene: Scene,
@@ -301,6 +302,7 @@ def visibility_field(
     ids_per_sample: int,
     supersample: int,
     jitter: Optional[int],
+    progress: Optional[Callable[[int, int], object]] = None,
 ) -> dict[str, Any]: ...
 def field_view(
     sorted_scene: Scene,
@@ -331,6 +333,7 @@ def impostors(
     projection_name: str,
     fov: Optional[float],
     grow: bool,
+    progress: Optional[Callable[[int, int], object]] = None,
 ) -> tuple[Impostors, dict[str, Any]]: ...
 def impostor_view(
     handle: Impostors,

@@ -11,6 +11,7 @@ from typing import Any, Optional, Union
 import numpy as np
 
 from . import _core
+from ._progress import Bar
 from ._scene import Scene
 from .errors import InputError
 
@@ -340,18 +341,22 @@ def epr_points(
     seed: int = 0,
     resolution: Union[None, int, Sequence[int]] = None,
     density: str = "eye",
+    progress: Optional[bool] = None,
 ) -> Points:
     """Points for the reflectors' cube maps (see :func:`scenesample.discretize`)."""
     refl, res = cube_maps(scene, eye, reflectors, resolution)
-    d = _core.epr_points(
-        scene._core,
-        eye,
-        *reflector_arrays(refl),
-        res,
-        density,
-        float(rho_scale),
-        int(seed),
-    )
+    label = "EPR points" if density == "eye" else "iVIR points"
+    with Bar(progress, label, "triangles") as bar:
+        d = _core.epr_points(
+            scene._core,
+            eye,
+            *reflector_arrays(refl),
+            res,
+            density,
+            float(rho_scale),
+            int(seed),
+            bar.callback,
+        )
     return Points._from_core(d, refl, scene)
 
 

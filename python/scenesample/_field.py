@@ -12,6 +12,7 @@ from typing import Any, Optional, Union
 import numpy as np
 
 from . import _core
+from ._progress import Bar
 from ._scene import Scene
 from .errors import InputError
 from .results import DepthImages
@@ -195,6 +196,7 @@ def visibility_field(
     ids_per_sample: int = 1,
     supersample: int = 3,
     seed: Optional[int] = None,
+    progress: Optional[bool] = None,
 ) -> Union[VisibilityField, list[VisibilityField]]:
     """See :func:`scenesample.discretize` (``method="visibility_field"``)."""
     if not isinstance(scene, Scene):
@@ -231,17 +233,19 @@ def visibility_field(
     if seed is not None and seed < 0:
         raise InputError(f"seed must be None or a non-negative integer, got {seed!r}")
     start = time.perf_counter()
-    d = _core.visibility_field(
-        scene._core,
-        [s.as_array().reshape(-1, 3) for s in slabs],
-        uv,
-        st,
-        dims,
-        grouping,
-        int(ids_per_sample),
-        int(supersample),
-        None if seed is None else int(seed),
-    )
+    with Bar(progress, "visibility field", "samples") as bar:
+        d = _core.visibility_field(
+            scene._core,
+            [s.as_array().reshape(-1, 3) for s in slabs],
+            uv,
+            st,
+            dims,
+            grouping,
+            int(ids_per_sample),
+            int(supersample),
+            None if seed is None else int(seed),
+            bar.callback,
+        )
     cells = np.zeros(len(d["cells"]), dtype=CELL_DTYPE)
     for k, name in enumerate(CELL_DTYPE.names):
         cells[name] = d["cells"][:, k]

@@ -12,6 +12,7 @@ from typing import Any, Optional
 import numpy as np
 
 from . import _core
+from ._progress import Bar
 from ._scene import Scene
 from .errors import InputError, check_integer
 
@@ -169,6 +170,7 @@ def impostors(
     projection: str = "orthographic",
     fov: Optional[float] = None,
     grow: bool = True,
+    progress: Optional[bool] = None,
 ) -> Impostors:
     """See :func:`scenesample.discretize` (``method="impostors"``)."""
     import time
@@ -185,15 +187,17 @@ def impostors(
         if not (0 < fov < math.pi):
             raise InputError(f"fov must be in (0, pi) radians, got {fov!r}")
     start = time.perf_counter()
-    handle, d = _core.impostors(
-        scene._core,
-        check_integer("depth", depth, 0),
-        check_integer("subdivisions", subdivisions, 0),
-        check_integer("resolution", resolution),
-        projection,
-        fov,
-        bool(grow),
-    )
+    with Bar(progress, "impostors", "cells") as bar:
+        handle, d = _core.impostors(
+            scene._core,
+            check_integer("depth", depth, 0),
+            check_integer("subdivisions", subdivisions, 0),
+            check_integer("resolution", resolution),
+            projection,
+            fov,
+            bool(grow),
+            bar.callback,
+        )
     c = len(d["size"])
     cells = np.zeros(c, dtype=CELL_DTYPE)
     cells["lo"] = d["lo"]

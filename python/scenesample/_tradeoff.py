@@ -11,6 +11,7 @@ from typing import Any, Optional
 import numpy as np
 
 from . import _core
+from ._progress import Bar
 from ._scene import Scene
 from .errors import InputError
 
@@ -236,7 +237,7 @@ def tradeoff(
     reference: Any = None,
     camera: Optional[Camera] = None,
     executor: Optional[Executor] = None,
-    progress: bool = True,
+    progress: Optional[bool] = None,
     as_frame: Optional[bool] = None,
 ) -> Any:
     """Sweep the accuracy knobs of an effect or method and tabulate what each setting costs.
@@ -259,8 +260,9 @@ def tradeoff(
         Runs the settings (one task each), e.g. a process pool or a dask cluster's
         ``client.get_executor()``; the scene and camera are pickled to the workers. Default:
         one after another in this process.
-    progress : bool
-        Show a tqdm progress bar when tqdm is installed.
+    progress : bool, optional
+        A tqdm bar over the settings when tqdm is installed: None (default) once the sweep has
+        run for 2 s, True at once, False never.
     as_frame : bool, optional
         Return a pandas DataFrame (default: when pandas is installed) or a numpy structured
         array.
@@ -291,7 +293,7 @@ def tradeoff(
     names = list(grid)
     settings = [dict(zip(names, combo)) for combo in itertools.product(*grid.values())]
     state = _camera_state(cam)
-    bar = _bar(len(settings), progress, effect_or_method)
+    bar = Bar(progress, f"tradeoff {effect_or_method}", "settings", total=len(settings))
     rows: list[Optional[dict]] = [None] * len(settings)
     if executor is None:
         for i, s in enumerate(settings):
@@ -348,21 +350,3 @@ def _structured(columns: dict[str, list]) -> np.ndarray:
     for k, v in columns.items():
         out[k] = [str(x) if out.dtype[k].kind == "U" else x for x in v]
     return out
-
-
-class _NoBar:
-    def update(self, n: int) -> None:
-        pass
-
-    def close(self) -> None:
-        pass
-
-
-def _bar(total: int, progress: bool, label: str) -> Any:
-    if not progress:
-        return _NoBar()
-    try:
-        from tqdm.auto import tqdm
-    except ImportError:
-        return _NoBar()
-    return tqdm(total=total, desc=f"tradeoff {label}")

@@ -171,7 +171,7 @@ pub fn generate(
             Density::OffScreen => cap,
         }
     };
-    let mut out = sample_triangles(scene, &views, skip, spacing, seed);
+    let mut out = sample_triangles(scene, &views, skip, spacing, seed)?;
     out.timings
         .push(("total".into(), total.elapsed().as_secs_f64()));
     Ok(out)
@@ -247,7 +247,7 @@ pub fn generate_shadow(
             Density::OffScreen => cap,
         }
     };
-    let mut out = sample_triangles(scene, &views, |_, _| false, spacing, seed);
+    let mut out = sample_triangles(scene, &views, |_, _| false, spacing, seed)?;
     out.timings
         .push(("total".into(), total.elapsed().as_secs_f64()));
     Ok(out)
@@ -359,17 +359,21 @@ fn sample_triangles(
     skip: impl Fn(usize, usize) -> bool + Sync,
     spacing: impl Fn(usize, &[DVec3; 3], &[u64]) -> f64 + Sync,
     seed: u64,
-) -> Points {
+) -> Result<Points> {
     let start = Instant::now();
     let words = views.len().div_ceil(64).max(1);
     let frusta: Vec<Frustum> = views.iter().map(Frustum::of).collect();
     let floor = scene.diagonal() * 1e-9;
     let verts = scene.vertices();
     let faces = scene.faces();
-    let per_triangle: Vec<TrianglePoints> = faces
-        .par_iter()
-        .enumerate()
-        .map(|(t, f)| {
+    // In blocks, so the caller sees progress (in triangles) and Ctrl-C is heard between them.
+    const BLOCK: usize = 1 << 16;
+    crate::process::add_total(faces.len() as u64);
+    let mut per_triangle: Vec<TrianglePoints> = Vec::with_capacity(faces.len());
+    for (k, block) in faces.chunks(BLOCK).enumerate() {
+        crate::process::check()?;
+        per_triangle.par_extend(block.par_iter().enumerate().map(|(j, f)| {
+            let t = k * BLOCK + j;
             let p = f.map(|i| DVec3::from(verts[i as usize].map(f64::from)));
             let mut bits = vec![0u64; words];
             for (v, fr) in frusta.iter().enumerate() {
@@ -389,8 +393,9 @@ fn sample_triangles(
                 return TrianglePoints::Culled;
             }
             TrianglePoints::Points(bits, cover(&p, s))
-        })
-        .collect();
+        }));
+        crate::process::advance(block.len() as u64);
+    }
 
     let mut out = Points {
         view_count: views.len(),
@@ -428,7 +433,7 @@ fn sample_triangles(
         ("triangles_culled".into(), culled as f64),
         ("triangles_outside_views".into(), invisible as f64),
     ];
-    out
+    Ok(out)
 }
 
 enum TrianglePoints {

@@ -437,8 +437,10 @@ pub fn build(scene: &Scene, opts: &ImpostorOptions) -> Result<Impostors> {
     let mut rays = 0u64;
     let verts = scene.vertices();
     let normals = vertex_normals(scene);
+    crate::process::add_total(cells.len() as u64);
     for (ci, cell) in cells.iter().enumerate() {
         crate::process::check()?;
+        crate::process::advance(1);
         let set: Vec<u32> = if opts.grow {
             let (c, r) = (cell.center(), cell.radius());
             (0..scene.triangle_count() as u32)

@@ -359,9 +359,12 @@ pub fn sample(
     // One uv sample at a time: its (S·T·ss⁴) rays in one batch.
     let st_count = ds * dt;
     let rays_per_uv = st_count * ss.pow(4);
+    // Progress in slab samples (iu, iv, is, it); one (iu, iv) row of them per step.
+    crate::process::add_total((du * dv * st_count) as u64);
     for iu in 0..du {
         for iv in 0..dv {
             crate::process::check()?;
+            crate::process::advance(st_count as u64);
             let start = Instant::now();
             let mut origins = Vec::with_capacity(rays_per_uv);
             let mut dirs = Vec::with_capacity(rays_per_uv);

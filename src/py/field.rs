@@ -50,7 +50,7 @@ pub fn default_slab<'py>(
 
 /// Cells and one sampled field per slab.
 #[pyfunction]
-#[pyo3(signature = (scene, slabs, uv, st, grid, grouping, ids_per_sample, supersample, jitter))]
+#[pyo3(signature = (scene, slabs, uv, st, grid, grouping, ids_per_sample, supersample, jitter, progress=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn visibility_field<'py>(
     py: Python<'py>,
@@ -63,6 +63,7 @@ pub fn visibility_field<'py>(
     ids_per_sample: u32,
     supersample: u32,
     jitter: Option<u64>,
+    progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let supersample = vf::Supersample {
         per_axis: supersample,
@@ -86,27 +87,28 @@ pub fn visibility_field<'py>(
         return Err(input(py, "at least one slab is needed".to_string()));
     }
     let s = scene.inner.clone();
-    let (cells, fields, sorted, cell_seconds) = super::run(py, || -> crate::error::Result<_> {
-        let start = std::time::Instant::now();
-        let cells = vf::cells(&s, [grid.0, grid.1, grid.2], grouping)?;
-        let sorted = s.permuted(&cells.triangles)?;
-        let cell_seconds = start.elapsed().as_secs_f64();
-        let fields = slabs
-            .iter()
-            .map(|sl| {
-                vf::sample(
-                    &s,
-                    sl,
-                    [uv.0, uv.1],
-                    [st.0, st.1],
-                    &cells,
-                    ids_per_sample,
-                    supersample,
-                )
-            })
-            .collect::<crate::error::Result<Vec<_>>>()?;
-        Ok((cells, fields, sorted, cell_seconds))
-    })?;
+    let (cells, fields, sorted, cell_seconds) =
+        super::run_with(py, progress, || -> crate::error::Result<_> {
+            let start = std::time::Instant::now();
+            let cells = vf::cells(&s, [grid.0, grid.1, grid.2], grouping)?;
+            let sorted = s.permuted(&cells.triangles)?;
+            let cell_seconds = start.elapsed().as_secs_f64();
+            let fields = slabs
+                .iter()
+                .map(|sl| {
+                    vf::sample(
+                        &s,
+                        sl,
+                        [uv.0, uv.1],
+                        [st.0, st.1],
+                        &cells,
+                        ids_per_sample,
+                        supersample,
+                    )
+                })
+                .collect::<crate::error::Result<Vec<_>>>()?;
+            Ok((cells, fields, sorted, cell_seconds))
+        })?;
     let d = PyDict::new(py);
     let c = cells.table.len();
     d.set_item("cell_of", array(py, cells.cell_of, &[s.triangle_count()])?)?;

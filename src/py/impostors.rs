@@ -42,7 +42,7 @@ fn projection(py: Python<'_>, name: &str, fov: Option<f64>) -> PyResult<Impostor
 
 /// Build the impostors: the handle and the arrays.
 #[pyfunction]
-#[pyo3(signature = (scene, depth, subdivisions, resolution, projection_name, fov, grow))]
+#[pyo3(signature = (scene, depth, subdivisions, resolution, projection_name, fov, grow, progress=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn impostors<'py>(
     py: Python<'py>,
@@ -53,6 +53,7 @@ pub fn impostors<'py>(
     projection_name: &str,
     fov: Option<f64>,
     grow: bool,
+    progress: Option<Py<PyAny>>,
 ) -> PyResult<(PyImpostors, Bound<'py, PyDict>)> {
     let proj = projection(py, projection_name, fov)?;
     let opts = ImpostorOptions {
@@ -63,7 +64,7 @@ pub fn impostors<'py>(
         grow,
     };
     let s = scene.inner.clone();
-    let (imp, sorted) = super::run(py, || -> crate::error::Result<_> {
+    let (imp, sorted) = super::run_with(py, progress, || -> crate::error::Result<_> {
         let imp = di::build(&s, &opts)?;
         let sorted = s.permuted(&imp.triangles)?;
         Ok((imp, sorted))

@@ -16,6 +16,8 @@ mod scene;
 mod shadows;
 mod splat;
 
+use std::sync::Arc;
+
 use pyo3::prelude::*;
 
 use errors::IntoPy;
@@ -30,13 +32,22 @@ pub(crate) fn run<T: Send>(
     py: Python<'_>,
     work: impl Fn() -> crate::error::Result<T> + Sync,
 ) -> PyResult<T> {
-    let r = py.detach(|| {
-        crate::process::interruptible(&work, || Python::attach(|py| py.check_signals()))
-    });
-    match r {
-        Ok(r) => r.py_err(py),
-        Err(e) => Err(e),
-    }
+    run_with(py, None, work)
+}
+
+/// [`run`], reporting the work's progress (`process::advance`) to `progress(done, total)`,
+/// a Python callable, from the calling thread at each poll and once at the end.
+pub(crate) fn run_with<T: Send>(
+    py: Python<'_>,
+    progress: Option<Py<PyAny>>,
+    work: impl Fn() -> crate::error::Result<T> + Sync,
+) -> PyResult<T> {
+    let counter = progress
+        .is_some()
+        .then(|| Arc::new(crate::process::Progress::default()));
+    let mut poll = poller(progress, counter.clone());
+    let r = py.detach(|| crate::process::interruptible(&work, &mut poll, counter.as_ref()));
+    finish(py, r, poll)
 }
 
 /// [`run`] for single-threaded work that stays on the calling thread (`threads=1`): it checks
@@ -45,13 +56,49 @@ pub(crate) fn run_here<T: Send>(
     py: Python<'_>,
     work: impl Fn() -> crate::error::Result<T> + Sync,
 ) -> PyResult<T> {
-    let r = py.detach(|| {
-        crate::process::interruptible_here(&work, || Python::attach(|py| py.check_signals()))
-    });
+    let poll = poller(None, None);
+    let r = py.detach(|| crate::process::interruptible_here(&work, poll, None));
     match r {
         Ok(r) => r.py_err(py),
         Err(e) => Err(e),
     }
+}
+
+/// What the calling thread does at each poll: check for signals, then report progress when it
+/// moved. The last report also runs once more after the work ([`finish`]).
+fn poller(
+    progress: Option<Py<PyAny>>,
+    counter: Option<Arc<crate::process::Progress>>,
+) -> impl FnMut() -> PyResult<()> + 'static {
+    let mut shown = (u64::MAX, u64::MAX);
+    move || {
+        Python::attach(|py| {
+            py.check_signals()?;
+            if let (Some(f), Some(c)) = (&progress, &counter) {
+                use std::sync::atomic::Ordering::Relaxed;
+                let now = (c.done.load(Relaxed), c.total.load(Relaxed));
+                if now != shown {
+                    shown = now;
+                    f.call1(py, now)?;
+                }
+            }
+            Ok(())
+        })
+    }
+}
+
+fn finish<T>(
+    py: Python<'_>,
+    r: Result<crate::error::Result<T>, PyErr>,
+    mut poll: impl FnMut() -> PyResult<()>,
+) -> PyResult<T> {
+    let r = match r {
+        Ok(r) => r.py_err(py)?,
+        Err(e) => return Err(e),
+    };
+    // The final count, so a bar ends full.
+    poll()?;
+    Ok(r)
 }
 
 #[pymodule]

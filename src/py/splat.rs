@@ -16,7 +16,7 @@ use crate::splat::Points;
 /// reflector, cube-map resolution per reflector); `density` is "eye" (EPR) or "offscreen"
 /// (iVIR).
 #[pyfunction]
-#[pyo3(signature = (scene, eye, centers, radii, triangles, resolutions, density, rho_scale, seed))]
+#[pyo3(signature = (scene, eye, centers, radii, triangles, resolutions, density, rho_scale, seed, progress=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn epr_points<'py>(
     py: Python<'py>,
@@ -29,12 +29,13 @@ pub fn epr_points<'py>(
     density: &str,
     rho_scale: f64,
     seed: u64,
+    progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let reflectors = super::effects::reflectors(py, scene, centers, &radii, &triangles)?;
     let density = parse_density(py, density, rho_scale)?;
     let s = scene.inner.clone();
     let cam = eye.inner.clone();
-    let p = super::run(py, || {
+    let p = super::run_with(py, progress, || {
         epr::generate(&s, &cam, &reflectors, &resolutions, density, seed)
     })?;
     let views = epr::cube_views(&reflectors, &resolutions).py_err(py)?;

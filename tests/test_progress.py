@@ -1,0 +1,83 @@
+"""Progress bars on long work: tqdm when installed, counting real units (slab samples, cells,
+triangles, settings), shown at once with progress=True, never with False, and by default only
+once the work has run for a couple of seconds."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scenesample as ss
+import scenesample._progress as progress_module
+
+
+class Recorder:
+    """Stands in for tqdm: records what the bar was told."""
+
+    made: list = []
+
+    def __init__(self, total=None, desc="", unit="", delay=0.0, leave=True):
+        self.total, self.desc, self.unit, self.delay, self.n = total, desc, unit, delay, 0
+        self.updates = 0
+        Recorder.made.append(self)
+
+    def update(self, n):
+        self.n += n
+        self.updates += 1
+
+    def refresh(self):
+        pass
+
+    def close(self):
+        self.closed = True
+
+
+@pytest.fixture
+def bars(monkeypatch):
+    tqdm_auto = pytest.importorskip("tqdm.auto")
+    Recorder.made = []
+    monkeypatch.setattr(tqdm_auto, "tqdm", Recorder)
+    return Recorder.made
+
+
+def test_the_field_counts_slab_samples(bars):
+    ball = ss.scenes.icosphere(2)
+    ss.discretize(ball, method="visibility_field", uv=(4, 3), st=(5, 2), progress=True)
+    (bar,) = bars
+    assert (bar.unit, bar.delay, bar.closed) == ("samples", 0.0, True)
+    assert bar.total == bar.n == 4 * 3 * 5 * 2
+
+
+def test_impostors_count_cells_and_points_count_triangles(bars, gpu):
+    ball = ss.scenes.icosphere(2)
+    imp = ss.discretize(ball, method="impostors", depth=1, resolution=8, progress=True)
+    assert bars[-1].unit == "cells" and bars[-1].total == bars[-1].n == len(imp.cells)
+    eye = ss.Camera.look_at((3, 0, 1), (0, 0, 0), (0, 0, 1), yfov=0.8, width=32, height=32)
+    mirror = ss.scenes.icosphere(1, radius=0.3, center=(0.0, 1.2, 0.0))
+    scene = ss.Scene.from_arrays(
+        np.concatenate([ball.vertices, mirror.vertices]),
+        np.concatenate([ball.faces, mirror.faces + len(ball.vertices)]),
+    )
+    ss.discretize(scene, method="epr", eye=eye, reflectors=[((0.0, 1.2, 0.0), 0.3)],
+                  resolution=16, progress=True)  # fmt: skip
+    assert bars[-1].unit == "triangles"
+    assert bars[-1].total == bars[-1].n and bars[-1].n % scene.triangle_count == 0
+
+
+def test_default_bars_wait_and_false_shows_none(bars):
+    ball = ss.scenes.icosphere(2)
+    ss.discretize(ball, method="visibility_field", uv=(2, 2), st=(2, 2))
+    assert bars[-1].delay == progress_module.DELAY
+    before = len(bars)
+    ss.discretize(ball, method="visibility_field", uv=(2, 2), st=(2, 2), progress=False)
+    assert len(bars) == before
+    with pytest.raises(ss.InputError, match="progress"):
+        ss.discretize(ball, method="visibility_field", progress="yes")
+
+
+def test_tradeoff_counts_settings(bars):
+    ball = ss.scenes.icosphere(2)
+    cam = ss.Camera.look_at((2.5, 2.0, 1.5), (0, 0, 0), (0, 0, 1), yfov=0.8, width=24, height=24)
+    knobs = {"depth": [0, 1], "resolution": [8], "subdivisions": [1]}
+    ss.tradeoff(ball, "impostors", knobs=knobs, camera=cam, progress=True, as_frame=False)
+    sweep = [b for b in bars if b.unit == "settings"]
+    assert len(sweep) == 1 and sweep[0].total == sweep[0].n == 2
