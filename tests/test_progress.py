@@ -81,3 +81,15 @@ def test_tradeoff_counts_settings(bars):
     ss.tradeoff(ball, "impostors", knobs=knobs, camera=cam, progress=True, as_frame=False)
     sweep = [b for b in bars if b.unit == "settings"]
     assert len(sweep) == 1 and sweep[0].total == sweep[0].n == 2
+
+
+def test_an_experiment_counts_its_scenes(bars, tmp_path, gpu):
+    from scenesample.experiments import impostors
+
+    impostors.main(
+        ["--scenes", "urban", "--distances", "1", "--depth", "1", "--subdivisions", "0"]
+        + ["--resolution", "8", "--budgets", "0", "--storage-depths", "0"]
+        + ["--size", "24", "--out", str(tmp_path)]
+    )
+    outer = [b for b in bars if b.unit == "scenes"]
+    assert len(outer) == 1 and outer[0].total == outer[0].n == 1

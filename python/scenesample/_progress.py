@@ -63,3 +63,12 @@ class Bar:
 
     def __exit__(self, *exc: Any) -> None:
         self.close()
+
+
+def steps(items: Any, desc: str, unit: str, progress: Optional[bool] = None) -> Any:
+    """Iterate over ``items`` with a :class:`Bar` counting them (the experiments' outer loops)."""
+    items = list(items)
+    with Bar(progress, desc, unit, total=len(items)) as bar:
+        for x in items:
+            yield x
+            bar.update(1)

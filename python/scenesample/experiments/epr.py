@@ -24,6 +24,7 @@ import numpy as np
 
 import scenesample as ss
 
+from .._progress import steps
 from ..imageio import write_png
 from ._tables import write_csv
 
@@ -49,7 +50,7 @@ def run(spheres: int, size: int, angle: float, distance: float, **kw: Any) -> di
 def tables(args: Any, out: Path) -> tuple[list[dict[str, Any]], Optional[dict[str, Any]]]:
     rows = []
     fig7_run = None
-    for n in args.spheres:
+    for n in steps(args.spheres, "epr: spheres", "runs"):
         t = time.perf_counter()
         r = run(n, args.resolution, args.angle, 3.2)
         for m in METHODS:
@@ -84,7 +85,7 @@ def fig6(args: Any, out: Path) -> list[dict[str, Any]]:
     import matplotlib.pyplot as plt
 
     rows = []
-    for d in args.distances:
+    for d in steps(args.distances, "epr: distances", "runs"):
         scene = ss.scenes.reflective_room(spheres=args.figure_spheres, detail=3)
         eye = ss.scenes.reflective_room_eye(args.resolution, angle=args.angle, distance=d)
         ref = ss.reflection_reference(scene, eye)
@@ -169,7 +170,7 @@ def table3(args: Any, out: Path) -> list[dict[str, Any]]:
     rows = []
     last = {}
     kw = dict(max_resolution=args.shadow_max_resolution)
-    for n in args.light_samples:
+    for n in steps(args.light_samples, "epr: light samples", "runs"):
         ref = ss.omni_shadows(scene, eye, *SHADOW_LIGHT, light_samples=n, method="raytraced")
         for m in METHODS:
             ss.omni_shadows(scene, eye, *SHADOW_LIGHT, light_samples=n, method=m, **kw)

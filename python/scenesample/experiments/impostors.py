@@ -28,6 +28,7 @@ import numpy as np
 
 import scenesample as ss
 
+from .._progress import steps
 from ..imageio import write_png
 from ._tables import write_csv
 
@@ -261,7 +262,7 @@ def main(argv: Optional[list[str]] = None) -> None:
     out.mkdir(parents=True, exist_ok=True)
     rows, storage = [], []
     files = ss.scenes.shared_scene_files()
-    for name in args.scenes:
+    for name in steps(args.scenes, "impostors", "scenes"):
         if name not in ss.scenes.PAPER_SCENES and name not in files:
             print(f"  skipping {name}: ../shared/scenes/{name} is not present")
             continue

@@ -22,6 +22,7 @@ import numpy as np
 
 import scenesample as ss
 
+from .._progress import steps
 from ..imageio import linear_to_srgb, write_png
 from ._tables import write_csv
 
@@ -198,7 +199,7 @@ def main(argv: Optional[list[str]] = None) -> None:
     out.mkdir(parents=True, exist_ok=True)
     results = {}
     rows = []
-    for name, (scene, up, cull) in scene_list(args.scenes).items():
+    for name, (scene, up, cull) in steps(scene_list(args.scenes).items(), "sampling", "scenes"):
         t = time.perf_counter()
         r = run_scene(scene, up, cull, args.resolution, args.frames, args.redundancy)
         results[name] = r

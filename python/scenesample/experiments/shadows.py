@@ -34,6 +34,7 @@ import numpy as np
 
 import scenesample as ss
 
+from .._progress import steps
 from ..imageio import write_png
 from ._tables import write_csv
 
@@ -151,7 +152,7 @@ def main(argv: Optional[list[str]] = None) -> None:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     rows = []
-    for name in args.scenes:
+    for name in steps(args.scenes, "shadows", "scenes"):
         scene, camera, light_of, sizes = shadow_scene(name, args.output)
         sweeps = [("resolution", r, 1.0, r) for r in args.resolutions]
         sweeps += [("light_size", s, s, args.resolution) for s in args.sizes if sizes]

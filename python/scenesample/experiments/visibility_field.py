@@ -31,6 +31,7 @@ import numpy as np
 
 import scenesample as ss
 
+from .._progress import steps
 from ..imageio import write_png
 from ._tables import write_csv
 
@@ -279,7 +280,7 @@ def main(argv: Optional[list[str]] = None) -> None:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     rows, fields_rows = [], []
-    for name in args.scenes:
+    for name in steps(args.scenes, "visibility_field", "scenes"):
         r, f = run_scene(name, args, out)
         rows += r
         fields_rows += f
