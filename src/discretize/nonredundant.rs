@@ -20,6 +20,8 @@
 
 use std::time::Instant;
 
+use glam::DVec3;
+
 use super::conventional::{
     check_cameras, discretize_conventional, resolve_ids, resolve_streamed, PixelRays,
 };
@@ -140,8 +142,118 @@ fn layered_images(
     let mut img = resolve_streamed(scene, cameras, Instant::now(), |ctx, on_image| {
         layered::render(ctx, scene, cameras, test, cull_backfaces, on_image)
     })?;
+    if test == layered::LayerTest::PixelRedundancy {
+        img = coincident_samples(scene, cameras, img, cull_backfaces)?;
+    }
     img.method = method.into();
     Ok(img)
+}
+
+/// Algorithm 3 compares triangle ids; distinct triangles that are one surface (coplanar and
+/// overlapping: a box's bottom on a floor, a decal; `redundancy::coincident_groups`) must count
+/// as the same triangle too, or a sample of one is kept where an earlier image holds the other
+/// at the same point. The GPU pass cannot see that, so the few samples of such triangles are
+/// checked here, in f64: one that projects into an earlier image at a pixel holding a triangle
+/// of its group is redundant, and its pixel ray is walked on (BVH casts, as for visibility
+/// redundancy) to the first sample no earlier image holds, by triangle or group. Images are
+/// fixed in order, each against the fixed earlier ones; the GPU's later images were tested
+/// against the unfixed ones, which differ only at these pixels.
+fn coincident_samples(
+    scene: &Scene,
+    cameras: &[Camera],
+    img: DepthImages,
+    cull_backfaces: bool,
+) -> Result<DepthImages> {
+    let Some(groups) = scene
+        .coincident
+        .get_or_init(|| redundancy::coincident_groups(scene))
+        .as_ref()
+    else {
+        return Ok(img);
+    };
+    let start = Instant::now();
+    let npx = img.width as usize * img.height as usize;
+    let mut size = vec![0u32; groups.len()];
+    for &g in groups {
+        size[g as usize] += 1;
+    }
+    let shared = |t: i32| t >= 0 && size[groups[t as usize] as usize] > 1;
+    let same = |a: i32, b: i32| {
+        a == b || (shared(a) && shared(b) && groups[a as usize] == groups[b as usize])
+    };
+    let mut ids = img.triangle.clone();
+    let mut fixed = 0usize;
+    for i in 1..cameras.len() {
+        let (before, rest) = ids.split_at_mut(i * npx);
+        let image = &mut rest[..npx];
+        let held = |t: i32, point: DVec3| {
+            cameras[..i].iter().enumerate().any(|(j, cam)| {
+                redundancy::pixel_of(cam, point)
+                    .is_some_and(|(x, y)| same(before[j * npx + y * cam.width as usize + x], t))
+            })
+        };
+        let cam = &cameras[i];
+        let w = cam.width as usize;
+        let rays = PixelRays::new(cam);
+        let tolerance = redundancy::tolerance(scene);
+        // Pixels whose sample an earlier image holds through a coincident triangle, and the
+        // depth each walk resumes beyond.
+        let mut active: Vec<(usize, f64)> = (0..npx)
+            .filter(|&p| shared(image[p]))
+            .filter_map(|p| {
+                let depth = img.depth[i * npx + p] as f64;
+                let (o, d) = rays.ray(p % w, p / w);
+                held(image[p], o + d * depth).then_some((p, depth))
+            })
+            .collect();
+        fixed += active.len();
+        for &(p, _) in &active {
+            image[p] = -1;
+        }
+        while !active.is_empty() {
+            let mut origins = Vec::with_capacity(active.len());
+            let mut dirs = Vec::with_capacity(active.len());
+            for &(p, from) in &active {
+                let (o, d) = rays.ray(p % w, p / w);
+                let from = from + tolerance + 1e-5 * from.abs();
+                origins.push((o + d * from).as_vec3().to_array());
+                dirs.push(d.as_vec3().to_array());
+            }
+            let hits = trace::cast_rays(scene, &origins, &dirs, 0.0, f32::INFINITY)?;
+            let mut next = Vec::new();
+            for (k, &(p, from)) in active.iter().enumerate() {
+                let t = hits.triangle[k];
+                if t < 0 {
+                    continue;
+                }
+                let (o, d) = rays.ray(p % w, p / w);
+                let depth = from + tolerance + 1e-5 * from.abs() + hits.t[k] as f64;
+                let [a, b, c] = scene.triangle(t as usize);
+                let back = cull_backfaces && (b - a).cross(c - a).dot(d) >= 0.0;
+                if back || held(t, o + d * depth) {
+                    next.push((p, depth));
+                } else {
+                    image[p] = t;
+                }
+            }
+            active = next;
+        }
+    }
+    if fixed == 0 {
+        return Ok(img);
+    }
+    let mut timings = img.timings;
+    let (mut out, resolve_seconds) = resolve_ids(scene, cameras, ids)?;
+    timings.push((
+        "coincident".into(),
+        start.elapsed().as_secs_f64() - resolve_seconds,
+    ));
+    timings.push(("coincident_resolve".into(), resolve_seconds));
+    if let Some(total) = timings.iter_mut().find(|(k, _)| k == "total") {
+        total.1 += start.elapsed().as_secs_f64();
+    }
+    out.timings = timings;
+    Ok(out)
 }
 
 /// Algorithm 1 with Algorithm 2, exactly (see the module docs).

@@ -115,3 +115,138 @@ const DEPTH_TOLERANCE: f64 = 1e-5;
 pub fn tolerance(scene: &Scene) -> f64 {
     1e-5 * scene.diagonal()
 }
+
+/// Distinct triangles that are one surface: coplanar (unit normal within 1e-6 and plane offset
+/// within 1e-6 of the scene's diagonal, either orientation) and overlapping with positive area
+/// (touching along an edge does not count), such as a box's bottom on a floor or a decal.
+/// Returns, per triangle, a representative of its group; `None` when no two triangles are
+/// coincident. Exact duplicates are coincident too. Planes are compared through a rounded key,
+/// so two planes straddling a rounding step stay apart (the test is conservative).
+pub fn coincident_groups(scene: &Scene) -> Option<Vec<u32>> {
+    use std::collections::HashMap;
+    let n = scene.triangle_count();
+    let step = scene.diagonal().max(f64::MIN_POSITIVE) * 1e-6;
+    let mut buckets: HashMap<[i64; 4], Vec<(u32, [DVec2; 3])>> = HashMap::new();
+    for t in 0..n {
+        let [a, b, c] = scene.triangle(t);
+        let normal = (b - a).cross(c - a);
+        let len = normal.length();
+        if len.is_nan() || len <= 0.0 {
+            continue;
+        }
+        let mut u = normal / len;
+        let k = u.abs().max_position();
+        if u[k] < 0.0 {
+            u = -u;
+        }
+        let key = [
+            (u.x * 1e6).round() as i64,
+            (u.y * 1e6).round() as i64,
+            (u.z * 1e6).round() as i64,
+            (u.dot(a) / step).round() as i64,
+        ];
+        // In the plane: drop the dominant axis of the normal.
+        let (i, j) = ((k + 1) % 3, (k + 2) % 3);
+        let flat = [a, b, c].map(|p| DVec2::new(p[i], p[j]));
+        buckets.entry(key).or_default().push((t as u32, flat));
+    }
+    let mut parent: Vec<u32> = (0..n as u32).collect();
+    fn find(parent: &mut [u32], mut x: u32) -> u32 {
+        while parent[x as usize] != x {
+            parent[x as usize] = parent[parent[x as usize] as usize];
+            x = parent[x as usize];
+        }
+        x
+    }
+    let mut any = false;
+    for (_, mut tris) in buckets.into_iter().filter(|(_, v)| v.len() > 1) {
+        // Sweep along x: only triangles whose x ranges overlap are tested.
+        let lo_x = |t: &[DVec2; 3]| t.iter().map(|p| p.x).fold(f64::INFINITY, f64::min);
+        let hi_x = |t: &[DVec2; 3]| t.iter().map(|p| p.x).fold(f64::NEG_INFINITY, f64::max);
+        tris.sort_by(|a, b| lo_x(&a.1).total_cmp(&lo_x(&b.1)));
+        let mut open: Vec<usize> = Vec::new();
+        for k in 0..tris.len() {
+            let start = lo_x(&tris[k].1);
+            open.retain(|&m| hi_x(&tris[m].1) > start);
+            for &m in &open {
+                if overlap(&tris[k].1, &tris[m].1, step) {
+                    let (a, b) = (find(&mut parent, tris[k].0), find(&mut parent, tris[m].0));
+                    if a != b {
+                        parent[a.max(b) as usize] = a.min(b);
+                        any = true;
+                    }
+                }
+            }
+            open.push(k);
+        }
+    }
+    any.then(|| (0..n as u32).map(|t| find(&mut parent, t)).collect())
+}
+
+/// Whether two triangles of a plane overlap by more than `eps` (2D separating axes; sharing an
+/// edge or a corner is not overlapping).
+fn overlap(a: &[DVec2; 3], b: &[DVec2; 3], eps: f64) -> bool {
+    for tri in [a, b] {
+        for e in 0..3 {
+            let d = tri[(e + 1) % 3] - tri[e];
+            let axis = DVec2::new(-d.y, d.x);
+            let len = axis.length();
+            if len == 0.0 {
+                return false;
+            }
+            let axis = axis / len;
+            let span = |t: &[DVec2; 3]| {
+                let p = t.map(|p| p.dot(axis));
+                (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]))
+            };
+            let ((a0, a1), (b0, b1)) = (span(a), span(b));
+            if a1 <= b0 + eps || b1 <= a0 + eps {
+                return false;
+            }
+        }
+    }
+    true
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn coplanar_overlapping_triangles_group_and_neighbours_do_not() {
+        // A floor quad (two triangles sharing a diagonal), a decal inside it facing down, and a
+        // parallel quad just above (1e-3 of the scene: a different plane).
+        let v = vec![
+            [0.0, 0.0, 0.0],
+            [4.0, 0.0, 0.0],
+            [4.0, 4.0, 0.0],
+            [0.0, 4.0, 0.0],
+            [2.0, 0.5, 0.0],
+            [3.0, 0.5, 0.0],
+            [3.0, 1.5, 0.0],
+            [1.0, 1.0, 0.004],
+            [2.0, 1.0, 0.004],
+            [1.0, 2.0, 0.004],
+        ];
+        let f = vec![[0, 1, 2], [0, 2, 3], [4, 6, 5], [7, 8, 9]];
+        let s = Scene::from_arrays(v, f, None, None).unwrap();
+        let g = coincident_groups(&s).unwrap();
+        // The decal overlaps the first floor triangle only; the floor's halves merely touch.
+        assert_eq!(g[2], g[0]);
+        assert_ne!(g[1], g[0]);
+        assert_eq!(g[3], 3);
+        let alone = Scene::from_arrays(
+            vec![
+                [0.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [1.0, 1.0, 0.0],
+                [0.0, 1.0, 0.0],
+            ],
+            vec![[0, 1, 2], [0, 2, 3]],
+            None,
+            None,
+        )
+        .unwrap();
+        assert!(coincident_groups(&alone).is_none());
+    }
+}

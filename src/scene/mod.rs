@@ -97,6 +97,9 @@ pub struct Scene {
     degenerate_count: usize,
     /// Built on the first `cast_rays` (see `trace`).
     pub(crate) bvh: OnceLock<Arc<crate::trace::Bvh>>,
+    /// Groups of coincident triangles, found on the first non-redundant rendering (see
+    /// `discretize::redundancy::coincident_groups`).
+    pub(crate) coincident: OnceLock<Option<Vec<u32>>>,
     /// Per-triangle resolve data, built on the first depth image (see `discretize`).
     pub(crate) planes: OnceLock<Vec<crate::discretize::conventional::SurfacePlane>>,
     /// Uploaded on the first GPU use (see `gpu::SceneBuffers`); a Mutex because upload can fail.
@@ -125,6 +128,7 @@ impl Scene {
             degenerate,
             degenerate_count,
             bvh: OnceLock::new(),
+            coincident: OnceLock::new(),
             planes: OnceLock::new(),
             gpu: Mutex::new(None),
         })
