@@ -29,8 +29,8 @@ enable primitive_index;
 struct View {
     // clip = proj * view * (p - scene_centre), formed in f64 on the host.
     view_proj: mat4x4<f32>,
-    // For fs_peel, the depth mapping: (a, c, margin, orthographic). Perspective: window depth
-    // z = b / d - a for camera z d; orthographic: z = c - d / (far - near).
+    // For fs_peel, (k, c, 0, 0): a fragment is beyond the previous layer's window depth z by
+    // the tie margin when its own depth is below k·z + c (see fs_peel).
     peel: vec4<f32>,
 };
 
@@ -194,27 +194,30 @@ fn fs_first(@builtin(primitive_index) prim: u32) -> @location(0) i32 {
     return i32(prim);
 }
 
+// Peeling passes carry fs_peel's two constants as a flat varying: the vertex stage loads the
+// uniform once per vertex, where llvmpipe would load it lane by lane in every fragment.
+struct Peel {
+    @builtin(position) position: vec4<f32>,
+    @location(0) @interpolate(flat) kc: vec2<f32>,
+};
+
+@vertex
+fn vs_peel(@location(0) p: vec3<f32>) -> Peel {
+    return Peel(view.view_proj * vec4<f32>(p, 1.0), view.peel.xy);
+}
+
 @fragment
-fn fs_peel(
-    @builtin(position) frag: vec4<f32>,
-    @builtin(primitive_index) prim: u32,
-) -> @location(0) i32 {
+fn fs_peel(v: Peel, @builtin(primitive_index) prim: u32) -> @location(0) i32 {
     // Only images after the first use this entry point.
-    let previous = textureLoad(previous_depth, vec2<i32>(frag.xy), 0);
-    // A surface within a relative `margin` of the previous layer's camera z is that layer met
-    // again (a duplicated or coplanar face), not the next one: keep only fragments whose camera
-    // z exceeds the previous layer's by that factor. In window depth (reversed: smaller is
-    // farther), z(d (1 + margin)) is, for perspective, (previous + a) / (1 + margin) - a, and
-    // for orthographic previous - margin (c - previous). The margin is `trace::SAME_HIT`; the
-    // host checks the same rule on the exact f64 depths (`discretize::nonredundant`) and
-    // removes what float32 depth misjudged.
-    let a = view.peel.x;
-    let margin = view.peel.z;
-    var limit = (previous + a) / (1.0 + margin) - a;
-    if view.peel.w > 0.5 {
-        limit = previous - margin * (view.peel.y - previous);
-    }
-    if !(frag.z < limit) {
+    let previous = textureLoad(previous_depth, vec2<i32>(v.position.xy), 0);
+    // A surface within a relative margin m (`trace::SAME_HIT`) of the previous layer's camera z
+    // d is that layer met again (a duplicated or coplanar face), not the next one: keep only
+    // fragments beyond d (1 + m). Window depth is reversed and, for camera z d, b / d - a in
+    // perspective and c - d / (far - near) in orthographic, so z(d (1 + m)) is linear in the
+    // previous depth: k·previous + c, with k and c formed on the host. The host then checks
+    // the same rule on the exact f64 depths (`discretize::nonredundant`) and removes what
+    // float32 depth misjudged.
+    if !(v.position.z < v.kc.x * previous + v.kc.y) {
         discard;
     }
     return i32(prim);

@@ -19,9 +19,8 @@ use glam::DMat4;
 
 use super::depth::{finish_chunk, Pending, RasterStats};
 use super::raster::{
-    align, check_image_size, copy, draw_ids, id_pipeline, id_pipeline_with, submit_readback,
-    texture_2d, texture_2d_descriptor, uniform_window, IdPass, Timestamps, DEPTH_FORMAT,
-    TRI_FORMAT,
+    align, check_image_size, copy, draw_ids, id_pipeline_with, submit_readback, texture_2d,
+    texture_2d_descriptor, uniform_window, IdPass, Timestamps, DEPTH_FORMAT, TRI_FORMAT,
 };
 use super::{GpuContext, SceneBuffers};
 use crate::camera::{Camera, Projection};
@@ -44,7 +43,7 @@ pub enum LayerTest {
 #[derive(Clone, Copy, Pod, Zeroable)]
 struct ViewUniform {
     view_proj: [[f32; 4]; 4],
-    /// `fs_peel`'s depth mapping: (a, c, margin, orthographic); see layered.wgsl.
+    /// `fs_peel`'s (k, c, 0, 0); see layered.wgsl.
     peel: [f32; 4],
 }
 const VIEW_SIZE: u64 = std::mem::size_of::<ViewUniform>() as u64;
@@ -133,9 +132,10 @@ impl LayeredPipeline {
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
-        let make = |entry, cull| id_pipeline(device, &module, &pipeline_layout, entry, cull, &[]);
-        let pair = |entry| [make(entry, None), make(entry, Some(wgpu::Face::Back))];
-        let fixed = [pair("fs_peel"), pair("fs_first")];
+        let make =
+            |vs, fs, cull| id_pipeline_with(device, &module, &pipeline_layout, vs, fs, cull, &[]);
+        let pair = |vs, fs| [make(vs, fs, None), make(vs, fs, Some(wgpu::Face::Back))];
+        let fixed = [pair("vs_peel", "fs_peel"), pair("vs_main", "fs_first")];
         Self {
             layout,
             pipeline_layout,
@@ -244,22 +244,25 @@ pub fn render(
     for (i, cam) in cameras.iter().enumerate() {
         let (near, far) = cam.clip_range(bounds);
         let m = cam.projection_matrix(near, far) * cam.view_matrix_relative(centre);
-        let ortho = matches!(cam.projection, Projection::Orthographic { .. });
-        let (a, c) = if ortho {
-            (0.0, far / (far - near))
-        } else if far.is_finite() {
-            (near / (far - near), 0.0)
-        } else {
-            (0.0, 0.0)
+        // fs_peel keeps fragments below k·previous + c, the window depth of camera z
+        // d (1 + m) for the previous layer's d. Perspective (z = b / d - a): k = 1 / (1 + m),
+        // c = -a m / (1 + m). Orthographic (z = f / (f - n) - d / (f - n)): k = 1 + m,
+        // c = -m f / (f - n).
+        let m_tie = crate::trace::SAME_HIT as f64;
+        let (k, c) = match cam.projection {
+            Projection::Orthographic { .. } => (1.0 + m_tie, -m_tie * far / (far - near)),
+            Projection::Perspective { .. } => {
+                let a = if far.is_finite() {
+                    near / (far - near)
+                } else {
+                    0.0
+                };
+                (1.0 / (1.0 + m_tie), -a * m_tie / (1.0 + m_tie))
+            }
         };
         let u = ViewUniform {
             view_proj: m.as_mat4().to_cols_array_2d(),
-            peel: [
-                a as f32,
-                c as f32,
-                crate::trace::SAME_HIT,
-                f32::from(u8::from(ortho)),
-            ],
+            peel: [k as f32, c as f32, 0.0, 0.0],
         };
         let at = i * stride as usize;
         uniforms[at..at + VIEW_SIZE as usize].copy_from_slice(bytemuck::bytes_of(&u));
