@@ -450,6 +450,9 @@ def assert_peeling_matches_distinct_ray_hits(scene, cam, layers, min_share=0.995
         raw = agree.sum() / covered.sum()
         unexplained = (covered & ~agree & ~at_edge).sum() / covered.sum()
         shares.append(raw)
+        # The measure: agreement over all the image's pixels (empty on both sides
+        # agrees); the stricter one below counts only the pixels either side covers.
+        assert (agree | ~covered).mean() >= min_share, f"layer {i}: image pixels"
         assert raw >= 0.99, f"layer {i}: {raw:.4%} agree"
         assert unexplained <= 1 - min_share, f"layer {i}: {unexplained:.4%} disagree off edges"
     return shares
