@@ -165,9 +165,10 @@ pub fn interruptible<T: Send, E>(
             let (slot, done, home, work) = (&mut out, &done, &home, &work);
             pool.in_place_scope(|s| {
                 s.spawn(move |_| {
+                    // Set even if `work` panics (rayon re-raises the panic when the scope
+                    // ends), so the loop below never waits for a job that is gone.
+                    let _finished = Finished(done, home);
                     *slot = Some(counting(progress, work));
-                    done.store(true, Ordering::Release);
-                    home.unpark();
                 });
                 while !done.load(Ordering::Acquire) {
                     std::thread::park_timeout(POLL);
@@ -201,10 +202,21 @@ pub fn interruptible<T: Send, E>(
     }
 }
 
+/// Marks a job finished and wakes the thread waiting for it, when dropped.
+struct Finished<'a>(&'a AtomicBool, &'a std::thread::Thread);
+
+impl Drop for Finished<'_> {
+    fn drop(&mut self) {
+        self.0.store(true, Ordering::Release);
+        self.1.unpark();
+    }
+}
+
 /// [`interruptible`] for single-threaded work that must stay on the calling thread: `work`
-/// runs here, and its loops' [`check`] calls `poll` every [`POLL`]. Only this call stops.
+/// runs here, and its loops' [`check`] calls `poll` every [`POLL`]. Only this call stops: if
+/// another call's interruption stops it, it runs again.
 pub fn interruptible_here<T, E: 'static>(
-    work: impl FnOnce() -> Result<T>,
+    work: impl Fn() -> Result<T>,
     mut poll: impl FnMut() -> std::result::Result<(), E> + 'static,
     progress: Option<&Arc<Progress>>,
 ) -> std::result::Result<Result<T>, E> {
@@ -222,7 +234,17 @@ pub fn interruptible_here<T, E: 'static>(
     };
     // A call nested in another's work (none today) keeps the outer poll once it returns.
     let outer = POLLER.with(|p| p.borrow_mut().replace(mine));
-    let r = counting(progress, work);
+    let r = loop {
+        let r = counting(progress, &work);
+        if matches!(r, Err(Error::Interrupted)) && stopped.borrow().is_none() {
+            // Another call's interruption: wait for it to end, then run again.
+            while INTERRUPTING.load(Ordering::SeqCst) != 0 {
+                std::thread::sleep(Duration::from_millis(1));
+            }
+            continue;
+        }
+        break r;
+    };
     POLLER.with(|p| *p.borrow_mut() = outer);
     let e = stopped.borrow_mut().take();
     match e {
@@ -300,6 +322,20 @@ mod tests {
         // Outside a counted call, nothing is counted.
         advance(5);
         assert_eq!(p.done.load(Ordering::Relaxed), 8);
+    }
+
+    #[test]
+    fn a_panicking_job_is_raised_not_waited_for() {
+        let r = std::panic::catch_unwind(|| {
+            interruptible(
+                || -> Result<()> { panic!("boom") },
+                || Ok::<(), ()>(()),
+                None,
+            )
+        });
+        assert!(r.is_err());
+        let again = interruptible(|| Ok(1), || Ok::<(), ()>(()), None);
+        assert!(matches!(again, Ok(Ok(1))));
     }
 
     #[test]
