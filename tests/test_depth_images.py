@@ -252,3 +252,13 @@ def test_bad_requests_raise_typed_errors(gpu, tmp_path) -> None:
         ss.DepthImages.load_exr(tmp_path / "junk.exr")
     # The device survives all of the above.
     assert ss.discretize(s, a).mask.any()
+
+
+def test_the_pyrender_shim_restores_numpy_infty() -> None:
+    """pyrender reads ``np.infty`` (removed in numpy 2), e.g. for the bounds of a mesh without
+    primitives; importing it through the references module puts the alias back."""
+    pytest.importorskip("pyrender")
+    from scenesample import references
+
+    references._import_pyrender()
+    assert getattr(np, "infty") == np.inf  # noqa: B009

@@ -48,7 +48,9 @@ __all__ = [
 def _import_pyrender() -> Any:
     os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
     if not hasattr(np, "infty"):
-        np.inf = np.inf  # type: ignore[attr-defined]
+        # Through setattr: ruff's numpy-2 fix rewrites the attribute spelled out (NPY201),
+        # which once turned this shim into `np.inf = np.inf`, a no-op.
+        setattr(np, "infty", np.inf)  # noqa: B010
     import pyrender
 
     return pyrender
