@@ -13,10 +13,10 @@ setup: ## install system packages (Mesa Vulkan, EGL) and build scenesample with 
 demo: setup ## the main job: discretize a scene, write EXR/PNG to out/, print a timing table
 	$(PY) -m scenesample.demo
 
-test: setup test-rust test-python ## every test: cargo (Rust internals, shaders) and pytest
+test: setup lint test-rust test-python ## every test: lints, cargo (Rust internals, shaders) and pytest
 
-test-rust: ## cargo tests of the Rust core (release: shares the build with the extension)
-	cargo test --release
+test-rust: ## cargo tests of the Rust core, optimized, with debug assertions and overflow checks
+	cargo test --profile checked
 
 test-python: ## pytest: cross-validation against pyrender and Embree, bad input, stubs, notebooks
 	$(PY) -m pytest
