@@ -186,12 +186,8 @@ pub fn interruptible<T: Send, E>(
             return Err(e);
         }
         match out {
-            Some(Err(Error::Interrupted)) => {
-                // Another call's interruption stopped this one: wait for it to end, rerun.
-                while INTERRUPTING.load(Ordering::SeqCst) != 0 {
-                    std::thread::sleep(Duration::from_millis(1));
-                }
-            }
+            // Another call's interruption stopped this one: wait for it to end, rerun.
+            Some(Err(Error::Interrupted)) => wait_for_interruptions(),
             Some(r) => return Ok(r),
             None => {
                 return Ok(Err(Error::System(
@@ -199,6 +195,14 @@ pub fn interruptible<T: Send, E>(
                 )))
             }
         }
+    }
+}
+
+/// Wait until no call is being interrupted (a call stopped by another's interruption reruns
+/// after it).
+fn wait_for_interruptions() {
+    while INTERRUPTING.load(Ordering::SeqCst) != 0 {
+        std::thread::sleep(Duration::from_millis(1));
     }
 }
 
@@ -238,9 +242,7 @@ pub fn interruptible_here<T, E: 'static>(
         let r = counting(progress, &work);
         if matches!(r, Err(Error::Interrupted)) && stopped.borrow().is_none() {
             // Another call's interruption: wait for it to end, then run again.
-            while INTERRUPTING.load(Ordering::SeqCst) != 0 {
-                std::thread::sleep(Duration::from_millis(1));
-            }
+            wait_for_interruptions();
             continue;
         }
         break r;

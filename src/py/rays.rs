@@ -28,6 +28,19 @@ fn query(py: Python<'_>, t_min: f32, t_max: f32, threads: Option<usize>) -> PyRe
     })
 }
 
+/// Run a ray query where `q.threads` says: `threads=1` on the calling thread, else on the pool.
+fn on_threads<T: Send>(
+    py: Python<'_>,
+    q: &trace::Query,
+    work: impl Fn() -> crate::error::Result<T> + Sync,
+) -> PyResult<T> {
+    if q.threads == trace::Threads::One {
+        super::run_here(py, work)
+    } else {
+        super::run(py, work)
+    }
+}
+
 fn timings<'py>(py: Python<'py>, build: f64, trace: f64) -> PyResult<Bound<'py, PyDict>> {
     let t = PyDict::new(py);
     t.set_item("bvh_build", build)?;
@@ -51,12 +64,9 @@ pub fn cast_rays<'py>(
     rays!(origins, directions);
     let q = query(py, t_min, t_max, threads)?;
     let s = scene.inner.clone();
-    let work = || trace::nearest_hits(&s, origins, directions, max_hits, &q);
-    let hits = if q.threads == trace::Threads::One {
-        super::run_here(py, work)?
-    } else {
-        super::run(py, work)?
-    };
+    let hits = on_threads(py, &q, || {
+        trace::nearest_hits(&s, origins, directions, max_hits, &q)
+    })?;
     let n = origins.len();
     // One hit per ray keeps the flat shapes (N,), (N, 2); k hits add an axis.
     let (shape, bary): (Vec<usize>, Vec<usize>) = if max_hits == 1 {
@@ -89,12 +99,7 @@ pub fn occluded<'py>(
     rays!(origins, directions);
     let q = query(py, t_min, t_max, threads)?;
     let s = scene.inner.clone();
-    let work = || trace::occluded(&s, origins, directions, &q);
-    let r = if q.threads == trace::Threads::One {
-        super::run_here(py, work)?
-    } else {
-        super::run(py, work)?
-    };
+    let r = on_threads(py, &q, || trace::occluded(&s, origins, directions, &q))?;
     let n = r.hit.len();
     let d = PyDict::new(py);
     d.set_item("hit", array(py, r.hit, &[n])?)?;
