@@ -215,47 +215,23 @@ fn coincident_samples(
         let w = cam.width as usize;
         let rays = PixelRays::new(cam);
         let tolerance = redundancy::tolerance(scene);
-        // Pixels whose sample an earlier image holds through a coincident triangle, and the
-        // depth each walk resumes beyond.
-        let mut active: Vec<(usize, f64)> = (0..npx)
+        // Pixels whose sample an earlier image holds through a coincident triangle, walked on
+        // from just beyond that sample.
+        let walks: Vec<(usize, f64)> = (0..npx)
             .filter(|&p| shared(image[p]))
             .filter_map(|p| {
                 let depth = img.depth[i * npx + p] as f64;
                 let (o, d) = rays.ray(p % w, p / w);
-                held(image[p], o + d * depth).then_some((p, depth))
+                held(image[p], o + d * depth).then_some((p, depth + tolerance + 1e-5 * depth.abs()))
             })
             .collect();
-        fixed += active.len();
-        for &(p, _) in &active {
+        fixed += walks.len();
+        for &(p, _) in &walks {
             image[p] = -1;
         }
-        while !active.is_empty() {
-            let mut origins = Vec::with_capacity(active.len());
-            let mut dirs = Vec::with_capacity(active.len());
-            for &(p, from) in &active {
-                let (o, d) = rays.ray(p % w, p / w);
-                let from = from + tolerance + 1e-5 * from.abs();
-                origins.push((o + d * from).as_vec3().to_array());
-                dirs.push(d.as_vec3().to_array());
-            }
-            let hits = trace::cast_rays(scene, &origins, &dirs, 0.0, f32::INFINITY)?;
-            let mut next = Vec::new();
-            for (k, &(p, from)) in active.iter().enumerate() {
-                let t = hits.triangle[k];
-                if t < 0 {
-                    continue;
-                }
-                let (o, d) = rays.ray(p % w, p / w);
-                let depth = from + tolerance + 1e-5 * from.abs() + hits.t[k] as f64;
-                let [a, b, c] = scene.triangle(t as usize);
-                let back = cull_backfaces && (b - a).cross(c - a).dot(d) >= 0.0;
-                if back || held(t, o + d * depth) {
-                    next.push((p, depth));
-                } else {
-                    image[p] = t;
-                }
-            }
-            active = next;
+        let redundant = |c: &[Sample]| Ok(c.iter().map(|s| held(s.triangle, s.point)).collect());
+        for (p, t) in walk(scene, cam, walks, cull_backfaces, redundant)? {
+            image[p] = t;
         }
     }
     if fixed == 0 {
@@ -312,77 +288,91 @@ fn walk_image(
     cull_backfaces: bool,
 ) -> Result<Vec<i32>> {
     let cam = &cameras[i];
-    let (w, h) = (cam.width as usize, cam.height as usize);
-    let rays = PixelRays::new(cam);
+    let npx = cam.width as usize * cam.height as usize;
     let (near, _) = cam.clip_range(scene.bounds());
     let tolerance = redundancy::tolerance(scene);
-    let planes_normal = |t: usize| {
-        let [a, b, c] = scene.triangle(t);
-        (b - a).cross(c - a)
-    };
-    let mut out = vec![-1i32; w * h];
-    // Pixels still walking, and the depth each resumes from.
-    let mut active: Vec<usize> = (0..w * h).collect();
-    let mut from: Vec<f64> = vec![near; w * h];
-    while !active.is_empty() {
-        let mut origins = Vec::with_capacity(active.len());
-        let mut dirs = Vec::with_capacity(active.len());
-        for &p in &active {
-            let (o, d) = rays.ray(p % w, p / w);
-            // Resume from depth `from[p]`: the ray's direction has camera z −1, so t is depth.
-            origins.push((o + d * from[p]).as_vec3().to_array());
-            dirs.push(d.as_vec3().to_array());
-        }
-        let hits = trace::cast_rays(scene, &origins, &dirs, 0.0, f32::INFINITY)?;
-        let mut candidates = Vec::new();
-        let mut at = Vec::new();
-        for (k, &p) in active.iter().enumerate() {
-            let tri = hits.triangle[k];
-            if tri < 0 {
-                continue; // nothing left along this ray: the pixel stays empty
-            }
-            let (o, d) = rays.ray(p % w, p / w);
-            let depth = from[p] + hits.t[k] as f64;
-            let point = o + d * depth;
-            from[p] = depth;
-            if cull_backfaces && planes_normal(tri as usize).dot(d) >= 0.0 {
-                at.push((p, false));
-                candidates.push(None);
-                continue;
-            }
-            at.push((p, true));
-            candidates.push(Some(Sample {
-                triangle: tri,
-                point,
-            }));
-        }
-        // Test the candidates against each earlier viewpoint in turn; redundant ones drop out.
+    let start = (0..npx).map(|p| (p, near)).collect();
+    let mut out = vec![-1i32; npx];
+    // Test the candidates against each earlier viewpoint in turn; redundant ones drop out.
+    let redundant = |candidates: &[Sample]| -> Result<Vec<bool>> {
         let mut redundant = vec![false; candidates.len()];
         for cam_j in &cameras[..i] {
-            let open: Vec<usize> = (0..candidates.len())
-                .filter(|&c| candidates[c].is_some() && !redundant[c])
-                .collect();
+            let open: Vec<usize> = (0..candidates.len()).filter(|&c| !redundant[c]).collect();
             if open.is_empty() {
                 break;
             }
-            let samples: Vec<Sample> = open.iter().map(|&c| candidates[c].unwrap()).collect();
+            let samples: Vec<Sample> = open.iter().map(|&c| candidates[c]).collect();
             let seen = redundancy::visible_from(scene, &samples, cam_j, tolerance)?;
             for (k, &c) in open.iter().enumerate() {
                 redundant[c] |= seen[k];
             }
         }
+        Ok(redundant)
+    };
+    for (p, t) in walk(scene, cam, start, cull_backfaces, redundant)? {
+        out[p] = t;
+    }
+    Ok(out)
+}
+
+/// Walk pixel rays of `cam` front to back: each `(pixel, depth)` of `start` casts from that
+/// depth, and every surface it meets is a candidate sample, which `redundant` tests (a batch
+/// at a time); the first candidate not redundant (nor a culled back face) is the pixel's
+/// sample. Returns `(pixel, triangle)` for the pixels that found one. A walk resumes just
+/// beyond each rejected surface, past the tolerance that makes two surfaces the same point,
+/// so it always advances.
+fn walk(
+    scene: &Scene,
+    cam: &Camera,
+    start: Vec<(usize, f64)>,
+    cull_backfaces: bool,
+    mut redundant: impl FnMut(&[Sample]) -> Result<Vec<bool>>,
+) -> Result<Vec<(usize, i32)>> {
+    let w = cam.width as usize;
+    let rays = PixelRays::new(cam);
+    let tolerance = redundancy::tolerance(scene);
+    let mut found = Vec::new();
+    let mut active = start;
+    while !active.is_empty() {
+        let mut origins = Vec::with_capacity(active.len());
+        let mut dirs = Vec::with_capacity(active.len());
+        for &(p, from) in &active {
+            let (o, d) = rays.ray(p % w, p / w);
+            // Resume from depth `from`: the ray's direction has camera z −1, so t is depth.
+            origins.push((o + d * from).as_vec3().to_array());
+            dirs.push(d.as_vec3().to_array());
+        }
+        let hits = trace::cast_rays(scene, &origins, &dirs, 0.0, f32::INFINITY)?;
+        // (pixel, depth of the surface met, candidate index or none for a culled back face)
+        let mut met = Vec::new();
+        let mut candidates = Vec::new();
+        for (k, &(p, from)) in active.iter().enumerate() {
+            let tri = hits.triangle[k];
+            if tri < 0 {
+                continue; // nothing left along this ray: the pixel stays empty
+            }
+            let (o, d) = rays.ray(p % w, p / w);
+            let depth = from + hits.t[k] as f64;
+            let [a, b, c] = scene.triangle(tri as usize);
+            if cull_backfaces && (b - a).cross(c - a).dot(d) >= 0.0 {
+                met.push((p, depth, None));
+                continue;
+            }
+            met.push((p, depth, Some(candidates.len())));
+            candidates.push(Sample {
+                triangle: tri,
+                point: o + d * depth,
+            });
+        }
+        let redundant = redundant(&candidates)?;
         let mut next = Vec::new();
-        for (c, &(p, tested)) in at.iter().enumerate() {
-            if tested && !redundant[c] {
-                out[p] = candidates[c].unwrap().triangle;
-            } else {
-                // Resume just beyond this surface: past the tolerance that makes two surfaces
-                // the same point, so the walk always advances.
-                from[p] += tolerance + 1e-5 * from[p].abs();
-                next.push(p);
+        for (p, depth, c) in met {
+            match c {
+                Some(c) if !redundant[c] => found.push((p, candidates[c].triangle)),
+                _ => next.push((p, depth + tolerance + 1e-5 * depth.abs())),
             }
         }
         active = next;
     }
-    Ok(out)
+    Ok(found)
 }
