@@ -396,12 +396,7 @@ def main(argv: Optional[list[str]] = None) -> None:
         # CPU only: no GPU adapter is asked for.
         only = a.scenes.split(",") if a.scenes else None
         r = _bench_rays.run(a.quick, a.rounds, only)
-        md = _bench_rays.report(r)
-        print(md)
-        _write(a.out or "docs/bench/rays.md", md)
-        if a.json:
-            with open(a.json, "w") as f:
-                json.dump(r, f, indent=2, default=float)
+        _emit(_bench_rays.report(r), a.out or "docs/bench/rays.md", r, a.json)
         return
     info = ss.device_info()
     device = f"{info['name']} ({info['backend']})"
@@ -432,12 +427,7 @@ def main(argv: Optional[list[str]] = None) -> None:
         print(report_epr(results["epr"], device), flush=True)
         results["field"] = bench_field(128 if a.quick else 256, a.repeats)
         print(report_field(results["field"], device), flush=True)
-        md = summary(results, device)
-        print(md)
-        _write(a.out or "out/bench/all.md", md)
-        if a.json:
-            with open(a.json, "w") as f:
-                json.dump(results, f, indent=2, default=float)
+        _emit(summary(results, device), a.out or "out/bench/all.md", results, a.json)
         return
     if a.which == "nonredundant":
         r = bench_nonredundant(size, a.repeats)
@@ -451,6 +441,15 @@ def main(argv: Optional[list[str]] = None) -> None:
     if a.json:
         with open(a.json, "w") as f:
             json.dump({"depth": depth, "device": info}, f, indent=2)
+
+
+def _emit(md: str, path: str, raw: Any, json_path: Optional[str]) -> None:
+    """Print a report, write it to `path`, and the raw figures to `json_path` if given."""
+    print(md)
+    _write(path, md)
+    if json_path:
+        with open(json_path, "w") as f:
+            json.dump(raw, f, indent=2, default=float)
 
 
 def _write(path: str, text: str) -> None:
