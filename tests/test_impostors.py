@@ -34,7 +34,8 @@ def error(imp: ss.Impostors, scene: ss.Scene, distance: float) -> dict:
 @pytest.fixture(scope="module")
 def sphere():
     scene = ss.scenes.icosphere(4)
-    return scene, ss.discretize(scene, method="impostors", depth=2, subdivisions=2, resolution=32)
+    kw = dict(octree_depth=2, subdivisions=2, resolution=32)
+    return scene, ss.discretize(scene, method="impostors", **kw)
 
 
 @pytest.fixture(scope="module")
@@ -45,15 +46,15 @@ def bunny():
     scene = ss.Scene.load(files["stanford_bunny"])
     kw = dict(subdivisions=2, resolution=32)
     built = {
-        "multi": ss.discretize(scene, method="impostors", depth=2, **kw),
-        "single": ss.discretize(scene, method="impostors", depth=0, **kw),
-        "no_grow": ss.discretize(scene, method="impostors", depth=2, grow=False, **kw),
+        "multi": ss.discretize(scene, method="impostors", octree_depth=2, **kw),
+        "single": ss.discretize(scene, method="impostors", octree_depth=0, **kw),
+        "no_grow": ss.discretize(scene, method="impostors", octree_depth=2, grow=False, **kw),
     }
     for deg in (40, 60, 90):
         built[f"perspective {deg}"] = ss.discretize(
             scene,
             method="impostors",
-            depth=2,
+            octree_depth=2,
             projection="perspective",
             fov=np.radians(deg),
             **kw,
@@ -172,8 +173,8 @@ def test_bad_input_is_refused(sphere):
         (dict(fov=0.5), "fov applies"),
         (dict(projection="perspective", fov=4.0), "fov"),
         (dict(resolution=0), "resolution"),
-        (dict(depth=-1), "depth"),
-        (dict(depth=8, subdivisions=3, resolution=512), "bytes"),
+        (dict(octree_depth=-1), "octree_depth"),
+        (dict(octree_depth=8, subdivisions=3, resolution=512), "bytes"),
     ]:
         with pytest.raises(ss.InputError, match=match):
             ss.discretize(scene, method="impostors", **kw)

@@ -97,7 +97,8 @@ INTERRUPT = textwrap.dedent(
         "cast_rays_all_cores": lambda: ss.cast_rays(scene, o, d),
         "visibility_field": lambda: ss.discretize(
             scene, method="visibility_field", uv=(40, 40), st=(40, 40)),
-        "impostors": lambda: ss.discretize(scene, method="impostors", depth=2, resolution=64),
+        "impostors": lambda: ss.discretize(
+            scene, method="impostors", octree_depth=2, resolution=64),
     }
     call = calls[sys.argv[1]]
     sent = []

@@ -49,7 +49,7 @@ def test_the_field_counts_slab_samples(bars):
 
 def test_impostors_count_cells_and_points_count_triangles(bars, gpu):
     ball = ss.scenes.icosphere(2)
-    imp = ss.discretize(ball, method="impostors", depth=1, resolution=8, progress=True)
+    imp = ss.discretize(ball, method="impostors", octree_depth=1, resolution=8, progress=True)
     assert bars[-1].unit == "cells" and bars[-1].total == bars[-1].n == len(imp.cells)
     eye = ss.Camera.look_at((3, 0, 1), (0, 0, 0), (0, 0, 1), yfov=0.8, width=32, height=32)
     mirror = ss.scenes.icosphere(1, radius=0.3, center=(0.0, 1.2, 0.0))

@@ -228,7 +228,7 @@ def test_impostor_cameras_straight_down_an_octree_axis():
     view tilted by 3 degrees (within 1.5x + 5, and < 40 of 765 with 320 views; the error is
     dominated by the ~6 degrees between the view and the nearest impostor direction)."""
     scene = ss.scenes.icosphere(3)
-    imp = ss.discretize(scene, method="impostors", depth=1, subdivisions=2, resolution=32)
+    imp = ss.discretize(scene, method="impostors", octree_depth=1, subdivisions=2, resolution=32)
     errors = []
     for eye in [(0, 0, 6), (0.3, 0.1, 6)]:
         cam = ss.Camera.look_at(eye, (0, 0, 0), (0, 1, 0), yfov=0.6, width=64, height=64)

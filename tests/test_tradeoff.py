@@ -17,18 +17,18 @@ def ball():
 
 
 CAM = ss.Camera.look_at((2.5, 2.0, 1.5), (0, 0, 0), (0, 0, 1), yfov=0.8, width=48, height=48)
-KNOBS = {"depth": [0, 1], "resolution": [8, 24], "subdivisions": [1]}
+KNOBS = {"octree_depth": [0, 1], "resolution": [8, 24], "subdivisions": [1]}
 
 
 def test_a_sweep_tabulates_error_time_memory_and_the_front(ball):
     table = ss.tradeoff(ball, "impostors", knobs=KNOBS, camera=CAM, progress=False, as_frame=False)
-    assert table.dtype.names[:3] == ("depth", "resolution", "subdivisions")
+    assert table.dtype.names[:3] == ("octree_depth", "resolution", "subdivisions")
     assert len(table) == 4
     assert np.isfinite(table["error"]).all() and (table["seconds"] > 0).all()
     assert (table["memory"] > 0).all() and table["pareto"].any()
     # Finer images cost more memory; the front is not dominated by any row.
     for d in (0, 1):
-        rows = table[table["depth"] == d]
+        rows = table[table["octree_depth"] == d]
         assert rows["memory"][rows["resolution"] == 24] > rows["memory"][rows["resolution"] == 8]
     front = table[table["pareto"]]
     for f in front:
@@ -119,6 +119,6 @@ def test_bad_input_is_refused(ball):
     with pytest.raises(ss.InputError, match="effect_or_method"):
         ss.tradeoff(ball, "caustics")
     with pytest.raises(ss.InputError, match="knob"):
-        ss.tradeoff(ball, "impostors", knobs={"depth": []})
+        ss.tradeoff(ball, "impostors", knobs={"octree_depth": []})
     with pytest.raises(ss.InputError, match="executor"):
         ss.tradeoff(ball, "impostors", knobs=KNOBS, camera=CAM, executor=object(), progress=False)

@@ -195,8 +195,8 @@ def test_lines_from_the_wrong_side_mark_nothing(turtles):
 
 def test_jittered_rays_are_seeded():
     scene = sphere_scene(2)
-    a = ss.discretize(scene, method="visibility_field", uv=(4, 4), st=(4, 4), seed=3)
-    b = ss.discretize(scene, method="visibility_field", uv=(4, 4), st=(4, 4), seed=3)
+    a = ss.discretize(scene, method="visibility_field", uv=(4, 4), st=(4, 4), jitter=True, seed=3)
+    b = ss.discretize(scene, method="visibility_field", uv=(4, 4), st=(4, 4), jitter=True, seed=3)
     np.testing.assert_array_equal(a.ids, b.ids)
 
 

@@ -13,7 +13,7 @@ Conventions (shared by every function):
 
 from __future__ import annotations
 
-from . import errors, plot, references, scenes
+from . import errors, methods, plot, references, scenes
 from ._api import device_info, discretize, reconstruct
 from ._core import Camera
 from ._core import __version__ as __version__
@@ -78,6 +78,7 @@ __all__ = [
     "errors",
     "evaluate",
     "intermediate_cameras",
+    "methods",
     "occluded",
     "omni_shadows",
     "plan",

@@ -245,7 +245,7 @@ def _geometry_error(
 ) -> dict[str, Any]:
     import time
 
-    from ._api import discretize
+    from ._depth import conventional
 
     if not isinstance(mesh, Mesh):
         raise InputError(f"metric='geometry' measures a Mesh, got {type(mesh).__name__}")
@@ -257,9 +257,9 @@ def _geometry_error(
         raise InputError(f"tolerance must be a non-negative number, got {tolerance!r}")
     start = time.perf_counter()
     cams = list(cameras)
-    truth = discretize(scene, cams)
+    truth = conventional(scene, cams)
     if len(mesh.faces):
-        rebuilt = discretize(mesh.to_scene(), cams)
+        rebuilt = conventional(mesh.to_scene(), cams)
         dm = rebuilt.depth.astype(np.float64)
     else:
         dm = np.full(truth.depth.shape, np.inf)

@@ -12,7 +12,9 @@ from typing import Any, Optional, Union
 import numpy as np
 
 from . import _core
+from ._depth import conventional
 from ._progress import Bar
+from ._rays import cast_rays
 from ._scene import Scene
 from .errors import InputError
 from .results import DepthImages
@@ -195,10 +197,46 @@ def visibility_field(
     grid: Any = (16, 16, 16),
     ids_per_sample: int = 1,
     supersample: int = 3,
-    seed: Optional[int] = None,
+    jitter: bool = False,
+    seed: int = 0,
     progress: Optional[bool] = None,
 ) -> Union[VisibilityField, list[VisibilityField]]:
-    """See :func:`scenesample.discretize` (``method="visibility_field"``)."""
+    """The visibility field (visibility-field.txt §3): for every sample (iu, iv, is, it) of the
+    slab, ``supersample^4`` BVH rays from its uv cell to its st cell; the ``ids_per_sample``
+    cells hit most often are kept (§3.3).
+
+    Parameters
+    ----------
+    scene : Scene
+    slab : Slab or list of Slab, optional
+        The two-plane parameterization (default :meth:`Slab.around`: planes before and beyond
+        the scene's bounds along their longest axis). Several slabs give one field each (a
+        list), sharing the cells.
+    uv, st : (int, int)
+        Samples on each plane (default 16 x 16).
+    grid : (int, int, int) or "scene"
+        Cells along x, y, z of each object's bounding box (objects: the scene's meshes/nodes,
+        or its connected components when it has one object); ``"scene"``: one 16^3 grid over
+        the whole scene. A triangle belongs to the cell holding its centroid.
+    ids_per_sample : int
+        Cell ids kept per sample (the most frequent).
+    supersample : int
+        Rays per axis of each plane's sample cell (3: 3 x 3 on each plane, 81 rays per sample,
+        §3.3), at sub-cell centres (the paper's regular grid).
+    jitter : bool
+        Jitter each ray within its sub-cell instead (off by default).
+    seed : int
+        Seeds the jitter (any non-negative integer, 0 included); unused without ``jitter``.
+    progress : bool, optional
+        A tqdm bar over the slab samples when tqdm is installed. None (default): only once the
+        work has run for 2 s; True: at once; False: never. Ctrl-C stops it within half a
+        second (``KeyboardInterrupt``).
+
+    Returns
+    -------
+    VisibilityField or list of VisibilityField
+        One per slab (a list when ``slab`` is a list).
+    """
     if not isinstance(scene, Scene):
         raise InputError(f"scene must be a scenesample.Scene, got {type(scene).__name__}")
     if scene.triangle_count == 0:
@@ -228,10 +266,10 @@ def visibility_field(
     for name, val in (("ids_per_sample", ids_per_sample), ("supersample", supersample)):
         if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < 1:
             raise InputError(f"{name} must be a positive integer, got {val!r}")
-    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, (int, np.integer))):
-        raise InputError(f"seed must be None or a non-negative integer, got {seed!r}")
-    if seed is not None and seed < 0:
-        raise InputError(f"seed must be None or a non-negative integer, got {seed!r}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise InputError(f"seed must be a non-negative integer, got {seed!r}")
+    if not isinstance(jitter, (bool, np.bool_)):
+        raise InputError(f"jitter must be True or False, got {jitter!r}")
     start = time.perf_counter()
     with Bar(progress, "visibility field", "samples") as bar:
         d = _core.visibility_field(
@@ -243,7 +281,7 @@ def visibility_field(
             grouping,
             int(ids_per_sample),
             int(supersample),
-            None if seed is None else int(seed),
+            int(seed) if jitter else None,
             bar.callback,
         )
     cells = np.zeros(len(d["cells"]), dtype=CELL_DTYPE)
@@ -289,7 +327,31 @@ def field_view(
     interpolate: str = "none",
     subsample: int = 1,
 ) -> FieldView:
-    """See :func:`scenesample.reconstruct` (a :class:`VisibilityField`)."""
+    """Render ``camera``'s view from a visibility field (visibility-field.txt §4, Fig. 4).
+
+    One pixel in every ``subsample x subsample`` block (the block's middle pixel) gives a line;
+    where it crosses the slab's uv and st rectangles gives (u, v, s, t); the cells stored at
+    that sample are marked (``interpolate="uv"``: also the 2 x 2 samples around (u, v);
+    ``"st"``: around (s, t); ``"uv+st"``: the 16 around both, §4.1). A pixel whose line misses
+    either rectangle, runs parallel to a plane, or crosses st before uv marks nothing. Then only
+    the marked cells' triangles are rasterized on the GPU (faces are kept sorted by cell: one
+    draw per run of marked cells).
+
+    Parameters
+    ----------
+    field_ : VisibilityField or list of VisibilityField
+        One, or the list one ``discretize`` call made (one per slab, sharing the cells).
+    camera : Camera
+    interpolate : {"none", "uv", "st", "uv+st"}
+    subsample : int
+        Side of the pixel blocks that share one line (>= 1).
+
+    Returns
+    -------
+    FieldView
+        ``marked`` (C,) bool, ``image`` a :class:`DepthImages`, ``stats``, ``timings``
+        (``resample``, ``render``, ``total``).
+    """
     fs = [field_] if isinstance(field_, VisibilityField) else list(field_)
     if not fs or not all(isinstance(f, VisibilityField) for f in fs):
         raise InputError("reconstruct needs a VisibilityField or a list of them")
@@ -338,8 +400,6 @@ def field_view(
 
 def cells_metric(view: FieldView, scene: Scene, camera: Optional[Camera] = None) -> dict[str, Any]:
     """``evaluate(view, scene, "cells")``: see :func:`scenesample.evaluate`."""
-    from ._api import discretize
-    from ._rays import cast_rays
 
     if not isinstance(view, FieldView):
         raise InputError(f"metric='cells' measures a FieldView, got {type(view).__name__}")
@@ -358,7 +418,7 @@ def cells_metric(view: FieldView, scene: Scene, camera: Optional[Camera] = None)
 
     # 1. Z-buffer of all geometry.
     t = time.perf_counter()
-    truth = discretize(scene, cam)
+    truth = conventional(scene, cam)
     t_all = time.perf_counter() - t
     tri = truth.triangle[0]
     seen = tri >= 0

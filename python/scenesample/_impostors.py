@@ -58,7 +58,7 @@ class Impostors:
     cell_triangles : tuple of ((C + 1,) uint32 offsets, (F,) uint32 triangle ids)
         The triangles that draw each cell as geometry (each triangle in the cell of its
         centroid), CSR.
-    resolution, projection, fov, grow, depth_levels
+    resolution, projection, fov, grow, octree_depth
         The settings used.
     stats : dict
         ``cells``, ``views`` (D), ``rays``, ``bytes_raw`` (the cropped texels: 4 bytes of
@@ -80,7 +80,7 @@ class Impostors:
     projection: str
     fov: Optional[float]
     grow: bool
-    depth_levels: int
+    octree_depth: int
     stats: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
     _handle: Any = None
@@ -164,7 +164,7 @@ class ImpostorView:
 def impostors(
     scene: Scene,
     *,
-    depth: int = 4,
+    octree_depth: int = 4,
     subdivisions: int = 2,
     resolution: int = 128,
     projection: str = "orthographic",
@@ -172,7 +172,35 @@ def impostors(
     grow: bool = True,
     progress: Optional[bool] = None,
 ) -> Impostors:
-    """See :func:`scenesample.discretize` (``method="impostors"``)."""
+    """Multi-cell orthographic impostors (multi-cell-orthographic-impostors.txt §3.1): per
+    non-empty octree cell and icosahedron direction, a ``resolution``² image of the cell
+    ray-cast on the CPU through a BVH of the cell's triangles, lit view-independently (base
+    colour x (0.3 + 0.7 |n . L|), L fixed), cropped to its content.
+
+    Parameters
+    ----------
+    scene : Scene
+    octree_depth : int
+        Octree levels below the root: leaves are 2**octree_depth per axis of the cubic bounds
+        (empty ones skipped); 0 is a single cell.
+    subdivisions : int
+        Icosahedron subdivisions: 20 * 4**s views per cell (320 for 2).
+    resolution : int
+        Image side in pixels (default 128).
+    projection : {"orthographic", "perspective"}
+        The paper's orthographic images, or perspective ones (camera at radius / sin(fov / 2)).
+    fov : float, optional
+        For ``"perspective"``: the field of view in radians.
+    grow : bool
+        Cell growing (§4.3): each cell's images show every triangle that intersects its bounding
+        sphere; without it only the geometry inside the cell, rays clipped to its box.
+    progress : bool, optional
+        A tqdm bar over the cells (see :func:`visibility_field`).
+
+    Returns
+    -------
+    Impostors
+    """
     import time
 
     if not isinstance(scene, Scene):
@@ -190,7 +218,7 @@ def impostors(
     with Bar(progress, "impostors", "cells") as bar:
         handle, d = _core.impostors(
             scene._core,
-            check_integer("depth", depth, 0),
+            check_integer("octree_depth", octree_depth, 0),
             check_integer("subdivisions", subdivisions, 0),
             check_integer("resolution", resolution),
             projection,
@@ -223,7 +251,7 @@ def impostors(
         projection=projection,
         fov=fov,
         grow=bool(grow),
-        depth_levels=int(depth),
+        octree_depth=int(octree_depth),
         stats={
             "cells": c,
             "views": len(d["directions"]),
@@ -263,7 +291,31 @@ def impostor_view(
     scene: Optional[Scene] = None,
     screen_threshold: float = 0.0,
 ) -> ImpostorView:
-    """See :func:`scenesample.reconstruct` (an :class:`Impostors`)."""
+    """Draw ``camera``'s view from impostors (multi-cell-orthographic-impostors.txt §3.2).
+
+    Cells whose sphere (and triangles) lie outside the view are culled; the rest, nearest
+    first, are drawn as triangles (GPU, lit like the impostors) while their triangles fit in
+    ``triangle_budget`` and their sphere spans at least ``screen_threshold`` pixels; every other
+    cell as the impostor whose direction makes the smallest angle with the direction from the
+    cell to the eye, a billboard through the cell's centre, depth-tested, with no per-pixel
+    correction.
+
+    Parameters
+    ----------
+    imp : Impostors
+    camera : Camera
+    triangle_budget : int, optional
+        Triangles that may be drawn as geometry (0: none; ``None``: no limit). Needs ``scene``
+        when not 0.
+    scene : Scene, optional
+        The scene the impostors were built from, for the cells drawn as triangles.
+    screen_threshold : float
+        Smallest projected sphere diameter, in pixels, of a cell drawn as triangles.
+
+    Returns
+    -------
+    ImpostorView
+    """
     if not isinstance(camera, Camera):
         raise InputError(f"camera must be a scenesample.Camera, got {type(camera).__name__}")
     budget: Optional[int]

@@ -8,17 +8,11 @@ from typing import Any, Optional
 import numpy as np
 
 from . import _core
-from ._scene import Scene
-from .errors import InputError, check_integer
+from ._scene import Scene, core_of
+from .errors import check_integer
 from .results import RayHits
 
 __all__ = ["cast_rays", "occluded", "bvh_stats"]
-
-
-def _scene_core(scene: Any) -> _core.Scene:
-    if isinstance(scene, Scene):
-        return scene._core
-    raise InputError(f"scene must be a scenesample.Scene, got {type(scene).__name__}")
 
 
 def _rows(a: Any) -> np.ndarray:
@@ -81,7 +75,7 @@ def cast_rays(
     """
     k = check_integer("max_hits", max_hits)
     r = _core.cast_rays(
-        _scene_core(scene),
+        core_of(scene),
         _rows(origins),
         _rows(directions),
         float(t_min),
@@ -123,7 +117,7 @@ def occluded(
         True where the ray hits a triangle in range.
     """
     r = _core.occluded(
-        _scene_core(scene),
+        core_of(scene),
         _rows(origins),
         _rows(directions),
         float(t_min),
@@ -144,4 +138,4 @@ def bvh_stats(scene: Scene) -> dict[str, Any]:
         ``depth``, ``sah`` (surface area heuristic cost relative to the root, Embree's measure)
         and ``build_seconds``.
     """
-    return dict(_core.bvh_stats(_scene_core(scene)))
+    return dict(_core.bvh_stats(core_of(scene)))

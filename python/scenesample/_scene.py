@@ -11,7 +11,7 @@ from typing import Any, Optional
 import numpy as np
 
 from . import _core
-from .errors import SceneFileError, SceneWarning
+from .errors import InputError, SceneFileError, SceneWarning
 
 __all__ = ["Scene"]
 
@@ -301,3 +301,10 @@ def _vertex_colors(mesh: Any) -> np.ndarray:
         # sRGB-encoded 8-bit colours to linear, like glTF base colours.
         return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
     return np.ones((n, 3))
+
+
+def core_of(scene: Any) -> _core.Scene:
+    """The Rust scene behind ``scene``; :class:`InputError` when it is not a :class:`Scene`."""
+    if isinstance(scene, Scene):
+        return scene._core
+    raise InputError(f"scene must be a scenesample.Scene, got {type(scene).__name__}")

@@ -42,7 +42,7 @@ KNOBS: dict[str, dict[str, list]] = {
         "resolution": [8, 16],
     },
     "impostors": {
-        "depth": [0, 1, 2],
+        "octree_depth": [0, 1, 2],
         "resolution": [16, 32, 64],
     },
 }
@@ -206,7 +206,7 @@ def _run(kind: str, scene: Scene, cam_state: tuple, light: Any, ref: Any, settin
         imp = ss.discretize(
             scene,
             method="impostors",
-            depth=int(settings.get("depth", 2)),
+            octree_depth=int(settings.get("octree_depth", 2)),
             resolution=int(settings.get("resolution", 32)),
             subdivisions=int(settings.get("subdivisions", 2)),
         )

@@ -60,13 +60,13 @@ def camera(scene: ss.Scene, up: Any, distance: float, size: int) -> Any:
 def variants(args: Any) -> dict[str, dict[str, Any]]:
     kw = dict(subdivisions=args.subdivisions, resolution=args.resolution)
     out = {
-        "single cell": dict(depth=0, **kw),
-        f"multi-cell (depth {args.depth})": dict(depth=args.depth, **kw),
-        "multi-cell, no growing": dict(depth=args.depth, grow=False, **kw),
+        "single cell": dict(octree_depth=0, **kw),
+        f"multi-cell (depth {args.depth})": dict(octree_depth=args.depth, **kw),
+        "multi-cell, no growing": dict(octree_depth=args.depth, grow=False, **kw),
     }
     for deg in (40, 60, 90):
         out[f"perspective {deg}"] = dict(
-            depth=args.depth, projection="perspective", fov=float(np.radians(deg)), **kw
+            octree_depth=args.depth, projection="perspective", fov=float(np.radians(deg)), **kw
         )
     return out
 
@@ -104,7 +104,7 @@ def run_scene(name: str, args: Any, out: Path) -> tuple[list[dict], list[dict]]:
         imp = ss.discretize(
             scene,
             method="impostors",
-            depth=depth,
+            octree_depth=depth,
             subdivisions=args.subdivisions,
             resolution=args.resolution,
         )
