@@ -2,19 +2,45 @@
 
 from __future__ import annotations
 
+import time
 from collections.abc import Sequence
 from typing import Any, Optional
 
 import numpy as np
 
 from . import _core
+from ._depth import conventional
+from ._field import FieldView, cells_metric
+from ._images import image_metrics, impostor_metrics, is_image_like, reflection_metrics
+from ._impostors import ImpostorView
+from ._omni import OmniShadowResult
+from ._reflections import ReflectionResult
 from ._scene import Scene
+from ._shadows import ShadowResult
 from .errors import InputError
 from .results import DepthImages, Mesh
 
 __all__ = ["evaluate", "intermediate_cameras"]
 
-METRICS = ("sampling", "shadow", "geometry", "image", "cells")
+METRICS = ("sampling", "shadow", "geometry", "image", "reflection", "impostor", "cells")
+
+
+def default_metric(result: Any, reference: Any) -> str:
+    """The metric ``evaluate`` uses when none is given: against a :class:`Scene`, the one the
+    result's type calls for (``DepthImages`` -> ``"sampling"``, ``Mesh`` -> ``"geometry"``,
+    ``FieldView`` -> ``"cells"``); between two shadow results ``"shadow"``; between two impostor
+    views ``"impostor"``; a reflection result against one with reflective pixels
+    ``"reflection"``; any other pair of images ``"image"``."""
+    if isinstance(reference, Scene) or reference is None:
+        return {Mesh: "geometry", FieldView: "cells"}.get(type(result), "sampling")
+    shadows = (ShadowResult, OmniShadowResult)
+    if isinstance(result, shadows) and isinstance(reference, shadows):
+        return "shadow"
+    if isinstance(result, ImpostorView) and isinstance(reference, ImpostorView):
+        return "impostor"
+    if isinstance(result, ReflectionResult) and hasattr(reference, "reflective"):
+        return "reflection"
+    return "image"
 
 
 def intermediate_cameras(region: Sequence[Any], count: int, seed: int = 0) -> list[Any]:
@@ -59,24 +85,34 @@ def evaluate(
     tolerance: float = 0.01,
     camera: Optional[Any] = None,
 ) -> dict[str, Any]:
-    """Measure a result's accuracy. The metric defaults from the first argument's type:
-    ``DepthImages`` -> ``"sampling"``, ``ShadowResult`` and ``OmniShadowResult`` ->
-    ``"shadow"``, ``Mesh`` -> ``"geometry"``, ``ReflectionResult`` -> ``"image"``.
+    """Measure a result's accuracy against a reference or the scene. Without ``metric``, it
+    follows from the two arguments (see :func:`default_metric`): ``DepthImages`` + Scene ->
+    ``"sampling"``, ``Mesh`` + Scene -> ``"geometry"``, ``FieldView`` + Scene -> ``"cells"``,
+    two shadow results -> ``"shadow"``, two ``ImpostorView`` -> ``"impostor"``, a
+    ``ReflectionResult`` against one -> ``"reflection"``, any other two images -> ``"image"``.
 
-    ``evaluate(result, reference, "image")`` compares two images (``ReflectionResult`` or
-    (H, W, 3) arrays, linear RGB) on the 0-255 scale of their 8-bit sRGB display
-    (eye-based-point-rendering.txt §4.2): ``rmse``, ``psnr``, ``max_abs`` over all pixels, the
-    same with ``_reflective`` over the reference's reflective pixels, and that ``mask``. The
-    reflections' reference is :func:`scenesample.reflection_reference` (MVR at 4x, downsampled).
+    ``evaluate(result, reference, "image")``: any image-like result (``DepthImages`` (their
+    base colour), ``ImpostorView``, ``ReflectionResult``, ``Frame``, ``ShadowResult`` and
+    ``OmniShadowResult`` (their visible fraction as grey), or an (H, W, 3) / (H, W) array of
+    linear values) against any other of the same size, on the 0-255 scale of their 8-bit sRGB
+    display (eye-based-point-rendering.txt §4.2). Always the same keys: ``rmse``, ``psnr``,
+    ``max_abs`` (over all pixels), ``pixel_error`` (the sum over pixels of |dR| + |dG| + |dB|,
+    the p_diff of multi-cell-orthographic-impostors.txt §5) and ``coverage_difference`` (the
+    fraction of pixels where one has a surface and the other none; arrays cover every pixel).
 
-    ``evaluate(view, reference, "image")`` with two :class:`ImpostorView` (the reference
-    typically ``ImpostorView.of_triangles(scene, camera)``) compares their 8-bit colours
-    (multi-cell-orthographic-impostors.txt §5): ``pixel_error`` (the paper's p_diff: the sum
-    over pixels of |dR| + |dG| + |dB|), ``error_per_foreground_pixel`` (divided by the area of
-    the reference's foreground bounding rectangle, Fig. 2), ``gap_pixels`` and ``gap_mask``
-    (background showing through inside the reference's silhouette, i.e. at foreground pixels
-    whose four neighbours are foreground too: the "black line" artifact, not a one-pixel
-    misfit of the outline), ``rmse`` and ``foreground_rect``.
+    ``evaluate(result, reference, "reflection")``: the image metrics, and ``rmse_reflective``,
+    ``psnr_reflective``, ``max_abs_reflective`` over the reference's reflective pixels, with
+    that ``mask``. The reflections' reference is :func:`scenesample.reflection_reference` (MVR
+    at 4x, downsampled).
+
+    ``evaluate(view, reference, "impostor")`` with two :class:`ImpostorView` (the reference
+    typically ``ImpostorView.of_triangles(scene, camera)``): the paper's figures
+    (multi-cell-orthographic-impostors.txt §5) on the 8-bit colours the views store (linear x
+    255, no display encoding): ``pixel_error`` (p_diff), ``error_per_foreground_pixel``
+    (divided by the area of the reference's foreground bounding rectangle, Fig. 2),
+    ``gap_pixels`` and ``gap_mask`` (background showing through inside the reference's
+    silhouette, i.e. at foreground pixels whose four neighbours are foreground too: the "black
+    line" artifact, not a one-pixel misfit of the outline), ``rmse`` and ``foreground_rect``.
 
     ``evaluate(shadows, reference, "shadow")`` compares two :class:`ShadowResult` (or two
     :class:`OmniShadowResult`) of one view and one set of light samples
@@ -153,27 +189,22 @@ def evaluate(
     InputError
         Unknown metric or redundancy, images without reference cameras, bad ``intermediate``.
     """
-    from ._field import FieldView, cells_metric
-    from ._impostors import ImpostorView, image_error
-    from ._omni import OmniShadowResult
-    from ._reflections import ReflectionResult, image_metrics
-    from ._shadows import ShadowResult
-
     if metric is None:
-        metric = {
-            ShadowResult: "shadow",
-            OmniShadowResult: "shadow",
-            Mesh: "geometry",
-            ReflectionResult: "image",
-            FieldView: "cells",
-            ImpostorView: "image",
-        }.get(type(images), "sampling")
+        metric = default_metric(images, scene)
     if metric not in METRICS:
         raise InputError(f"metric must be one of {list(METRICS)}, got {metric!r}")
-    if metric == "image" and isinstance(images, ImpostorView):
-        return image_error(images, scene)
-    if metric == "image":
-        return image_metrics(images, scene)
+    if metric in ("image", "reflection", "impostor"):
+        for name, v in (("result", images), ("reference", scene)):
+            if isinstance(v, Scene) or not is_image_like(v):
+                raise InputError(
+                    f"metric={metric!r} compares two image-like results; the {name} is "
+                    f"{type(v).__name__}"
+                )
+        return {
+            "image": image_metrics,
+            "reflection": reflection_metrics,
+            "impostor": impostor_metrics,
+        }[metric](images, scene)
     if metric == "shadow":
         return _shadow_error(images, scene)
     if metric == "cells":
@@ -210,9 +241,6 @@ def evaluate(
 
 
 def _shadow_error(result: Any, reference: Any) -> dict[str, Any]:
-    from ._omni import OmniShadowResult
-    from ._shadows import ShadowResult
-
     kinds = (ShadowResult, OmniShadowResult)
     for name, r in (("result", result), ("reference", reference)):
         if not isinstance(r, kinds):
@@ -243,10 +271,6 @@ def _shadow_error(result: Any, reference: Any) -> dict[str, Any]:
 def _geometry_error(
     mesh: Any, scene: Any, cameras: Optional[Sequence[Any]], tolerance: float
 ) -> dict[str, Any]:
-    import time
-
-    from ._depth import conventional
-
     if not isinstance(mesh, Mesh):
         raise InputError(f"metric='geometry' measures a Mesh, got {type(mesh).__name__}")
     if not isinstance(scene, Scene):

@@ -15,6 +15,7 @@ from . import _core
 from ._progress import Bar
 from ._scene import Scene
 from .errors import InputError, check_integer
+from .imageio import linear_to_srgb
 
 __all__ = ["Impostors", "ImpostorView", "PROJECTIONS"]
 
@@ -149,9 +150,7 @@ class ImpostorView:
 
     def to_srgb8(self) -> np.ndarray:
         """(H, W, 3) uint8 for display."""
-        from ._reflections import to_srgb8
-
-        return to_srgb8(self.color)
+        return linear_to_srgb(self.color)
 
     def __repr__(self) -> str:
         h, w = self.depth.shape
@@ -345,41 +344,3 @@ def impostor_view(
         stats={k: int(v) for k, v in d["stats"].items()},
         timings=dict(d["timings"]),
     )
-
-
-def image_error(view: Any, reference: Any) -> dict[str, Any]:
-    """``evaluate(view, reference, "image")`` for impostor views: see
-    :func:`scenesample.evaluate`."""
-    for name, v in (("view", view), ("reference", reference)):
-        if not isinstance(v, ImpostorView):
-            raise InputError(f"{name} must be an ImpostorView, got {type(v).__name__}")
-    if view.color.shape != reference.color.shape:
-        raise InputError(f"images differ in shape: {view.color.shape} vs {reference.color.shape}")
-    a = np.round(np.clip(view.color, 0, 1) * 255).astype(np.int64)
-    b = np.round(np.clip(reference.color, 0, 1) * 255).astype(np.int64)
-    diff = np.abs(a - b)
-    p_diff = int(diff.sum())
-    fg = reference.mask
-    if fg.any():
-        ys, xs = np.nonzero(fg)
-        rect = (ys.max() - ys.min() + 1) * (xs.max() - xs.min() + 1)
-    else:
-        rect = 0
-    # Inside the silhouette: foreground pixels whose four neighbours are foreground too (a
-    # one-pixel misfit of the outline is resampling, not the inter-cell "black line").
-    inner = fg.copy()
-    inner[1:] &= fg[:-1]
-    inner[:-1] &= fg[1:]
-    inner[:, 1:] &= fg[:, :-1]
-    inner[:, :-1] &= fg[:, 1:]
-    inner[[0, -1], :] = False
-    inner[:, [0, -1]] = False
-    gaps = inner & ~view.mask
-    return {
-        "pixel_error": p_diff,
-        "error_per_foreground_pixel": float(p_diff / rect) if rect else float("nan"),
-        "gap_pixels": int(gaps.sum()),
-        "gap_mask": gaps,
-        "rmse": float(np.sqrt(np.mean(diff.astype(np.float64) ** 2))),
-        "foreground_rect": int(rect),
-    }

@@ -16,6 +16,7 @@ from ._epr import reflectors_of
 from ._scene import Scene
 from ._shadows import AreaLight
 from .errors import InputError
+from .imageio import linear_to_srgb
 
 __all__ = ["Effect", "Frame", "plan", "render", "QUALITY", "THROUGHPUT"]
 
@@ -119,6 +120,8 @@ class Frame:
         ReflectionResult.
     plan : list of Effect
         The effects that ran.
+    mask : (H, W) bool
+        Pixels that see a surface.
     stats : dict
         ``effects_run``, ``reflectors``, ``lights``, the operations counted while rendering
         (``cube_maps``, ``splat_passes``, ``shadow_views``, ``rays_cast``), and per effect
@@ -130,13 +133,12 @@ class Frame:
     image: np.ndarray
     effects: dict
     plan: list
+    mask: np.ndarray
     stats: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
 
     def to_srgb8(self) -> np.ndarray:
-        from ._reflections import to_srgb8
-
-        return to_srgb8(self.image)
+        return linear_to_srgb(self.image)
 
     def __repr__(self) -> str:
         h, w, _ = self.image.shape
@@ -475,6 +477,7 @@ def render(
         image=image.astype(np.float32),
         effects=results,
         plan=chosen,
+        mask=mask,
         stats=stats,
         timings=timings,
     )

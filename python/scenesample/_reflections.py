@@ -18,6 +18,7 @@ from ._epr import (
 )
 from ._scene import Scene
 from .errors import InputError
+from .imageio import linear_to_srgb
 
 Camera = _core.Camera
 REFLECTION_METHODS = ("epr", "mvr", "ivir")
@@ -65,13 +66,7 @@ class ReflectionResult:
     def to_srgb8(self) -> np.ndarray:
         """(H, W, 3) uint8: clamped to [0, 1] and sRGB encoded, for display and for the image
         metric."""
-        return to_srgb8(self.image)
-
-
-def to_srgb8(linear: np.ndarray) -> np.ndarray:
-    x = np.clip(np.asarray(linear, dtype=np.float64), 0.0, 1.0)
-    s = np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
-    return np.round(s * 255).astype(np.uint8)
+        return linear_to_srgb(self.image)
 
 
 def reflections(
@@ -176,46 +171,3 @@ def reflection_reference(
     refl_px = r.reflective.reshape(h, factor, w, factor).mean(axis=(1, 3)) >= 0.5
     timings = dict(r.timings)
     return ReflectionResult(img, refl_px, f"mvr x{factor}", r.resolutions, dict(r.stats), timings)
-
-
-def image_metrics(subject: Any, reference: Any) -> dict[str, Any]:
-    """RMSE, PSNR and max |difference| of two images on the 0-255 scale of their 8-bit sRGB
-    display (§4.2), over all pixels and over the reference's reflective pixels."""
-    a = _image_of(subject, "subject")
-    b = _image_of(reference, "reference")
-    if a.shape != b.shape:
-        raise InputError(f"images differ in shape: {a.shape} vs {b.shape}")
-    diff = to_srgb8(a).astype(np.float64) - to_srgb8(b).astype(np.float64)
-    mask = getattr(reference, "reflective", None)
-    if mask is None:
-        mask = np.ones(a.shape[:2], dtype=bool)
-
-    def stats(sel: np.ndarray) -> tuple[float, float, float]:
-        d = diff[sel]
-        if d.size == 0:
-            return float("nan"), float("nan"), float("nan")
-        mse = float(np.mean(d**2))
-        rmse = mse**0.5
-        psnr = float("inf") if mse == 0 else 10 * np.log10(255.0**2 / mse)
-        return rmse, psnr, float(np.abs(d).max())
-
-    everywhere = np.ones(a.shape[:2], dtype=bool)
-    rmse, psnr, mx = stats(everywhere)
-    rr, rp, rm = stats(np.asarray(mask, dtype=bool))
-    return {
-        "rmse": rmse,
-        "psnr": psnr,
-        "max_abs": mx,
-        "rmse_reflective": rr,
-        "psnr_reflective": rp,
-        "max_abs_reflective": rm,
-        "mask": np.asarray(mask, dtype=bool),
-    }
-
-
-def _image_of(x: Any, name: str) -> np.ndarray:
-    img = getattr(x, "image", x)
-    arr = np.asarray(img, dtype=np.float32)
-    if arr.ndim != 3 or arr.shape[2] != 3:
-        raise InputError(f"{name} must be an (H, W, 3) image or have one, got {arr.shape}")
-    return arr

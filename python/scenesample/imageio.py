@@ -34,7 +34,9 @@ def _u8(x: np.ndarray) -> np.ndarray:
 
 
 def linear_to_srgb(rgb: np.ndarray) -> np.ndarray:
-    """(..., 3) linear colour -> (..., 3) uint8 sRGB."""
+    """(..., 3) linear colour -> (..., 3) uint8 sRGB: NaN as 0, clamped to [0, 1], the sRGB
+    transfer curve, rounded half up. The package's one display encoder: every ``to_srgb8`` and
+    every image metric goes through it."""
     c = np.clip(np.nan_to_num(rgb), 0.0, 1.0)
     return _u8(np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055))
 
