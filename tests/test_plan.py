@@ -153,3 +153,23 @@ def test_bad_input_is_refused():
         ss.render(room(), "eye")
     with pytest.raises(ss.InputError, match="light type"):
         room(lights=[{"type": "laser", "position": [0, 0, 1]}])
+
+
+def test_stats_are_per_call_when_two_renders_run_at_once():
+    """Each frame reports what its own call ran, not process-wide counter differences."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    mirrored, lit = room(mirror_sphere=True), room(lights=[POINT])
+    alone = {
+        "mirrored": ss.render(mirrored, EYE, quality="fast").stats,
+        "lit": ss.render(lit, EYE, quality="fast").stats,
+    }
+    keys = ("cube_maps", "splat_passes", "shadow_views", "rays_cast")
+    with ThreadPoolExecutor(2) as pool:
+        for _ in range(2):
+            a = pool.submit(ss.render, mirrored, EYE, quality="fast")
+            b = pool.submit(ss.render, lit, EYE, quality="fast")
+            for name, f in (("mirrored", a), ("lit", b)):
+                got = f.result().stats
+                assert {k: got[k] for k in keys} == {k: alone[name][k] for k in keys}, name
+    assert alone["mirrored"]["shadow_views"] == 0 and alone["lit"]["cube_maps"] == 0

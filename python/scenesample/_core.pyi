@@ -13,7 +13,6 @@ __all__ = [
     "Scene",
     "bvh_stats",
     "cast_rays",
-    "counters",
     "default_slab",
     "device_info",
     "discretize_conventional",
@@ -363,7 +362,6 @@ def occluded(
 ) -> dict[str, Any]: ...
 def bvh_stats(scene: Scene) -> dict[str, Any]: ...
 def device_info() -> dict[str, Any]: ...
-def counters() -> dict[str, int]: ...
 def write_exr(
     path: _Path,
     width: int,

@@ -275,6 +275,8 @@ class SplatBuffers:
         Its index into the points, -1 where empty.
     cameras : list of Camera
     timings : dict of str to float
+    stats : dict of str to int
+        ``cube_maps``, ``splat_passes``, ``shadow_views``, ``rays_cast``: what this call ran.
     """
 
     packed: np.ndarray
@@ -282,6 +284,7 @@ class SplatBuffers:
     index: np.ndarray
     cameras: list
     timings: dict
+    stats: dict = field(default_factory=dict)
 
     def __repr__(self) -> str:
         v, h, w = self.index.shape
@@ -434,4 +437,6 @@ def splat(
         cams,
         bool(clip_to_triangle),
     )
-    return SplatBuffers(d["packed"], d["depth"], d["index"], cams, dict(d["timings"]))
+    return SplatBuffers(
+        d["packed"], d["depth"], d["index"], cams, dict(d["timings"]), dict(d["ops"])
+    )

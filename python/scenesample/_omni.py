@@ -44,7 +44,8 @@ class OmniShadowResult:
         ``light_samples``, ``views`` (6 per sample), ``resolution``, ``receivers`` (eye pixels
         with a surface); EPR / iVIR add the point statistics of :class:`Points` (``points``,
         ``triangles_culled``, ...) and ``buffer_bytes`` (the splatted cube maps); MVR adds
-        ``triangles_drawn`` (the scene's triangles times the views).
+        ``triangles_drawn`` (the scene's triangles times the views); and ``cube_maps``,
+        ``splat_passes``, ``shadow_views``, ``rays_cast``: what this call ran.
     timings : dict of str to float
         Seconds: ``eye`` (the eye's depth image), ``resolution`` (Eq. 6), then ``points``,
         ``splat`` (GPU pass and readback; ``splat_gpu`` the pass alone) and ``test`` for EPR /
@@ -198,7 +199,7 @@ def omni_shadows(
         light_samples=d["light_samples"],
         method=method,
         resolution=int(d["resolution"]),
-        stats=dict(d["stats"]),
+        stats={**d["stats"], **d["ops"]},
         timings=dict(d["timings"]),
     )
 

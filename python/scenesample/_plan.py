@@ -338,6 +338,9 @@ def _select(planned: list[Effect], effects: Any) -> list[Effect]:
     return chosen
 
 
+OPS = ("cube_maps", "splat_passes", "shadow_views", "rays_cast")
+
+
 def render(
     scene: Scene,
     camera: Camera,
@@ -361,7 +364,6 @@ def render(
     total = time.perf_counter()
     planned = plan(scene, area_lights=area_lights, camera=camera, quality=quality)
     chosen = _select(planned, effects)
-    before = _core.counters()
     timings: dict[str, float] = {}
 
     t = time.perf_counter()
@@ -465,8 +467,12 @@ def render(
         image[refl_result.reflective] = refl_result.image[refl_result.reflective]
     timings["compose"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - total
-    after = _core.counters()
-    stats: dict[str, Any] = {k: int(after[k] - before[k]) for k in after}
+    # What this call ran: the sum of its effects' own counts (never process-wide differences,
+    # which other calls running at the same time would pollute).
+    stats: dict[str, Any] = {k: 0 for k in OPS}
+    for r in results.values():
+        for k in OPS:
+            stats[k] += int(r.stats.get(k, 0))
     stats["effects_run"] = len(chosen)
     stats["reflectors"] = sum(
         len(e.params["reflectors"]) for e in chosen if e.kind == "reflections"

@@ -40,7 +40,8 @@ class ReflectionResult:
     stats : dict of str to float
         ``points`` (EPR / iVIR), ``shading_ops`` (shading evaluations: EPR shades each
         looked-up texel once, MVR / iVIR every covered texel), ``offscreen_pixels``,
-        ``buffer_bytes``, ``reflective_pixels``.
+        ``buffer_bytes``, ``reflective_pixels``; ``cube_maps``, ``splat_passes``,
+        ``shadow_views``, ``rays_cast``: what this call ran.
     timings : dict of str to float
         ``eye`` (G-buffer), ``points``, ``views`` (splat or raster), ``shade`` (MVR / iVIR),
         ``deferred`` (the eye's lookups, and EPR's lazy shading), ``total``.
@@ -142,7 +143,7 @@ def reflections(
         int(seed),
     )
     return ReflectionResult(
-        d["image"], d["reflective"], method, res, dict(d["stats"]), dict(d["timings"])
+        d["image"], d["reflective"], method, res, {**d["stats"], **d["ops"]}, dict(d["timings"])
     )
 
 

@@ -101,6 +101,9 @@ class ShadowResult:
     occluder_triangles : int
         Triangles each shadow map drew (the reconstruction's, or the scene's for ``geometry``;
         0 for ``raytraced``).
+    stats : dict of str to int
+        ``cube_maps``, ``splat_passes``, ``shadow_views``, ``rays_cast``: what this call ran
+        (its own counts, whatever else runs at the same time).
     timings : dict of str to float
         Seconds: ``eye`` (the output image's surface points), ``discretize`` (step 1),
         ``reconstruct`` (step 2), ``shadow`` (steps 4-9, or the ray casts), ``total``.
@@ -112,6 +115,7 @@ class ShadowResult:
     discretization: str
     occluder_triangles: int
     timings: dict[str, float] = field(default_factory=dict)
+    stats: dict[str, int] = field(default_factory=dict)
 
     @property
     def samples(self) -> int:
@@ -215,4 +219,5 @@ def soft_shadows(
         int(sres),
         int(layers),
     )
-    return ShadowResult(**d, discretization=discretization)
+    ops = d.pop("ops")
+    return ShadowResult(**d, discretization=discretization, stats=dict(ops))

@@ -124,7 +124,7 @@ pub fn reflections(
     if reflectors.is_empty() {
         return input_err!("reflections need at least one reflector");
     }
-    crate::counters::add(&crate::counters::CUBE_MAPS, reflectors.len() as u64);
+    crate::counters::add(crate::counters::Op::CubeMaps, reflectors.len() as u64);
     if opts.resolutions.len() != reflectors.len() || opts.resolutions.contains(&0) {
         return input_err!(
             "one cube-map resolution (>= 1) per reflector: {} reflectors, resolutions {:?}",

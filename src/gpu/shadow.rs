@@ -181,7 +181,7 @@ pub fn visibility(
     normals: &[DVec3],
     diagonal: f64,
 ) -> Result<(Vec<u32>, ShadowStats)> {
-    crate::counters::add(&crate::counters::SHADOW_VIEWS, lights.len() as u64);
+    crate::counters::add(crate::counters::Op::ShadowViews, lights.len() as u64);
     let Some(first) = lights.first() else {
         return Ok((Vec::new(), ShadowStats::default()));
     };

@@ -132,7 +132,7 @@ pub fn splat(
     bounds: [[f32; 3]; 2],
     clip_to_triangle: bool,
 ) -> Result<(Vec<u64>, SplatStats)> {
-    crate::counters::add(&crate::counters::SPLAT_PASSES, 1);
+    crate::counters::add(crate::counters::Op::SplatPasses, 1);
     let needed = wgpu::Features::SHADER_INT64 | wgpu::Features::SHADER_INT64_ATOMIC_MIN_MAX;
     if !ctx.device.features().contains(needed) {
         return Err(Error::GpuUnavailable(format!(

@@ -83,7 +83,7 @@ pub fn reflections<'py>(
     };
     let s = scene.inner.clone();
     let cam = eye.inner.clone();
-    let r = super::run(py, || {
+    let (r, ops) = super::run_counted(py, || {
         crate::effects::reflections::reflections(&s, &cam, &refl, &opts)
     })?;
     let (h, w) = (r.height as usize, r.width as usize);
@@ -92,5 +92,6 @@ pub fn reflections<'py>(
     d.set_item("reflective", array(py, r.reflective, &[h, w])?)?;
     d.set_item("stats", named(py, r.stats)?)?;
     d.set_item("timings", named(py, r.timings)?)?;
+    super::set_ops(&d, ops)?;
     Ok(d)
 }

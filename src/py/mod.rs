@@ -35,6 +35,27 @@ pub(crate) fn run<T: Send>(
     run_with(py, None, work)
 }
 
+/// [`run`], also returning what the work did (`counters::tally`): cube maps, splat passes,
+/// shadow views and rays of this call only, whatever other calls run meanwhile.
+pub(crate) fn run_counted<T: Send>(
+    py: Python<'_>,
+    work: impl Fn() -> crate::error::Result<T> + Sync,
+) -> PyResult<(T, crate::counters::Ops)> {
+    run(py, || {
+        let (r, ops) = crate::counters::tally(&work);
+        r.map(|v| (v, ops))
+    })
+}
+
+/// `d["ops"]`: a call's operation counts (see [`run_counted`]).
+pub(crate) fn set_ops(d: &Bound<'_, pyo3::types::PyDict>, ops: crate::counters::Ops) -> PyResult<()> {
+    let o = pyo3::types::PyDict::new(d.py());
+    for (k, v) in ops.named() {
+        o.set_item(k, v)?;
+    }
+    d.set_item("ops", o)
+}
+
 /// [`run`], reporting the work's progress (`process::advance`) to `progress(done, total)`,
 /// a Python callable, from the calling thread at each poll and once at the end.
 pub(crate) fn run_with<T: Send>(
@@ -129,7 +150,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(impostors::render_lit, m)?)?;
     m.add_function(wrap_pyfunction!(impostors::impostor_directions, m)?)?;
     m.add_function(wrap_pyfunction!(render::device_info, m)?)?;
-    m.add_function(wrap_pyfunction!(render::counters, m)?)?;
     m.add_function(wrap_pyfunction!(render::write_exr, m)?)?;
     m.add_function(wrap_pyfunction!(render::read_exr, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

@@ -151,13 +151,3 @@ pub fn read_exr<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyDi
     let img = super::run(py, || crate::io::exr::read_depth_images(&path))?;
     images_dict(py, img)
 }
-
-/// The process-wide operation counters (see `counters`).
-#[pyfunction]
-pub fn counters(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
-    let d = PyDict::new(py);
-    for (k, v) in crate::counters::snapshot() {
-        d.set_item(k, v)?;
-    }
-    Ok(d)
-}

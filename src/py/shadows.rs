@@ -61,7 +61,7 @@ pub fn soft_shadows<'py>(
     };
     let s = scene.inner.clone();
     let cam = camera.inner.clone();
-    let r = super::run(py, || shadows::soft_shadows(&s, &cam, &light, &opts))?;
+    let (r, ops) = super::run_counted(py, || shadows::soft_shadows(&s, &cam, &light, &opts))?;
     let (h, w) = (r.height as usize, r.width as usize);
     let count = (samples.0 * samples.1) as usize;
     let d = PyDict::new(py);
@@ -70,6 +70,7 @@ pub fn soft_shadows<'py>(
     d.set_item("mask", array(py, r.mask, &[h, w])?)?;
     d.set_item("occluder_triangles", r.occluder_triangles)?;
     d.set_item("timings", named(py, r.timings)?)?;
+    super::set_ops(&d, ops)?;
     Ok(d)
 }
 
@@ -107,7 +108,7 @@ pub fn omni_shadows<'py>(
     let center = vec3(center, "light_center")?;
     let s = scene.inner.clone();
     let cam = eye.inner.clone();
-    let r = super::run(py, || {
+    let (r, ops) = super::run_counted(py, || {
         crate::effects::omni_shadows::omni_shadows(&s, &cam, center, radius, &opts)
     })?;
     let (h, w) = (r.height as usize, r.width as usize);
@@ -124,5 +125,6 @@ pub fn omni_shadows<'py>(
     d.set_item("resolution", r.resolution)?;
     d.set_item("stats", named(py, r.stats)?)?;
     d.set_item("timings", named(py, r.timings)?)?;
+    super::set_ops(&d, ops)?;
     Ok(d)
 }

@@ -165,7 +165,7 @@ pub fn splat<'py>(
     };
     let cams: Vec<_> = cameras.into_iter().map(|c| c.inner).collect();
     let s = scene.inner.clone();
-    let b = super::run(py, || {
+    let (b, ops) = super::run_counted(py, || {
         crate::splat::splat(&s, &points, &cams, clip_to_triangle)
     })?;
     let shape = [b.views, b.height as usize, b.width as usize];
@@ -174,5 +174,6 @@ pub fn splat<'py>(
     d.set_item("index", array(py, b.index(), &shape)?)?;
     d.set_item("packed", array(py, b.packed, &shape)?)?;
     d.set_item("timings", named(py, b.timings)?)?;
+    super::set_ops(&d, ops)?;
     Ok(d)
 }

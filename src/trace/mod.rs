@@ -297,7 +297,7 @@ fn prepare(
     q: &Query,
 ) -> Result<(Arc<Bvh>, f64)> {
     check_rays(origins, directions, q.t_min, q.t_max, q.threads)?;
-    crate::counters::add(&crate::counters::RAYS_CAST, origins.len() as u64);
+    crate::counters::add(crate::counters::Op::RaysCast, origins.len() as u64);
     if scene.triangle_count() >= MAX_TRIANGLES as usize {
         return input_err!(
             "cast_rays handles scenes of fewer than {MAX_TRIANGLES} triangles; this one has {}",
