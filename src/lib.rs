@@ -17,6 +17,7 @@ pub mod scene;
 pub mod shadows;
 pub mod splat;
 pub mod trace;
+pub mod types;
 
 #[cfg(feature = "python")]
 mod py;

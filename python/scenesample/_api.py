@@ -5,7 +5,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any, Literal, Union, overload
+from typing import Any, Literal, Union, overload
 
 from . import _core
 from ._depth import camera_list, offset_images
@@ -16,9 +16,6 @@ from ._scene import Scene
 from .errors import InputError
 from .methods import DISCRETIZE, RECONSTRUCT, check_options, field_view, impostor_view
 from .results import DepthImages, Mesh
-
-if TYPE_CHECKING:
-    from ._core import DeviceInfo
 
 __all__ = ["discretize", "reconstruct", "device_info", "offset_images"]
 
@@ -167,7 +164,7 @@ def reconstruct(
 _VIEWS = {"field_view": field_view, "impostor_view": impostor_view}
 
 
-def device_info() -> DeviceInfo:
+def device_info() -> dict[str, Any]:
     """The GPU adapter scenesample uses: ``name``, ``backend``, ``device_type``, ``driver``,
     ``timestamps`` (whether GPU timings are available) and the limits that bound requests.
 

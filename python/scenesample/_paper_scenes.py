@@ -13,6 +13,7 @@ from typing import Any, Optional
 
 import numpy as np
 
+from ._core import Camera
 from ._scene import Scene
 
 __all__ = ["grass", "urban", "bird_nest", "tree", "turtles", "reference_cameras", "PAPER_SCENES"]
@@ -300,8 +301,6 @@ def reference_cameras(
     triangle's centre 0.8 scene diagonals from the scene's centre, in front of it and 35 degrees
     above it (``up`` is ``"z"`` for these procedural scenes, ``"y"`` for glTF ones), its side
     ``spread`` diagonals, all looking at the centre."""
-    from ._core import Camera
-
     if up not in ("y", "z"):
         raise ValueError(f"up must be 'y' or 'z', got {up!r}")
     lo, hi = np.asarray(scene.bounds, dtype=np.float64)

@@ -12,9 +12,12 @@ from typing import Any, Optional, Union
 import numpy as np
 
 from . import _core
+from ._depth import conventional
 from ._epr import reflectors_of
+from ._omni import omni_shadows
+from ._reflections import reflections
 from ._scene import Scene
-from ._shadows import AreaLight
+from ._shadows import AreaLight, soft_shadows
 from .errors import InputError
 from .imageio import linear_to_srgb
 
@@ -354,11 +357,6 @@ def render(
     ``effects``, only those kinds or planned effects), and compose them (see :class:`Frame`).
     A scene that calls for nothing is lit without shadows or reflections; with no lights at all
     a default light from the camera's upper left lights it."""
-    from ._api import discretize
-    from ._omni import omni_shadows
-    from ._reflections import reflections
-    from ._shadows import soft_shadows
-
     if not isinstance(camera, Camera):
         raise InputError(f"camera must be a scenesample.Camera, got {type(camera).__name__}")
     total = time.perf_counter()
@@ -367,7 +365,7 @@ def render(
     timings: dict[str, float] = {}
 
     t = time.perf_counter()
-    g = discretize(scene, camera)
+    g = conventional(scene, camera)
     timings["gbuffer"] = time.perf_counter() - t
     tri = g.triangle[0]
     mask = tri >= 0

@@ -11,8 +11,15 @@ from typing import Any, Optional
 import numpy as np
 
 from . import _core
+from ._api import discretize, reconstruct
+from ._evaluate import evaluate
+from ._impostors import ImpostorView
+from ._omni import omni_shadows
+from ._plan import emissive_lights
 from ._progress import Bar
+from ._reflections import reflection_reference, reflections
 from ._scene import Scene
+from ._shadows import AreaLight, soft_shadows
 from .errors import InputError
 
 __all__ = ["tradeoff", "KNOBS", "default_camera"]
@@ -94,9 +101,6 @@ def _camera(state: tuple) -> Camera:
 
 
 def _light(scene: Scene, kind: str) -> Any:
-    from ._plan import emissive_lights
-    from ._shadows import AreaLight
-
     if kind == "soft_shadows":
         found = emissive_lights(scene)
         if found:
@@ -119,104 +123,136 @@ def _up(scene: Scene) -> str:
 
 
 def _reference(kind: str, scene: Scene, cam: Camera, light: Any, knobs: dict) -> Any:
-    import scenesample as ss
-
     if kind == "soft_shadows":
-        r = ss.soft_shadows(scene, cam, light, samples=(16, 16), discretization="raytraced")
+        r = soft_shadows(scene, cam, light, samples=(16, 16), discretization="raytraced")
         return (r.visibility, r.mask)
     if kind == "omni_shadows":
         n = max(knobs.get("light_samples", [20]))
-        r = ss.omni_shadows(scene, cam, *light, light_samples=n, method="raytraced")
+        r = omni_shadows(scene, cam, *light, light_samples=n, method="raytraced")
         return (r.visibility, r.mask)
     if kind == "reflections":
-        return ss.reflection_reference(scene, cam)
+        return reflection_reference(scene, cam)
     if kind == "visibility_field":
         return None
-    return ss.ImpostorView.of_triangles(scene, cam)
+    return ImpostorView.of_triangles(scene, cam)
+
+
+def _visibility_error(r: Any, ref: Any) -> float:
+    """Mean |visible fraction - reference| x 255 over the pixels both see a surface at."""
+    vis, mask = ref
+    both = mask & r.mask
+    return float(255 * np.abs(r.visibility[both] - vis[both]).mean())
+
+
+def _run_soft_shadows(scene: Scene, cam: Camera, light: Any, ref: Any, settings: dict) -> dict:
+    s = int(settings.get("samples", 8))
+    start = time.perf_counter()
+    r = soft_shadows(
+        scene,
+        cam,
+        light,
+        samples=(s, s),
+        discretization=settings.get("discretization", "nonredundant"),
+        resolution=int(settings.get("resolution", 512)),
+    )
+    seconds = time.perf_counter() - start
+    memory = r.visibility.nbytes + r.visible.nbytes + r.mask.nbytes
+    return {"error": _visibility_error(r, ref), "seconds": seconds, "memory": memory}
+
+
+def _run_omni_shadows(scene: Scene, cam: Camera, light: Any, ref: Any, settings: dict) -> dict:
+    start = time.perf_counter()
+    r = omni_shadows(
+        scene,
+        cam,
+        *light,
+        light_samples=int(settings.get("light_samples", 20)),
+        method=settings.get("method", "epr"),
+        rho_scale=float(settings.get("rho_scale", 0.5)),
+        max_resolution=int(settings.get("max_resolution", 512)),
+    )
+    seconds = time.perf_counter() - start
+    return {
+        "error": _visibility_error(r, ref),
+        "seconds": seconds,
+        "memory": int(r.stats.get("buffer_bytes", 0)) + r.visible.nbytes,
+        "points": float(r.stats.get("points", 0)),
+    }
+
+
+def _run_reflections(scene: Scene, cam: Camera, light: Any, ref: Any, settings: dict) -> dict:
+    start = time.perf_counter()
+    r = reflections(
+        scene,
+        cam,
+        method=settings.get("method", "epr"),
+        rho_scale=float(settings.get("rho_scale", 0.5)),
+        bounces=int(settings.get("bounces", 1)),
+    )
+    seconds = time.perf_counter() - start
+    return {
+        "error": float(evaluate(r, ref)["rmse"]),
+        "seconds": seconds,
+        "memory": int(r.stats.get("buffer_bytes", 0)),
+        "shading_ops": float(r.stats.get("shading_ops", 0)),
+    }
+
+
+def _run_visibility_field(scene: Scene, cam: Camera, light: Any, ref: Any, settings: dict) -> dict:
+    res = int(settings.get("resolution", 16))
+    start = time.perf_counter()
+    field = discretize(
+        scene,
+        method="visibility_field",
+        uv=(res, res),
+        st=(res, res),
+        ids_per_sample=int(settings.get("ids_per_sample", 1)),
+    )
+    build = time.perf_counter() - start
+    view = reconstruct(field, cam, interpolate=settings.get("interpolate", "none"))
+    m = evaluate(view, scene, "cells")
+    return {
+        "error": float(m["missed_fraction"]),
+        "seconds": view.timings["resample"] + view.timings["render"],
+        "memory": int(field.stats["memory_bytes"]),
+        "build_seconds": build,
+        "time_zbuffer": float(m["time_zbuffer"]),
+    }
+
+
+def _run_impostors(scene: Scene, cam: Camera, light: Any, ref: Any, settings: dict) -> dict:
+    start = time.perf_counter()
+    imp = discretize(
+        scene,
+        method="impostors",
+        octree_depth=int(settings.get("octree_depth", 2)),
+        resolution=int(settings.get("resolution", 32)),
+        subdivisions=int(settings.get("subdivisions", 2)),
+    )
+    build = time.perf_counter() - start
+    view = reconstruct(imp, cam)
+    return {
+        "error": float(evaluate(view, ref)["error_per_foreground_pixel"]),
+        "seconds": view.timings["total"],
+        "memory": int(imp.stats["bytes_raw"]),
+        "build_seconds": build,
+    }
+
+
+_RUNS = {
+    "soft_shadows": _run_soft_shadows,
+    "omni_shadows": _run_omni_shadows,
+    "reflections": _run_reflections,
+    "visibility_field": _run_visibility_field,
+    "impostors": _run_impostors,
+}
 
 
 def _run(kind: str, scene: Scene, cam_state: tuple, light: Any, ref: Any, settings: dict) -> dict:
     """One row: run ``kind`` with ``settings``, time it, measure its error and memory."""
-    import scenesample as ss
-
-    cam = _camera(cam_state)
-    start = time.perf_counter()
-    extra: dict[str, float] = {}
-    if kind == "soft_shadows":
-        s = int(settings.get("samples", 8))
-        r = ss.soft_shadows(
-            scene,
-            cam,
-            light,
-            samples=(s, s),
-            discretization=settings.get("discretization", "nonredundant"),
-            resolution=int(settings.get("resolution", 512)),
-        )
-        seconds = time.perf_counter() - start
-        vis, mask = ref
-        both = mask & r.mask
-        err = float(255 * np.abs(r.visibility[both] - vis[both]).mean())
-        memory = r.visibility.nbytes + r.visible.nbytes + r.mask.nbytes
-    elif kind == "omni_shadows":
-        r = ss.omni_shadows(
-            scene,
-            cam,
-            *light,
-            light_samples=int(settings.get("light_samples", 20)),
-            method=settings.get("method", "epr"),
-            rho_scale=float(settings.get("rho_scale", 0.5)),
-            max_resolution=int(settings.get("max_resolution", 512)),
-        )
-        seconds = time.perf_counter() - start
-        vis, mask = ref
-        both = mask & r.mask
-        err = float(255 * np.abs(r.visibility[both] - vis[both]).mean())
-        memory = int(r.stats.get("buffer_bytes", 0)) + r.visible.nbytes
-        extra["points"] = float(r.stats.get("points", 0))
-    elif kind == "reflections":
-        r = ss.reflections(
-            scene,
-            cam,
-            method=settings.get("method", "epr"),
-            rho_scale=float(settings.get("rho_scale", 0.5)),
-            bounces=int(settings.get("bounces", 1)),
-        )
-        seconds = time.perf_counter() - start
-        err = float(ss.evaluate(r, ref)["rmse"])
-        memory = int(r.stats.get("buffer_bytes", 0))
-        extra["shading_ops"] = float(r.stats.get("shading_ops", 0))
-    elif kind == "visibility_field":
-        res = int(settings.get("resolution", 16))
-        field = ss.discretize(
-            scene,
-            method="visibility_field",
-            uv=(res, res),
-            st=(res, res),
-            ids_per_sample=int(settings.get("ids_per_sample", 1)),
-        )
-        build = time.perf_counter() - start
-        view = ss.reconstruct(field, cam, interpolate=settings.get("interpolate", "none"))
-        m = ss.evaluate(view, scene, "cells")
-        seconds = view.timings["resample"] + view.timings["render"]
-        err = float(m["missed_fraction"])
-        memory = int(field.stats["memory_bytes"])
-        extra["build_seconds"] = build
-        extra["time_zbuffer"] = float(m["time_zbuffer"])
-    else:
-        imp = ss.discretize(
-            scene,
-            method="impostors",
-            octree_depth=int(settings.get("octree_depth", 2)),
-            resolution=int(settings.get("resolution", 32)),
-            subdivisions=int(settings.get("subdivisions", 2)),
-        )
-        build = time.perf_counter() - start
-        view = ss.reconstruct(imp, cam)
-        seconds = view.timings["total"]
-        err = float(ss.evaluate(view, ref)["error_per_foreground_pixel"])
-        memory = int(imp.stats["bytes_raw"])
-        extra["build_seconds"] = build
-    return {"error": err, "seconds": float(seconds), "memory": int(memory), **extra}
+    row = _RUNS[kind](scene, _camera(cam_state), light, ref, settings)
+    row["seconds"], row["memory"] = float(row["seconds"]), int(row["memory"])
+    return row
 
 
 def pareto(error: np.ndarray, seconds: np.ndarray) -> np.ndarray:

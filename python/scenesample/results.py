@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from . import _core
+from ._scene import Scene
 from .errors import InputError
 
 __all__ = ["DepthImages", "Mesh", "RayHits"]
@@ -237,6 +238,4 @@ class Mesh:
 
     def to_scene(self) -> Any:
         """The mesh as a :class:`scenesample.Scene` (to render, ray cast or evaluate it)."""
-        from ._scene import Scene
-
         return Scene.from_arrays(self.vertices, self.faces)

@@ -12,6 +12,7 @@ from typing import Any, Optional
 
 import numpy as np
 
+from ._core import Camera
 from ._paper_scenes import PAPER_SCENES, bird_nest, grass, reference_cameras, tree, turtles, urban
 from ._scene import Scene
 
@@ -234,8 +235,6 @@ def reflective_room(spheres: int = 10, seed: int = 0, detail: int = 3) -> Scene:
 def reflective_room_eye(resolution: int = 512, angle: float = 0.0, distance: float = 3.2) -> Any:
     """The eye for :func:`reflective_room`: ``distance`` from the room's centre axis, 1.6 high,
     turned ``angle`` radians about z (0: looking along +y), looking at (0, 0, 0.7)."""
-    from ._core import Camera
-
     eye = (distance * np.sin(angle), -distance * np.cos(angle), 1.6)
     return Camera.look_at(
         eye, (0.0, 0.0, 0.7), (0.0, 0.0, 1.0), yfov=0.9, width=resolution, height=resolution

@@ -6,6 +6,7 @@
 //! on the hardware depth buffer, nor on f32 interpolation, nor on the scene's distance from the
 //! world origin.
 
+use std::sync::Arc;
 use std::time::Instant;
 
 use glam::{DVec3, Vec3};
@@ -16,29 +17,16 @@ use crate::error::{Error, Result};
 use crate::gpu;
 use crate::input_err;
 use crate::scene::Scene;
+use crate::types::{DepthImages, Timings};
 
-/// `n` images of `height`×`width`, row-major, image after image.
-#[derive(Debug, Clone, Default)]
-pub struct DepthImages {
-    pub n: usize,
-    pub width: u32,
-    pub height: u32,
-    /// Camera-space z (positive), +inf where no surface.
-    pub depth: Vec<f32>,
-    /// Scene face index, −1 where no surface.
-    pub triangle: Vec<i32>,
-    /// Unit world geometric normal from the triangle's winding (not flipped toward the camera);
-    /// zero where no surface or the triangle is degenerate.
-    pub normal: Vec<[f32; 3]>,
-    /// World position of the surface point; NaN where no surface.
-    pub position: Vec<[f32; 3]>,
-    /// Linear base colour interpolated from the vertices; zero where no surface.
-    pub color: Vec<[f32; 3]>,
-    pub cameras: Vec<Camera>,
-    /// How the images were made: "conventional", "nonredundant" or "peeling".
-    pub method: String,
-    /// (stage, seconds), in the order the stages ran.
-    pub timings: Vec<(String, f64)>,
+/// Every triangle's [`SurfacePlane`], in face order: a scene's cached resolve data.
+pub(crate) struct ScenePlanes(pub Vec<SurfacePlane>);
+
+impl std::ops::Deref for ScenePlanes {
+    type Target = [SurfacePlane];
+    fn deref(&self) -> &[SurfacePlane] {
+        &self.0
+    }
 }
 
 /// Render one conventional depth image per camera. Cameras may differ in pose and projection
@@ -83,12 +71,7 @@ pub fn discretize_sided(scene: &Scene, cameras: &[Camera]) -> Result<DepthImages
             near.color[i] = other.color[i];
         }
     }
-    for (stage, seconds) in other.timings {
-        match near.timings.iter_mut().find(|(s, _)| *s == stage) {
-            Some((_, total)) => *total += seconds,
-            None => near.timings.push((stage, seconds)),
-        }
-    }
+    near.timings.merge(&other.timings);
     Ok(near)
 }
 
@@ -150,7 +133,7 @@ pub(crate) fn resolve_streamed(
     let raw = raster(&ctx, &mut |at, ids| {
         let range = at * npx..at * npx + ids.len();
         img.triangle[range.clone()].copy_from_slice(ids);
-        resolve_into(&mut img, range, &rays, planes);
+        resolve_into(&mut img, range, &rays, &planes);
     })?;
     img.timings = raster_timings(
         device_seconds,
@@ -171,19 +154,19 @@ fn raster_timings(
     raw: &gpu::depth::RasterStats,
     resolve_seconds: f64,
     total: Instant,
-) -> Vec<(String, f64)> {
-    let mut t = vec![
-        ("device".into(), device_seconds),
-        ("upload".into(), raw.upload_seconds),
-        ("prepare".into(), prepare_seconds),
-        ("raster".into(), raw.raster_seconds),
-    ];
+) -> Timings {
+    let mut t = Timings::from([
+        ("device", device_seconds),
+        ("upload", raw.upload_seconds),
+        ("prepare", prepare_seconds),
+        ("raster", raw.raster_seconds),
+    ]);
     if let Some(g) = raw.gpu_seconds {
-        t.push(("raster_gpu".into(), g));
+        t.add("raster_gpu", g);
     }
-    t.push(("readback".into(), raw.readback_seconds));
-    t.push(("resolve".into(), resolve_seconds));
-    t.push(("total".into(), total.elapsed().as_secs_f64()));
+    t.add("readback", raw.readback_seconds);
+    t.add("resolve", resolve_seconds);
+    t.add("total", total.elapsed().as_secs_f64());
     t
 }
 
@@ -222,7 +205,7 @@ pub(crate) fn resolve_ids(
     let rays: Vec<PixelRays> = cameras.iter().map(PixelRays::new).collect();
     let n = ids.len();
     img.triangle = ids;
-    resolve_into(&mut img, 0..n, &rays, planes);
+    resolve_into(&mut img, 0..n, &rays, &planes);
     Ok((img, start.elapsed().as_secs_f64()))
 }
 
@@ -312,7 +295,7 @@ impl DepthImages {
             color: vec![[0.0; 3]; total],
             cameras: cameras.to_vec(),
             method: "conventional".into(),
-            timings: vec![],
+            timings: Timings::new(),
         })
     }
 }
@@ -397,13 +380,15 @@ impl SurfacePlane {
         }
     }
 
-    /// The scene's planes, built in parallel on first use.
-    pub(crate) fn of(scene: &Scene) -> &[SurfacePlane] {
-        scene.planes.get_or_init(|| {
-            (0..scene.triangle_count())
-                .into_par_iter()
-                .map(|i| Self::new(scene, i))
-                .collect()
+    /// The scene's planes, built in parallel on first use and cached on the scene.
+    pub(crate) fn of(scene: &Scene) -> Arc<ScenePlanes> {
+        scene.derived(|| {
+            ScenePlanes(
+                (0..scene.triangle_count())
+                    .into_par_iter()
+                    .map(|i| Self::new(scene, i))
+                    .collect(),
+            )
         })
     }
 

@@ -38,7 +38,7 @@ use crate::camera::{Camera, Projection};
 use crate::error::Result;
 use crate::input_err;
 use crate::scene::Scene;
-use crate::splat::Points;
+use crate::types::{Points, Timings};
 
 /// Most points one triangle may produce.
 pub const MAX_PER_TRIANGLE: f64 = 65536.0;
@@ -172,8 +172,7 @@ pub fn generate(
         }
     };
     let mut out = sample_triangles(scene, &views, skip, spacing, seed)?;
-    out.timings
-        .push(("total".into(), total.elapsed().as_secs_f64()));
+    out.timings.add("total", total.elapsed().as_secs_f64());
     Ok(out)
 }
 
@@ -248,8 +247,7 @@ pub fn generate_shadow(
         }
     };
     let mut out = sample_triangles(scene, &views, |_, _| false, spacing, seed)?;
-    out.timings
-        .push(("total".into(), total.elapsed().as_secs_f64()));
+    out.timings.add("total", total.elapsed().as_secs_f64());
     Ok(out)
 }
 
@@ -426,7 +424,7 @@ fn sample_triangles(
             out.views.extend_from_slice(&bits);
         }
     }
-    out.timings = vec![("points".into(), start.elapsed().as_secs_f64())];
+    out.timings = Timings::from([("points", start.elapsed().as_secs_f64())]);
     out.stats = vec![
         ("points".into(), out.len() as f64),
         ("triangles_sampled".into(), sampled as f64),

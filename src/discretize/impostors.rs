@@ -26,6 +26,7 @@ use crate::error::Result;
 use crate::input_err;
 use crate::scene::Scene;
 use crate::trace::cast_rays;
+use crate::types::Timings;
 
 /// The most memory the uncropped images (colour and depth) may take.
 pub const MAX_BYTES: u64 = 6 << 30;
@@ -151,55 +152,12 @@ pub struct Impostors {
     /// the cells drawn as triangles at runtime (face order does not change them).
     pub normals: Vec<DVec3>,
     pub rays: u64,
-    pub timings: Vec<(String, f64)>,
-}
-
-/// The regular icosahedron: 12 unit vertices and 20 counter-clockwise faces.
-pub fn icosahedron() -> ([DVec3; 12], [[u32; 3]; 20]) {
-    let t = (1.0 + 5f64.sqrt()) / 2.0;
-    let v = [
-        (-1.0, t, 0.0),
-        (1.0, t, 0.0),
-        (-1.0, -t, 0.0),
-        (1.0, -t, 0.0),
-        (0.0, -1.0, t),
-        (0.0, 1.0, t),
-        (0.0, -1.0, -t),
-        (0.0, 1.0, -t),
-        (t, 0.0, -1.0),
-        (t, 0.0, 1.0),
-        (-t, 0.0, -1.0),
-        (-t, 0.0, 1.0),
-    ]
-    .map(|(x, y, z)| DVec3::new(x, y, z).normalize());
-    let f = [
-        [0, 11, 5],
-        [0, 5, 1],
-        [0, 1, 7],
-        [0, 7, 10],
-        [0, 10, 11],
-        [1, 5, 9],
-        [5, 11, 4],
-        [11, 10, 2],
-        [10, 7, 6],
-        [7, 1, 8],
-        [3, 9, 4],
-        [3, 4, 2],
-        [3, 2, 6],
-        [3, 6, 8],
-        [3, 8, 9],
-        [4, 9, 5],
-        [2, 4, 11],
-        [6, 2, 10],
-        [8, 6, 7],
-        [9, 8, 1],
-    ];
-    (v, f)
+    pub timings: Timings,
 }
 
 /// Unit directions to the face centres of an icosahedron subdivided `s` times (20·4^s).
 pub fn icosahedron_directions(s: u32) -> Vec<DVec3> {
-    let (v, f) = icosahedron();
+    let (v, f) = crate::scene::shapes::icosahedron();
     let mut tris: Vec<[DVec3; 3]> = f.iter().map(|t| t.map(|i| v[i as usize])).collect();
     for _ in 0..s {
         tris = tris
@@ -596,12 +554,12 @@ pub fn build(scene: &Scene, opts: &ImpostorOptions) -> Result<Impostors> {
         triangles: order,
         normals,
         rays,
-        timings: vec![
-            ("cells".into(), cell_seconds),
-            ("render".into(), render_seconds),
-            ("crop".into(), crop_seconds),
-            ("total".into(), total.elapsed().as_secs_f64()),
-        ],
+        timings: Timings::from([
+            ("cells", cell_seconds),
+            ("render", render_seconds),
+            ("crop", crop_seconds),
+            ("total", total.elapsed().as_secs_f64()),
+        ]),
     })
 }
 

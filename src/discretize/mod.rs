@@ -12,8 +12,6 @@ pub mod nonredundant;
 pub mod redundancy;
 pub mod visibility_field;
 
-pub use conventional::{
-    discretize_conventional, discretize_ranges, discretize_sided, push_range, DepthImages,
-};
+pub use conventional::{discretize_conventional, discretize_ranges, discretize_sided, push_range};
 pub use nonredundant::{centroid_camera, discretize_nonredundant, discretize_peeling};
 pub use redundancy::Redundancy;

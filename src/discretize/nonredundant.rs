@@ -26,13 +26,13 @@ use super::conventional::{
     check_cameras, discretize_conventional, resolve_ids, resolve_streamed, PixelRays,
 };
 use super::redundancy::{self, Redundancy, Sample};
-use super::DepthImages;
 use crate::camera::Camera;
 use crate::error::Result;
 use crate::gpu::layered;
 use crate::input_err;
 use crate::scene::Scene;
 use crate::trace::{self, SAME_HIT};
+use crate::types::{DepthImages, Timings};
 
 /// Non-redundant depth images, one per camera (shared resolution), image i free of samples
 /// redundant with images 0..i under `redundancy`.
@@ -139,10 +139,8 @@ fn merge_same_surfaces(img: &mut DepthImages) {
         }
     }
     let seconds = start.elapsed().as_secs_f64();
-    img.timings.push(("ties".into(), seconds));
-    if let Some(total) = img.timings.iter_mut().find(|(k, _)| k == "total") {
-        total.1 += seconds;
-    }
+    img.timings.add("ties", seconds);
+    img.timings.add("total", seconds);
 }
 
 /// The viewpoint depth peeling uses by default (§6.1.3): the centroid of the reference
@@ -183,11 +181,8 @@ fn coincident_samples(
     img: DepthImages,
     cull_backfaces: bool,
 ) -> Result<DepthImages> {
-    let Some(groups) = scene
-        .coincident
-        .get_or_init(|| redundancy::coincident_groups(scene))
-        .as_ref()
-    else {
+    let coincident = scene.derived(|| redundancy::Coincident(redundancy::coincident_groups(scene)));
+    let Some(groups) = coincident.0.as_ref() else {
         return Ok(img);
     };
     let start = Instant::now();
@@ -239,14 +234,12 @@ fn coincident_samples(
     }
     let mut timings = img.timings;
     let (mut out, resolve_seconds) = resolve_ids(scene, cameras, ids)?;
-    timings.push((
-        "coincident".into(),
+    timings.add(
+        "coincident",
         start.elapsed().as_secs_f64() - resolve_seconds,
-    ));
-    timings.push(("coincident_resolve".into(), resolve_seconds));
-    if let Some(total) = timings.iter_mut().find(|(k, _)| k == "total") {
-        total.1 += start.elapsed().as_secs_f64();
-    }
+    );
+    timings.add("coincident_resolve", resolve_seconds);
+    timings.add("total", start.elapsed().as_secs_f64());
     out.timings = timings;
     Ok(out)
 }
@@ -259,7 +252,7 @@ fn visibility_images(
 ) -> Result<DepthImages> {
     let total = Instant::now();
     let first = discretize_conventional(scene, &cameras[..1], cull_backfaces)?;
-    let raster_seconds = first.timings.iter().find(|(k, _)| k == "total").unwrap().1;
+    let raster_seconds = first.timings.get("total").unwrap_or(0.0);
     let start = Instant::now();
     let npx = cameras[0].width as usize * cameras[0].height as usize;
     let mut ids = first.triangle;
@@ -270,12 +263,12 @@ fn visibility_images(
     let walk_seconds = start.elapsed().as_secs_f64();
     let (mut img, resolve_seconds) = resolve_ids(scene, cameras, ids)?;
     img.method = "nonredundant".into();
-    img.timings = vec![
-        ("image0".into(), raster_seconds),
-        ("walk".into(), walk_seconds),
-        ("resolve".into(), resolve_seconds),
-        ("total".into(), total.elapsed().as_secs_f64()),
-    ];
+    img.timings = Timings::from([
+        ("image0", raster_seconds),
+        ("walk", walk_seconds),
+        ("resolve", resolve_seconds),
+        ("total", total.elapsed().as_secs_f64()),
+    ]);
     Ok(img)
 }
 

@@ -119,6 +119,9 @@ pub fn tolerance(scene: &Scene) -> f64 {
 /// Distinct triangles that are one surface: coplanar (unit normal within 1e-6 and plane offset
 /// within 1e-6 of the scene's diagonal, either orientation) and overlapping with positive area
 /// (touching along an edge does not count), such as a box's bottom on a floor or a decal.
+/// A scene's coincident groups (see [`coincident_groups`]), cached on the scene.
+pub struct Coincident(pub Option<Vec<u32>>);
+
 /// Returns, per triangle, a representative of its group; `None` when no two triangles are
 /// coincident. Exact duplicates are coincident too. Planes are compared through a rounded key,
 /// so two planes straddling a rounding step stay apart (the test is conservative).

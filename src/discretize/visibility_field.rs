@@ -24,6 +24,7 @@ use rayon::prelude::*;
 use crate::error::Result;
 use crate::input_err;
 use crate::scene::Scene;
+use crate::types::Timings;
 
 /// A rectangle: the points `origin + a·u + b·v` for `a, b` in [0, 1].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -296,7 +297,7 @@ pub struct Field {
     /// (U, V, S, T, n) row-major cell ids, −1 empty.
     pub ids: Vec<i32>,
     pub rays: u64,
-    pub timings: Vec<(String, f64)>,
+    pub timings: Timings,
 }
 
 /// How a sample's rays are placed in its uv and st cells.
@@ -426,11 +427,11 @@ pub fn sample(
         n,
         ids,
         rays: samples * per_sample,
-        timings: vec![
-            ("rays".into(), cast_seconds),
-            ("rank".into(), rank_seconds),
-            ("total".into(), total.elapsed().as_secs_f64()),
-        ],
+        timings: Timings::from([
+            ("rays", cast_seconds),
+            ("rank", rank_seconds),
+            ("total", total.elapsed().as_secs_f64()),
+        ]),
     })
 }
 

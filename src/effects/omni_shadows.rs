@@ -33,6 +33,7 @@ use crate::input_err;
 use crate::scene::Scene;
 use crate::shadows::{eye_points, per_pixel, raytraced};
 use crate::splat::{splat_views, Points};
+use crate::types::Timings;
 
 /// The smallest adaptive cube-map face resolution.
 pub const MIN_RESOLUTION: u32 = 16;
@@ -83,7 +84,7 @@ pub struct OmniResult {
     /// The cube-map face resolution used (0 for `Raytraced`).
     pub resolution: u32,
     pub stats: Vec<(String, f64)>,
-    pub timings: Vec<(String, f64)>,
+    pub timings: Timings,
 }
 
 /// `n` samples of a spherical light: its centre for one sample, otherwise a Fibonacci lattice
@@ -180,13 +181,13 @@ pub fn omni_shadows(
     if !(opts.rho_scale.is_finite() && opts.rho_scale > 0.0) {
         return input_err!("rho_scale must be finite and > 0, got {}", opts.rho_scale);
     }
-    let mut timings = Vec::new();
+    let mut timings = Timings::new();
     let mut stats = Vec::new();
 
     let start = Instant::now();
     let seen = discretize_conventional(scene, std::slice::from_ref(eye), false)?;
     let (points, normals, mask) = eye_points(&seen, eye);
-    timings.push(("eye".to_string(), start.elapsed().as_secs_f64()));
+    timings.add("eye", start.elapsed().as_secs_f64());
 
     let samples = light_samples(center, radius, opts.samples);
     let s_count = samples.len();
@@ -197,13 +198,13 @@ pub fn omni_shadows(
         (_, Some(r)) => r,
         (_, None) => adaptive_resolution(eye, &points, center, radius, opts.max_resolution),
     };
-    timings.push(("resolution".to_string(), start.elapsed().as_secs_f64()));
+    timings.add("resolution", start.elapsed().as_secs_f64());
     let near = NEAR * diagonal;
     let bits = match opts.method {
         OmniMethod::Raytraced => {
             let start = Instant::now();
             let bits = raytraced(scene, &samples, &points, &normals, diagonal)?;
-            timings.push(("shadow".to_string(), start.elapsed().as_secs_f64()));
+            timings.add("shadow", start.elapsed().as_secs_f64());
             bits
         }
         OmniMethod::Mvr => {
@@ -229,7 +230,7 @@ pub fn omni_shadows(
                     bits[(v / 6) * words + w] &= b;
                 }
             }
-            timings.push(("shadow".to_string(), start.elapsed().as_secs_f64()));
+            timings.add("shadow", start.elapsed().as_secs_f64());
             stats.push((
                 "triangles_drawn".to_string(),
                 (scene.triangle_count() * cams.len()) as f64,
@@ -246,19 +247,19 @@ pub fn omni_shadows(
             };
             let start = Instant::now();
             let pts = epr::generate_shadow(scene, eye, &samples, res, near, density, opts.seed)?;
-            timings.push(("points".to_string(), start.elapsed().as_secs_f64()));
+            timings.add("points", start.elapsed().as_secs_f64());
             stats.extend(pts.stats.iter().cloned());
             let cams = epr::shadow_views(&samples, res, near)?;
             let start = Instant::now();
             // Clipped to the triangle: unclipped squares overhang silhouettes and over-shadow.
             let (keys, splat_timings) = splat_views(scene, &pts, &cams, true)?;
-            timings.push(("splat".to_string(), start.elapsed().as_secs_f64()));
-            if let Some(&(_, gpu)) = splat_timings.iter().find(|(k, _)| k == "splat") {
-                timings.push(("splat_gpu".to_string(), gpu));
+            timings.add("splat", start.elapsed().as_secs_f64());
+            if let Some(gpu) = splat_timings.get("splat") {
+                timings.add("splat_gpu", gpu);
             }
             let start = Instant::now();
             let bits = test_splatted(&keys, &pts, &cams, &samples, &points, &normals, diagonal);
-            timings.push(("test".to_string(), start.elapsed().as_secs_f64()));
+            timings.add("test", start.elapsed().as_secs_f64());
             stats.push((
                 "buffer_bytes".to_string(),
                 (keys.len() * std::mem::size_of::<u64>()) as f64,
@@ -275,7 +276,7 @@ pub fn omni_shadows(
     ));
     stats.push(("resolution".to_string(), res as f64));
     stats.push(("receivers".to_string(), points.len() as f64));
-    timings.push(("total".to_string(), total.elapsed().as_secs_f64()));
+    timings.add("total", total.elapsed().as_secs_f64());
     Ok(OmniResult {
         width: eye.width,
         height: eye.height,

@@ -30,10 +30,11 @@ use rayon::prelude::*;
 use super::shading::{self, ShadeLight};
 use crate::camera::Camera;
 use crate::discretize::epr::{self, Density, Reflector};
-use crate::discretize::{discretize_conventional, discretize_sided, DepthImages};
+use crate::discretize::{discretize_conventional, discretize_sided};
 use crate::error::Result;
 use crate::input_err;
 use crate::scene::Scene;
+use crate::types::{DepthImages, Timings};
 
 /// Radiance where a ray leaves the scene.
 pub const BACKGROUND: [f64; 3] = [0.25, 0.3, 0.36];
@@ -78,7 +79,7 @@ pub struct ReflectionResult {
     /// Whether each eye pixel shows a reflector.
     pub reflective: Vec<bool>,
     pub stats: Vec<(String, f64)>,
-    pub timings: Vec<(String, f64)>,
+    pub timings: Timings,
 }
 
 /// Per texel of a cube map: the triangle seen (−1 none) and the world point.
@@ -138,13 +139,13 @@ pub fn reflections(
     if opts.supersample == 0 || opts.supersample > 256 {
         return input_err!("supersample must be 1..=256, got {}", opts.supersample);
     }
-    let mut timings = Vec::new();
+    let mut timings = Timings::new();
     let mut stats = Vec::new();
 
     // The eye's G-buffer.
     let start = Instant::now();
     let gbuf = discretize_conventional(scene, std::slice::from_ref(eye), false)?;
-    timings.push(("eye".to_string(), start.elapsed().as_secs_f64()));
+    timings.add("eye", start.elapsed().as_secs_f64());
     let mut owner = vec![-1i32; scene.triangle_count()];
     for (k, r) in reflectors.iter().enumerate() {
         for &t in &r.triangles {
@@ -194,7 +195,7 @@ pub fn reflections(
                     position,
                 });
             }
-            timings.push(("views".to_string(), start.elapsed().as_secs_f64()));
+            timings.add("views", start.elapsed().as_secs_f64());
         }
         Method::Epr | Method::Ivir => {
             let density = match opts.method {
@@ -212,7 +213,7 @@ pub fn reflections(
                 opts.seed,
             )?;
             point_count = points.len();
-            timings.push(("points".to_string(), start.elapsed().as_secs_f64()));
+            timings.add("points", start.elapsed().as_secs_f64());
             let start = Instant::now();
             let views = epr::cube_views(reflectors, &opts.resolutions)?;
             // One splat pass into every cube face, each at its reflector's resolution.
@@ -252,7 +253,7 @@ pub fn reflections(
                     position: pos,
                 });
             }
-            timings.push(("views".to_string(), start.elapsed().as_secs_f64()));
+            timings.add("views", start.elapsed().as_secs_f64());
         }
     }
     let texels: usize = cubes.iter().map(|c| c.triangle.len()).sum();
@@ -272,16 +273,16 @@ pub fn reflections(
         Method::Epr => {
             let start = Instant::now();
             let (img, ops) = ctx.eye_deferred(&pixels, w, h, opts.supersample);
-            timings.push(("deferred".to_string(), start.elapsed().as_secs_f64()));
+            timings.add("deferred", start.elapsed().as_secs_f64());
             (img, ops)
         }
         Method::Mvr | Method::Ivir => {
             let start = Instant::now();
             let (maps, ops) = ctx.shade_all(opts.bounces);
-            timings.push(("shade".to_string(), start.elapsed().as_secs_f64()));
+            timings.add("shade", start.elapsed().as_secs_f64());
             let start = Instant::now();
             let img = ctx.eye_mipmapped(&pixels, w, h, &maps);
-            timings.push(("deferred".to_string(), start.elapsed().as_secs_f64()));
+            timings.add("deferred", start.elapsed().as_secs_f64());
             (img, ops)
         }
     };
@@ -303,7 +304,7 @@ pub fn reflections(
         "reflective_pixels".to_string(),
         reflective.iter().filter(|&&r| r).count() as f64,
     ));
-    timings.push(("total".to_string(), total.elapsed().as_secs_f64()));
+    timings.add("total", total.elapsed().as_secs_f64());
     Ok(ReflectionResult {
         width: eye.width,
         height: eye.height,

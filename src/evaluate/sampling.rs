@@ -21,12 +21,13 @@ use rayon::prelude::*;
 
 use crate::camera::Camera;
 use crate::discretize::conventional::resolve_ids;
+use crate::discretize::discretize_conventional;
 use crate::discretize::redundancy::{self, pixel_redundant, Redundancy, Sample};
-use crate::discretize::{discretize_conventional, DepthImages};
 use crate::error::Result;
 use crate::gpu;
 use crate::input_err;
 use crate::scene::Scene;
+use crate::types::{DepthImages, Timings};
 
 /// The metrics, one entry per image (fractions in [0, 1]).
 #[derive(Debug, Default, Clone)]
@@ -44,7 +45,7 @@ pub struct SamplingMetrics {
     /// Per pixel of every image (row-major, image after image): disoccluded, and useful.
     pub disoccluded_mask: Vec<bool>,
     pub useful_mask: Vec<bool>,
-    pub timings: Vec<(String, f64)>,
+    pub timings: Timings,
 }
 
 /// The pixels (within image i) that hold samples, in the order of `samples_of`.
@@ -199,7 +200,7 @@ pub fn sampling_metrics(
     let start = Instant::now();
     let conventional = discretize_conventional(scene, reference, cull_backfaces)?;
     out.timings
-        .push(("conventional".into(), start.elapsed().as_secs_f64()));
+        .add("conventional", start.elapsed().as_secs_f64());
 
     // View-independent metrics 1 and 2.
     let start = Instant::now();
@@ -234,7 +235,7 @@ pub fn sampling_metrics(
         );
     }
     out.timings
-        .push(("view_independent".into(), start.elapsed().as_secs_f64()));
+        .add("view_independent", start.elapsed().as_secs_f64());
 
     // Metrics 3 and 4, frame by frame.
     let start = Instant::now();
@@ -292,10 +293,8 @@ pub fn sampling_metrics(
         out.available_min
             .push(a.iter().copied().fold(f64::NAN, f64::min));
     }
-    out.timings
-        .push(("frames".into(), start.elapsed().as_secs_f64()));
-    out.timings
-        .push(("total".into(), total.elapsed().as_secs_f64()));
+    out.timings.add("frames", start.elapsed().as_secs_f64());
+    out.timings.add("total", total.elapsed().as_secs_f64());
     Ok(out)
 }
 

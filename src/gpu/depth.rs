@@ -108,11 +108,7 @@ pub fn rasterize(
         .lock
         .lock()
         .map_err(|_| Error::Gpu("GPU lock poisoned".into()))?;
-    let cached = scene
-        .gpu
-        .lock()
-        .map(|s| s.as_ref().is_some_and(|b| b.serial == ctx.serial))
-        .unwrap_or(false);
+    let cached = SceneBuffers::cached(ctx, scene);
     let buffers = SceneBuffers::of(ctx, scene)?;
 
     let row_tri = align(w as u64 * 4, wgpu::COPY_BYTES_PER_ROW_ALIGNMENT as u64);

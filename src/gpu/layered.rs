@@ -198,11 +198,7 @@ pub fn render(
         .lock
         .lock()
         .map_err(|_| Error::Gpu("GPU lock poisoned".into()))?;
-    let cached = scene
-        .gpu
-        .lock()
-        .map(|s| s.as_ref().is_some_and(|b| b.serial == ctx.serial))
-        .unwrap_or(false);
+    let cached = SceneBuffers::cached(ctx, scene);
     let buffers = SceneBuffers::of(ctx, scene)?;
     // Duplicated faces are drawn once; the passes see kept faces' indices, which are mapped
     // back to triangle ids as each image comes back.
@@ -248,7 +244,7 @@ pub fn render(
         // d (1 + m) for the previous layer's d. Perspective (z = b / d - a): k = 1 / (1 + m),
         // c = -a m / (1 + m). Orthographic (z = f / (f - n) - d / (f - n)): k = 1 + m,
         // c = -m f / (f - n).
-        let m_tie = crate::trace::SAME_HIT as f64;
+        let m_tie = crate::types::SAME_HIT as f64;
         let (k, c) = match cam.projection {
             Projection::Orthographic { .. } => (1.0 + m_tie, -m_tie * far / (far - near)),
             Projection::Perspective { .. } => {

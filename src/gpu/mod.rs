@@ -229,11 +229,26 @@ pub struct Distinct {
     pub triangles: Vec<u32>,
 }
 
+/// A scene's buffers on the current device, cached on the scene; a Mutex because the upload can
+/// fail, and a forked child replaces its parent's.
+#[derive(Default)]
+pub struct SceneGpu(Mutex<Option<Arc<SceneBuffers>>>);
+
 impl SceneBuffers {
+    /// Whether the scene's buffers are on `ctx`'s device already.
+    pub fn cached(ctx: &GpuContext, scene: &Scene) -> bool {
+        scene.derived_if_built::<SceneGpu>().is_some_and(|c| {
+            c.0.lock()
+                .map(|s| s.as_ref().is_some_and(|b| b.serial == ctx.serial))
+                .unwrap_or(false)
+        })
+    }
+
     /// The scene's buffers, uploaded on first use and cached on the scene.
     pub fn of(ctx: &GpuContext, scene: &Scene) -> Result<Arc<SceneBuffers>> {
-        let mut slot = scene
-            .gpu
+        let cache = scene.derived(SceneGpu::default);
+        let mut slot = cache
+            .0
             .lock()
             .map_err(|_| Error::Gpu("scene GPU cache poisoned".into()))?;
         match slot.as_ref() {

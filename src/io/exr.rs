@@ -12,8 +12,8 @@ use serde_json::{json, Value};
 use smallvec::SmallVec;
 
 use crate::camera::{Camera, Projection};
-use crate::discretize::DepthImages;
 use crate::error::{Error, Result as CoreResult};
+use crate::types::DepthImages;
 
 const CAMERA_ATTR: &str = "scenesample.camera";
 /// How the images were made (`DepthImages::method`), on every part.
@@ -309,7 +309,7 @@ mod tests {
             color: (0..12).map(|i| [0.1 * i as f32, 0.2, 0.3]).collect(),
             cameras: vec![cam, cam2],
             method: "peeling".into(),
-            timings: vec![],
+            timings: crate::types::Timings::new(),
         };
         let path = std::env::temp_dir().join(format!("scenesample-exr-{}.exr", std::process::id()));
         write_depth_images(&path, &img).unwrap();

@@ -225,3 +225,12 @@ pub fn named<'py>(py: Python<'py>, items: Vec<(String, f64)>) -> PyResult<Bound<
     }
     Ok(d)
 }
+
+/// A call's [`Timings`](crate::types::Timings) as a dict of seconds, in stage order.
+pub fn timings<'py>(py: Python<'py>, t: &crate::types::Timings) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    for (k, v) in t.iter() {
+        d.set_item(k, v)?;
+    }
+    Ok(d)
+}

@@ -91,7 +91,7 @@ pub fn reflections<'py>(
     d.set_item("image", rows_owned(py, r.image, &[h, w, 3])?)?;
     d.set_item("reflective", array(py, r.reflective, &[h, w])?)?;
     d.set_item("stats", named(py, r.stats)?)?;
-    d.set_item("timings", named(py, r.timings)?)?;
+    d.set_item("timings", super::convert::timings(py, &r.timings)?)?;
     super::set_ops(&d, ops)?;
     Ok(d)
 }

@@ -4,10 +4,10 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use super::camera::PyCamera;
-use super::convert::{array, flat_i32, named, rows_f32};
+use super::convert::{array, flat_i32, rows_f32};
 use super::errors::input;
 use super::scene::PyScene;
-use crate::discretize::DepthImages;
+use crate::types::DepthImages;
 
 #[pyfunction]
 #[pyo3(signature = (scene, triangle, position, depth, cameras, method, reference, frames, redundancy, cull_backfaces))]
@@ -77,6 +77,6 @@ pub fn sampling_metrics<'py>(
     let shape = [n, height as usize, width as usize];
     d.set_item("disoccluded_mask", array(py, m.disoccluded_mask, &shape)?)?;
     d.set_item("useful_mask", array(py, m.useful_mask, &shape)?)?;
-    d.set_item("timings", named(py, m.timings)?)?;
+    d.set_item("timings", super::convert::timings(py, &m.timings)?)?;
     Ok(d)
 }

@@ -5,7 +5,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use super::camera::PyCamera;
-use super::convert::{array, named, rows_f64};
+use super::convert::{array, rows_f64};
 use super::errors::{input, IntoPy};
 use super::scene::PyScene;
 use crate::discretize::visibility_field::{self as vf, Field, Grouping, Rect, Slab};
@@ -139,7 +139,7 @@ pub fn visibility_field<'py>(
         fd.set_item("ids", array(py, f.ids, &shape)?)?;
         fd.set_item("slab", slab_array(py, sl)?)?;
         fd.set_item("rays", f.rays)?;
-        fd.set_item("timings", named(py, f.timings)?)?;
+        fd.set_item("timings", super::convert::timings(py, &f.timings)?)?;
         out.push(fd);
     }
     d.set_item("fields", out)?;
@@ -184,7 +184,7 @@ pub fn field_view<'py>(
             n: shape[4] as u32,
             ids: a.as_array().iter().copied().collect(),
             rays: 0,
-            timings: Vec::new(),
+            timings: crate::types::Timings::new(),
         };
         fields.push((slab(py, s)?, f));
     }

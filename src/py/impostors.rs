@@ -92,7 +92,7 @@ pub fn impostors<'py>(
     let n = imp.triangles.len();
     out.set_item("triangles", array(py, imp.triangles.clone(), &[n])?)?;
     out.set_item("rays", imp.rays)?;
-    out.set_item("timings", named(py, imp.timings.clone())?)?;
+    out.set_item("timings", super::convert::timings(py, &imp.timings)?)?;
     let handle = PyImpostors {
         inner: Arc::new(imp),
         projection: proj,
@@ -112,7 +112,7 @@ fn view_dict<'py>(py: Python<'py>, v: ri::ImpostorView) -> PyResult<Bound<'py, P
     let c = v.used.len();
     d.set_item("used", array(py, v.used, &[c])?)?;
     d.set_item("stats", named(py, v.stats)?)?;
-    d.set_item("timings", named(py, v.timings)?)?;
+    d.set_item("timings", super::convert::timings(py, &v.timings)?)?;
     Ok(d)
 }
 

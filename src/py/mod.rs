@@ -48,7 +48,10 @@ pub(crate) fn run_counted<T: Send>(
 }
 
 /// `d["ops"]`: a call's operation counts (see [`run_counted`]).
-pub(crate) fn set_ops(d: &Bound<'_, pyo3::types::PyDict>, ops: crate::counters::Ops) -> PyResult<()> {
+pub(crate) fn set_ops(
+    d: &Bound<'_, pyo3::types::PyDict>,
+    ops: crate::counters::Ops,
+) -> PyResult<()> {
     let o = pyo3::types::PyDict::new(d.py());
     for (k, v) in ops.named() {
         o.set_item(k, v)?;

@@ -4,10 +4,10 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use super::camera::PyCamera;
-use super::convert::{array, flat_i32, named, rows_f32, rows_owned};
+use super::convert::{array, flat_i32, rows_f32, rows_owned};
 use super::errors::input;
-use crate::discretize::DepthImages;
 use crate::reconstruct::{reconstruct_hybrid, reconstruct_mesh, reconstruct_points, Mesh};
+use crate::types::DepthImages;
 
 /// A `DepthImages` (any object with its fields) as the Rust struct, checked for size.
 pub fn depth_images(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<DepthImages> {
@@ -54,7 +54,7 @@ pub fn mesh_dict<'py>(py: Python<'py>, m: Mesh) -> PyResult<Bound<'py, PyDict>> 
     d.set_item("vertices", rows_owned(py, m.vertices, &[nv, 3])?)?;
     d.set_item("faces", rows_owned(py, m.faces, &[nf, 3])?)?;
     d.set_item("sample", array(py, m.sample, &[nf])?)?;
-    d.set_item("timings", named(py, m.timings)?)?;
+    d.set_item("timings", super::convert::timings(py, &m.timings)?)?;
     Ok(d)
 }
 

@@ -7,10 +7,10 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use super::camera::PyCamera;
-use super::convert::{array, flat_i32, named, rows_f32, rows_owned};
+use super::convert::{array, flat_i32, rows_f32, rows_owned};
 use super::errors::input;
 use super::scene::PyScene;
-use crate::discretize::DepthImages;
+use crate::types::DepthImages;
 
 pub(super) fn images_dict<'py>(py: Python<'py>, img: DepthImages) -> PyResult<Bound<'py, PyDict>> {
     let (n, h, w) = (img.n, img.height as usize, img.width as usize);
@@ -23,7 +23,7 @@ pub(super) fn images_dict<'py>(py: Python<'py>, img: DepthImages) -> PyResult<Bo
     let cams: Vec<PyCamera> = img.cameras.into_iter().map(PyCamera::from).collect();
     d.set_item("cameras", cams)?;
     d.set_item("method", img.method)?;
-    d.set_item("timings", named(py, img.timings)?)?;
+    d.set_item("timings", super::convert::timings(py, &img.timings)?)?;
     Ok(d)
 }
 
@@ -127,7 +127,7 @@ pub fn write_exr(
         color: rows_f32::<3>(color, "color")?,
         cameras: cameras.into_iter().map(|c| c.inner).collect(),
         method,
-        timings: vec![],
+        timings: crate::types::Timings::new(),
     };
     for (name, len) in [
         ("depth", img.depth.len()),

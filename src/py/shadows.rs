@@ -69,7 +69,7 @@ pub fn soft_shadows<'py>(
     d.set_item("visible", array(py, r.visible, &[h, w, count])?)?;
     d.set_item("mask", array(py, r.mask, &[h, w])?)?;
     d.set_item("occluder_triangles", r.occluder_triangles)?;
-    d.set_item("timings", named(py, r.timings)?)?;
+    d.set_item("timings", super::convert::timings(py, &r.timings)?)?;
     super::set_ops(&d, ops)?;
     Ok(d)
 }
@@ -124,7 +124,7 @@ pub fn omni_shadows<'py>(
     )?;
     d.set_item("resolution", r.resolution)?;
     d.set_item("stats", named(py, r.stats)?)?;
-    d.set_item("timings", named(py, r.timings)?)?;
+    d.set_item("timings", super::convert::timings(py, &r.timings)?)?;
     super::set_ops(&d, ops)?;
     Ok(d)
 }

@@ -10,7 +10,7 @@ use super::errors::{input, IntoPy};
 use super::scene::PyScene;
 use crate::discretize::epr::{self, Density};
 use crate::effects::omni_shadows::{eye_resolution, light_samples, NEAR};
-use crate::splat::Points;
+use crate::types::Points;
 
 /// Points for the cube maps of the reflectors (centres (R, 3), radii, triangle ids per
 /// reflector, cube-map resolution per reflector); `density` is "eye" (EPR) or "offscreen"
@@ -115,7 +115,7 @@ fn points_dict<'py>(
     d.set_item("views", array(py, p.views, &[n, words])?)?;
     let cams: Vec<PyCamera> = views.into_iter().map(PyCamera::from).collect();
     d.set_item("cameras", cams)?;
-    d.set_item("timings", named(py, p.timings)?)?;
+    d.set_item("timings", super::convert::timings(py, &p.timings)?)?;
     d.set_item("stats", named(py, p.stats)?)?;
     Ok(d)
 }
@@ -173,7 +173,7 @@ pub fn splat<'py>(
     d.set_item("depth", array(py, b.depth(), &shape)?)?;
     d.set_item("index", array(py, b.index(), &shape)?)?;
     d.set_item("packed", array(py, b.packed, &shape)?)?;
-    d.set_item("timings", named(py, b.timings)?)?;
+    d.set_item("timings", super::convert::timings(py, &b.timings)?)?;
     super::set_ops(&d, ops)?;
     Ok(d)
 }

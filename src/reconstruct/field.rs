@@ -22,10 +22,11 @@ use rayon::prelude::*;
 
 use crate::camera::Camera;
 use crate::discretize::visibility_field::{Field, Slab};
-use crate::discretize::{discretize_ranges, push_range, DepthImages};
+use crate::discretize::{discretize_ranges, push_range};
 use crate::error::Result;
 use crate::input_err;
 use crate::scene::Scene;
+use crate::types::DepthImages;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Interpolate {
@@ -203,8 +204,7 @@ pub fn render_marked(
     for t in img.triangle.iter_mut().filter(|t| **t >= 0) {
         *t = order[*t as usize] as i32;
     }
-    img.timings
-        .push(("ranges".into(), start.elapsed().as_secs_f64()));
+    img.timings.add("ranges", start.elapsed().as_secs_f64());
     Ok((img, drawn))
 }
 

@@ -15,9 +15,9 @@ use glam::DVec2;
 use super::{
     check, continuous, on_tangent_plane, per_image, push_vertex, ImageView, Mesh, MAX_STRETCH,
 };
-use crate::discretize::DepthImages;
 use crate::error::Result;
 use crate::input_err;
+use crate::types::{DepthImages, Timings};
 
 /// The hybrid reconstruction of `images` with the offset images `offset` (image i of `offset`
 /// made from `images.cameras[i].corner_camera()`). Two triangles per sample, counter-clockwise
@@ -43,7 +43,7 @@ pub fn reconstruct_hybrid(images: &DepthImages, offset: &DepthImages) -> Result<
     let mut m = per_image(images.n, |i| {
         image_hybrid(&ImageView::of(images, i), &ImageView::of(offset, i))
     });
-    m.timings = vec![("hybrid".into(), start.elapsed().as_secs_f64())];
+    m.timings = Timings::from([("hybrid", start.elapsed().as_secs_f64())]);
     Ok(m)
 }
 

@@ -19,10 +19,11 @@ use crate::camera::{Camera, Projection};
 use crate::discretize::impostors::{
     impostor_camera, lit, shading_normal, vertex_normals, ImpostorProjection, Impostors,
 };
-use crate::discretize::{discretize_ranges, push_range, DepthImages};
+use crate::discretize::{discretize_ranges, push_range};
 use crate::error::Result;
 use crate::input_err;
 use crate::scene::Scene;
+use crate::types::{DepthImages, Timings};
 
 /// How each cell was drawn.
 pub const CULLED: i32 = -2;
@@ -39,7 +40,7 @@ pub struct ImpostorView {
     /// Per cell: `CULLED`, `TRIANGLES`, or the index of the impostor direction used.
     pub used: Vec<i32>,
     pub stats: Vec<(String, f64)>,
-    pub timings: Vec<(String, f64)>,
+    pub timings: Timings,
 }
 
 /// The lit colour and depth of a depth image of `scene` (black / +inf where empty).
@@ -205,12 +206,12 @@ pub fn reconstruct(
             ("billboard_pixels".into(), billboard_pixels as f64),
         ],
         used,
-        timings: vec![
-            ("cull".into(), cull_seconds),
-            ("triangles".into(), triangle_seconds),
-            ("impostors".into(), impostor_seconds),
-            ("total".into(), total.elapsed().as_secs_f64()),
-        ],
+        timings: Timings::from([
+            ("cull", cull_seconds),
+            ("triangles", triangle_seconds),
+            ("impostors", impostor_seconds),
+            ("total", total.elapsed().as_secs_f64()),
+        ]),
     })
 }
 

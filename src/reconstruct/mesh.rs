@@ -9,8 +9,8 @@
 use std::time::Instant;
 
 use super::{check, continuous, per_image, push_vertex, ImageView, Mesh};
-use crate::discretize::DepthImages;
 use crate::error::Result;
+use crate::types::{DepthImages, Timings};
 
 /// The conventional mesh of every image. Faces wind counter-clockwise as seen from their
 /// image's camera; a face's `sample` is its block's first sample in (top-left, top-right,
@@ -19,7 +19,7 @@ pub fn reconstruct_mesh(images: &DepthImages) -> Result<Mesh> {
     check(images)?;
     let start = Instant::now();
     let mut m = per_image(images.n, |i| image_mesh(&ImageView::of(images, i)));
-    m.timings = vec![("mesh".into(), start.elapsed().as_secs_f64())];
+    m.timings = Timings::from([("mesh", start.elapsed().as_secs_f64())]);
     Ok(m)
 }
 

@@ -14,9 +14,9 @@ use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 
 use crate::camera::Camera;
-use crate::discretize::DepthImages;
 use crate::error::Result;
 use crate::input_err;
+use crate::types::{DepthImages, Timings};
 
 pub use hybrid::reconstruct_hybrid;
 pub use mesh::reconstruct_mesh;
@@ -36,7 +36,7 @@ pub struct Mesh {
     pub faces: Vec<[u32; 3]>,
     /// Flat index (image · H · W + row · W + column) of the sample each face came from.
     pub sample: Vec<i64>,
-    pub timings: Vec<(String, f64)>,
+    pub timings: Timings,
 }
 
 impl Mesh {

@@ -10,15 +10,15 @@ use std::time::Instant;
 use glam::DVec3;
 
 use super::{check, per_image, push_vertex, ImageView, Mesh, MAX_STRETCH};
-use crate::discretize::DepthImages;
 use crate::error::Result;
+use crate::types::{DepthImages, Timings};
 
 /// One square (two triangles, both with the sample's index) per sample.
 pub fn reconstruct_points(images: &DepthImages) -> Result<Mesh> {
     check(images)?;
     let start = Instant::now();
     let mut m = per_image(images.n, |i| image_points(&ImageView::of(images, i)));
-    m.timings = vec![("points".into(), start.elapsed().as_secs_f64())];
+    m.timings = Timings::from([("points", start.elapsed().as_secs_f64())]);
     Ok(m)
 }
 

@@ -5,7 +5,10 @@
 
 pub mod gltf;
 pub mod obj;
+pub mod shapes;
 
+use std::any::{Any, TypeId};
+use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 
 use glam::{DVec3, Vec3};
@@ -95,15 +98,31 @@ pub struct Scene {
     bounds: [[f32; 3]; 2],
     degenerate: Vec<bool>,
     degenerate_count: usize,
-    /// Built on the first `cast_rays` (see `trace`).
-    pub(crate) bvh: OnceLock<Arc<crate::trace::Bvh>>,
-    /// Groups of coincident triangles, found on the first non-redundant rendering (see
-    /// `discretize::redundancy::coincident_groups`).
-    pub(crate) coincident: OnceLock<Option<Vec<u32>>>,
-    /// Per-triangle resolve data, built on the first depth image (see `discretize`).
-    pub(crate) planes: OnceLock<Vec<crate::discretize::conventional::SurfacePlane>>,
-    /// Uploaded on the first GPU use (see `gpu::SceneBuffers`); a Mutex because upload can fail.
-    pub(crate) gpu: Mutex<Option<Arc<crate::gpu::SceneBuffers>>>,
+    /// What the rooms derive from the scene (see [`Scene::derived`]).
+    derived: Derived,
+}
+
+/// One cached value per type, each built once.
+type Slot = Arc<OnceLock<Arc<dyn Any + Send + Sync>>>;
+
+/// The values derived from a scene by the code that uses it (its BVH, its GPU buffers, its
+/// per-triangle planes, ...), keyed by their type, so that the scene names none of its users.
+#[derive(Default)]
+struct Derived(Mutex<HashMap<TypeId, Slot>>);
+
+impl std::fmt::Debug for Derived {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let n = self.0.lock().map(|m| m.len()).unwrap_or(0);
+        write!(f, "Derived({n} values)")
+    }
+}
+
+impl Derived {
+    fn slot<T: Any>(&self) -> Slot {
+        // A panic elsewhere while the map was locked leaves it intact: keep using it.
+        let mut map = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        map.entry(TypeId::of::<T>()).or_default().clone()
+    }
 }
 
 impl Scene {
@@ -127,11 +146,27 @@ impl Scene {
             bounds,
             degenerate,
             degenerate_count,
-            bvh: OnceLock::new(),
-            coincident: OnceLock::new(),
-            planes: OnceLock::new(),
-            gpu: Mutex::new(None),
+            derived: Derived::default(),
         })
+    }
+
+    /// The scene's `T`, built by `make` on first use and kept for the scene's lifetime (the
+    /// scene is immutable). Concurrent first uses build it once; the others wait for it. A
+    /// module caches what it derives from a scene under a type of its own.
+    pub fn derived<T: Any + Send + Sync>(&self, make: impl FnOnce() -> T) -> Arc<T> {
+        let slot = self.derived.slot::<T>();
+        let value = slot
+            .get_or_init(|| Arc::new(make()) as Arc<dyn Any + Send + Sync>)
+            .clone();
+        value
+            .downcast::<T>()
+            .unwrap_or_else(|_| unreachable!("slots are keyed by their value's type"))
+    }
+
+    /// The scene's `T` if [`Scene::derived`] has built it.
+    pub fn derived_if_built<T: Any + Send + Sync>(&self) -> Option<Arc<T>> {
+        let value = self.derived.slot::<T>().get()?.clone();
+        value.downcast::<T>().ok()
     }
 
     /// The same scene with its faces (and their material and object ids) in `order`: face i of

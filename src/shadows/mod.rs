@@ -11,13 +11,14 @@ use glam::{DVec2, DVec3};
 
 use crate::camera::Camera;
 use crate::discretize::{
-    discretize_conventional, discretize_nonredundant, discretize_peeling, DepthImages, Redundancy,
+    discretize_conventional, discretize_nonredundant, discretize_peeling, Redundancy,
 };
 use crate::error::Result;
 use crate::gpu;
 use crate::input_err;
 use crate::reconstruct::{reconstruct_hybrid, reconstruct_mesh, reconstruct_points};
 use crate::scene::Scene;
+use crate::types::{DepthImages, Timings};
 
 /// A rectangular area light: corners `center ± u/2 ± v/2`, emitting on both sides.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -133,7 +134,7 @@ pub struct ShadowResult {
     pub mask: Vec<bool>,
     /// Occluder triangles each shadow map drew (0 for `Raytraced`).
     pub occluder_triangles: usize,
-    pub timings: Vec<(String, f64)>,
+    pub timings: Timings,
 }
 
 /// A shadow or depth camera at `at` facing `dir`, square, whose view holds every corner of the
@@ -191,13 +192,13 @@ pub fn soft_shadows(
     if opts.resolution == 0 || opts.shadow_resolution == 0 {
         return input_err!("resolution and shadow_resolution must be positive");
     }
-    let mut timings = Vec::new();
+    let mut timings = Timings::new();
 
     // The output image's surface points, with normals facing the eye.
     let start = Instant::now();
     let seen = discretize_conventional(scene, std::slice::from_ref(eye), false)?;
     let (points, normals, mask) = eye_points(&seen, eye);
-    timings.push(("eye".to_string(), start.elapsed().as_secs_f64()));
+    timings.add("eye", start.elapsed().as_secs_f64());
 
     let samples = light.samples(nu, nv);
     let diagonal = scene.diagonal();
@@ -206,7 +207,7 @@ pub fn soft_shadows(
         Discretization::Raytraced => {
             let start = Instant::now();
             let bits = raytraced(scene, &samples, &points, &normals, diagonal)?;
-            timings.push(("shadow".to_string(), start.elapsed().as_secs_f64()));
+            timings.add("shadow", start.elapsed().as_secs_f64());
             (0, bits)
         }
         d => {
@@ -216,7 +217,7 @@ pub fn soft_shadows(
             } else {
                 let start = Instant::now();
                 let (images, offset) = discretize_light(scene, light, d, opts)?;
-                timings.push(("discretize".to_string(), start.elapsed().as_secs_f64()));
+                timings.add("discretize", start.elapsed().as_secs_f64());
                 let start = Instant::now();
                 let mesh = match (opts.reconstruction, offset) {
                     (Reconstruction::Hybrid, Some(offset)) => reconstruct_hybrid(&images, &offset)?,
@@ -226,7 +227,7 @@ pub fn soft_shadows(
                     (Reconstruction::Points, _) => reconstruct_points(&images)?,
                     (Reconstruction::Mesh, _) => reconstruct_mesh(&images)?,
                 };
-                timings.push(("reconstruct".to_string(), start.elapsed().as_secs_f64()));
+                timings.add("reconstruct", start.elapsed().as_secs_f64());
                 Some(mesh)
             };
             let (vertices, faces) = match &mesh {
@@ -244,13 +245,13 @@ pub fn soft_shadows(
                 &normals,
                 opts.shadow_resolution,
             )?;
-            timings.push(("shadow".to_string(), start.elapsed().as_secs_f64()));
+            timings.add("shadow", start.elapsed().as_secs_f64());
             (faces.len(), bits)
         }
     };
 
     let (visible, visibility) = per_pixel(&bits, &mask, s_count);
-    timings.push(("total".to_string(), total.elapsed().as_secs_f64()));
+    timings.add("total", total.elapsed().as_secs_f64());
     Ok(ShadowResult {
         width: eye.width,
         height: eye.height,

@@ -18,93 +18,7 @@ use crate::error::Result;
 use crate::gpu;
 use crate::input_err;
 use crate::scene::Scene;
-
-/// (step, seconds) in the order the steps ran.
-pub type Timings = Vec<(String, f64)>;
-
-/// A point set, as `discretize(method="epr")` makes it or a caller builds it.
-#[derive(Debug, Clone, Default)]
-pub struct Points {
-    pub center: Vec<[f32; 3]>,
-    /// Side of the point's square, world units.
-    pub length: Vec<f32>,
-    pub triangle: Vec<i32>,
-    pub normal: Vec<[f32; 3]>,
-    pub material: Vec<i32>,
-    /// `words()` words per point: bit v % 64 of word v / 64 is set when view v may see the point.
-    pub views: Vec<u64>,
-    /// How many views the bit strings describe.
-    pub view_count: usize,
-    pub timings: Vec<(String, f64)>,
-    pub stats: Vec<(String, f64)>,
-}
-
-impl Points {
-    /// 64-bit words per point in `views`.
-    pub fn words(&self) -> usize {
-        self.view_count.div_ceil(64).max(1)
-    }
-
-    pub fn len(&self) -> usize {
-        self.center.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.center.is_empty()
-    }
-
-    /// Check the arrays against each other and against `scene`.
-    pub fn validate(&self, scene: &Scene) -> Result<()> {
-        let n = self.len();
-        // Normals and materials are for shading, not splatting: they may be left empty.
-        for (name, len, optional) in [
-            ("length", self.length.len(), false),
-            ("triangle", self.triangle.len(), false),
-            ("normal", self.normal.len(), true),
-            ("material", self.material.len(), true),
-        ] {
-            if len != n && !(optional && len == 0) {
-                return input_err!("points have {n} centres but {len} entries in {name}");
-            }
-        }
-        if self.views.len() != n * self.words() {
-            return input_err!(
-                "points over {} views need {} visibility words each ({} in all), got {}",
-                self.view_count,
-                self.words(),
-                n * self.words(),
-                self.views.len()
-            );
-        }
-        let t = scene.triangle_count();
-        if let Some((i, &bad)) = self
-            .triangle
-            .iter()
-            .enumerate()
-            .find(|(_, &k)| k < 0 || k as usize >= t)
-        {
-            return input_err!("point {i} names triangle {bad}, but the scene has {t} triangles");
-        }
-        if let Some(i) = self
-            .center
-            .iter()
-            .position(|c| !c.iter().all(|x| x.is_finite()))
-        {
-            return input_err!("point {i} has a non-finite centre {:?}", self.center[i]);
-        }
-        if let Some(i) = self
-            .length
-            .iter()
-            .position(|l| !(l.is_finite() && *l >= 0.0))
-        {
-            return input_err!(
-                "point {i} has length {}; lengths must be finite and >= 0",
-                self.length[i]
-            );
-        }
-        Ok(())
-    }
-}
+pub use crate::types::{Points, Timings};
 
 /// Off-screen buffers filled by `splat`: one W×H buffer per view.
 #[derive(Debug, Clone)]
@@ -114,7 +28,7 @@ pub struct SplatBuffers {
     pub views: usize,
     /// (depth bits << 32 | point index), `u64::MAX` where no point landed; view-major.
     pub packed: Vec<u64>,
-    pub timings: Vec<(String, f64)>,
+    pub timings: Timings,
 }
 
 impl SplatBuffers {
@@ -229,15 +143,15 @@ pub fn splat_views(
     )?;
     Ok((
         packed,
-        vec![
-            ("device".into(), device_seconds),
-            ("prepare".into(), prepare_seconds),
-            ("pairs".into(), stats.pairs_seconds),
-            ("upload".into(), stats.upload_seconds),
-            ("splat".into(), stats.splat_seconds),
-            ("readback".into(), stats.readback_seconds),
-            ("total".into(), total.elapsed().as_secs_f64()),
-        ],
+        Timings::from([
+            ("device", device_seconds),
+            ("prepare", prepare_seconds),
+            ("pairs", stats.pairs_seconds),
+            ("upload", stats.upload_seconds),
+            ("splat", stats.splat_seconds),
+            ("readback", stats.readback_seconds),
+            ("total", total.elapsed().as_secs_f64()),
+        ]),
     ))
 }
 

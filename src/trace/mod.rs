@@ -86,16 +86,13 @@ impl Bvh {
     /// [`Bvh::of`], building on `threads` when the BVH is not cached yet.
     pub fn of_with(scene: &Scene, threads: Threads) -> Arc<Bvh> {
         let params = build::BuildParams::standard();
-        scene
-            .bvh
-            .get_or_init(|| {
-                // `Count` threads: the caller runs this inside that pool already.
-                Arc::new(match threads {
-                    Threads::One => Bvh::build_with(scene, params.sequential()),
-                    _ => Bvh::build_with(scene, params),
-                })
-            })
-            .clone()
+        scene.derived(|| {
+            // `Count` threads: the caller runs this inside that pool already.
+            match threads {
+                Threads::One => Bvh::build_with(scene, params.sequential()),
+                _ => Bvh::build_with(scene, params),
+            }
+        })
     }
 
     pub fn stats(&self) -> BvhStats {
@@ -304,7 +301,7 @@ fn prepare(
             scene.triangle_count()
         );
     }
-    let had = scene.bvh.get().is_some();
+    let had = scene.derived_if_built::<Bvh>().is_some();
     let bvh = Bvh::of_with(scene, q.threads);
     let built = if had { 0.0 } else { bvh.build_seconds };
     Ok((bvh, built))
@@ -605,10 +602,7 @@ impl Job for AnyJob<'_> {
     }
 }
 
-/// Two hits whose `t` differ by at most this fraction of the larger are one surface met twice
-/// (a duplicated or coplanar face): `nearest_hits` counts them once, and depth peeling makes
-/// them one layer (`discretize::discretize_peeling`).
-pub const SAME_HIT: f32 = 1e-5;
+pub use crate::types::SAME_HIT;
 
 struct NearestJob<'a>(&'a Rays<'a>, usize);
 
@@ -749,7 +743,7 @@ pub(crate) mod tests {
 
     /// An icosphere subdivided `n` times: a closed mesh with shared edges and vertices.
     pub(crate) fn icosphere(n: u32) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
-        let (v0, f0) = crate::discretize::impostors::icosahedron();
+        let (v0, f0) = crate::scene::shapes::icosahedron();
         let mut v: Vec<Vec3> = v0.iter().map(|p| p.as_vec3()).collect();
         let mut f: Vec<[u32; 3]> = f0.to_vec();
         for _ in 0..n {

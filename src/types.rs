@@ -1,0 +1,182 @@
+//! The types every room exchanges: depth images, point sets, per-stage timings, and the depth
+//! tolerance that makes two hits one surface. They sit below the rooms (`discretize`,
+//! `reconstruct`, `splat`, `shadows`, `effects`, `evaluate`, `io`, `gpu`, `trace`), so that none of
+//! those has to reach into another for them.
+
+use std::time::Instant;
+
+use crate::camera::Camera;
+use crate::error::Result;
+use crate::input_err;
+use crate::scene::Scene;
+
+/// Seconds per stage of one call, in the order the stages first ran. A stage recorded twice
+/// (a loop, or two passes of one kind) holds the sum.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Timings(Vec<(&'static str, f64)>);
+
+impl Timings {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Add `seconds` to `stage`.
+    pub fn add(&mut self, stage: &'static str, seconds: f64) {
+        match self.0.iter_mut().find(|(s, _)| *s == stage) {
+            Some((_, t)) => *t += seconds,
+            None => self.0.push((stage, seconds)),
+        }
+    }
+
+    /// Add the seconds since `start` to `stage`.
+    pub fn since(&mut self, stage: &'static str, start: Instant) {
+        self.add(stage, start.elapsed().as_secs_f64());
+    }
+
+    /// Set `stage` to `seconds` (a total measured from the call's start).
+    pub fn set(&mut self, stage: &'static str, seconds: f64) {
+        match self.0.iter_mut().find(|(s, _)| *s == stage) {
+            Some((_, t)) => *t = seconds,
+            None => self.0.push((stage, seconds)),
+        }
+    }
+
+    /// The seconds of `stage`, if it ran.
+    pub fn get(&self, stage: &str) -> Option<f64> {
+        self.0.iter().find(|(s, _)| *s == stage).map(|&(_, t)| t)
+    }
+
+    /// Add every stage of `other`.
+    pub fn merge(&mut self, other: &Timings) {
+        for &(s, t) in &other.0 {
+            self.add(s, t);
+        }
+    }
+
+    /// (stage, seconds) in order.
+    pub fn iter(&self) -> impl Iterator<Item = (&'static str, f64)> + '_ {
+        self.0.iter().copied()
+    }
+}
+
+impl<const N: usize> From<[(&'static str, f64); N]> for Timings {
+    fn from(stages: [(&'static str, f64); N]) -> Self {
+        let mut t = Timings::new();
+        for (s, x) in stages {
+            t.add(s, x);
+        }
+        t
+    }
+}
+
+/// Two hits whose `t` differ by at most this fraction of the larger are one surface met twice
+/// (a duplicated or coplanar face): `nearest_hits` counts them once, and depth peeling makes
+/// them one layer (`discretize::discretize_peeling`).
+pub const SAME_HIT: f32 = 1e-5;
+
+/// `n` images of `height`×`width`, row-major, image after image.
+#[derive(Debug, Clone, Default)]
+pub struct DepthImages {
+    pub n: usize,
+    pub width: u32,
+    pub height: u32,
+    /// Camera-space z (positive), +inf where no surface.
+    pub depth: Vec<f32>,
+    /// Scene face index, −1 where no surface.
+    pub triangle: Vec<i32>,
+    /// Unit world geometric normal from the triangle's winding (not flipped toward the camera);
+    /// zero where no surface or the triangle is degenerate.
+    pub normal: Vec<[f32; 3]>,
+    /// World position of the surface point; NaN where no surface.
+    pub position: Vec<[f32; 3]>,
+    /// Linear base colour interpolated from the vertices; zero where no surface.
+    pub color: Vec<[f32; 3]>,
+    pub cameras: Vec<Camera>,
+    /// How the images were made: "conventional", "nonredundant" or "peeling".
+    pub method: String,
+    pub timings: Timings,
+}
+
+/// A point set, as `discretize(method="epr")` makes it or a caller builds it.
+#[derive(Debug, Clone, Default)]
+pub struct Points {
+    pub center: Vec<[f32; 3]>,
+    /// Side of the point's square, world units.
+    pub length: Vec<f32>,
+    pub triangle: Vec<i32>,
+    pub normal: Vec<[f32; 3]>,
+    pub material: Vec<i32>,
+    /// `words()` words per point: bit v % 64 of word v / 64 is set when view v may see the point.
+    pub views: Vec<u64>,
+    /// How many views the bit strings describe.
+    pub view_count: usize,
+    pub timings: Timings,
+    pub stats: Vec<(String, f64)>,
+}
+
+impl Points {
+    /// 64-bit words per point in `views`.
+    pub fn words(&self) -> usize {
+        self.view_count.div_ceil(64).max(1)
+    }
+
+    pub fn len(&self) -> usize {
+        self.center.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.center.is_empty()
+    }
+
+    /// Check the arrays against each other and against `scene`.
+    pub fn validate(&self, scene: &Scene) -> Result<()> {
+        let n = self.len();
+        // Normals and materials are for shading, not splatting: they may be left empty.
+        for (name, len, optional) in [
+            ("length", self.length.len(), false),
+            ("triangle", self.triangle.len(), false),
+            ("normal", self.normal.len(), true),
+            ("material", self.material.len(), true),
+        ] {
+            if len != n && !(optional && len == 0) {
+                return input_err!("points have {n} centres but {len} entries in {name}");
+            }
+        }
+        if self.views.len() != n * self.words() {
+            return input_err!(
+                "points over {} views need {} visibility words each ({} in all), got {}",
+                self.view_count,
+                self.words(),
+                n * self.words(),
+                self.views.len()
+            );
+        }
+        let t = scene.triangle_count();
+        if let Some((i, &bad)) = self
+            .triangle
+            .iter()
+            .enumerate()
+            .find(|(_, &k)| k < 0 || k as usize >= t)
+        {
+            return input_err!("point {i} names triangle {bad}, but the scene has {t} triangles");
+        }
+        if let Some(i) = self
+            .center
+            .iter()
+            .position(|c| !c.iter().all(|x| x.is_finite()))
+        {
+            return input_err!("point {i} has a non-finite centre {:?}", self.center[i]);
+        }
+        if let Some(i) = self
+            .length
+            .iter()
+            .position(|l| !(l.is_finite() && *l >= 0.0))
+        {
+            return input_err!(
+                "point {i} has length {}; lengths must be finite and >= 0",
+                self.length[i]
+            );
+        }
+        Ok(())
+    }
+}
