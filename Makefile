@@ -15,8 +15,9 @@ demo: setup ## the main job: discretize a scene, write EXR/PNG to out/, print a 
 
 test: setup lint test-rust test-python ## every test: lints, cargo (Rust internals, shaders) and pytest
 
-test-rust: ## cargo tests of the Rust core, optimized, with debug assertions and overflow checks
+test-rust: ## cargo tests of the Rust core: optimized with debug assertions and overflow checks, then in debug
 	cargo test --profile checked
+	cargo test
 
 test-python: ## pytest: cross-validation against pyrender and Embree, bad input, stubs, notebooks
 	$(PY) -m pytest
