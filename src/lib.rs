@@ -14,6 +14,7 @@ pub mod io;
 pub mod process;
 pub mod reconstruct;
 pub mod scene;
+pub mod shading;
 pub mod shadows;
 pub mod splat;
 pub mod trace;

@@ -173,3 +173,23 @@ def test_stats_are_per_call_when_two_renders_run_at_once():
                 got = f.result().stats
                 assert {k: got[k] for k in keys} == {k: alone[name][k] for k in keys}, name
     assert alone["mirrored"]["shadow_views"] == 0 and alone["lit"]["cube_maps"] == 0
+
+
+def test_a_finely_tessellated_emissive_object_gets_its_smallest_rectangle():
+    """A disc of 4000 triangles: the light is the square around it (side = diameter), found
+    from the hull of its vertices (trying every triangle edge took minutes on real scenes)."""
+    from scenesample._plan import emissive_lights
+
+    n = 4000
+    a = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    rim = np.stack([np.cos(a), np.sin(a), np.full(n, 2.0)], axis=1)
+    verts = np.concatenate([[[0.0, 0.0, 2.0]], rim]).astype(np.float32)
+    faces = np.array([[0, 1 + i, 1 + (i + 1) % n] for i in range(n)], dtype=np.uint32)
+    glow = dict(MATTE, name="glow", emissive=[1, 1, 1])
+    disc = ss.Scene.from_arrays(verts, faces, material_ids=np.zeros(n, np.int32), materials=[glow])
+    [(_, light)] = emissive_lights(disc)
+    u, v = np.asarray(light.u), np.asarray(light.v)
+    assert abs(np.linalg.norm(u) * np.linalg.norm(v) - 4.0) < 0.01
+    np.testing.assert_allclose(light.center, [0, 0, 2], atol=1e-6)
+    local = (verts - np.asarray(light.center)) @ np.stack([u, v], 1)
+    assert (np.abs(local) <= np.array([u @ u, v @ v]) / 2 + 1e-6).all()

@@ -32,6 +32,7 @@ __all__ = [
     "render_cells",
     "render_lit",
     "sampling_metrics",
+    "shade_frame",
     "soft_shadows",
     "splat",
     "visibility_field",
@@ -342,6 +343,14 @@ def impostor_view(
     screen_threshold: float,
 ) -> dict[str, Any]: ...
 def render_lit(scene: Scene, camera: Camera) -> dict[str, Any]: ...
+def shade_frame(
+    scene: Scene,
+    camera: Camera,
+    triangle: ArrayLike,
+    position: ArrayLike,
+    light_visibility: Sequence[Optional[ArrayLike]],
+    areas: Sequence[tuple[ArrayLike, Optional[ArrayLike]]],
+) -> np.ndarray: ...
 def impostor_directions(handle: Impostors, camera: Camera) -> list[int]: ...
 def cast_rays(
     scene: Scene,

@@ -113,11 +113,14 @@ class Frame:
     Attributes
     ----------
     image : (H, W, 3) float32
-        Linear RGB: each pixel's base colour lit by the scene's lights (a light's contribution
-        is its colour x cos(theta), scaled by (d0 / d)^2 for point and spot lights, d0 the
-        light's distance to the scene's centre; a spot light only inside its cone), each
-        shadowed by its effect's visibility where one ran; plus 0.1 ambient. Where a
-        reflections effect ran, its reflective pixels are that effect's image.
+        Linear RGB, shaded in Rust by the package's one model (``src/shading.rs``, the one
+        reflections and impostors use): Lambertian diffuse plus a GGX specular lobe from each
+        material's metallic and roughness, under the scene's punctual lights (colour x
+        intensity, inverse-square falloff, glTF range and spot cones) and its area lights
+        (emissive objects and ``area_lights``: a unit-radiance source toward each centre), each
+        scaled by its shadow effect's visibility where one ran; with no light at all, a default
+        light from the camera's upper left; plus 0.08 ambient. Where a reflections effect ran,
+        its reflective pixels are that effect's image.
     effects : dict of str to result
         Each effect run, by :attr:`Effect.name`: a ShadowResult, OmniShadowResult or
         ReflectionResult.
@@ -152,9 +155,10 @@ class Frame:
 
 
 def emissive_lights(scene: Scene) -> list[tuple[str, AreaLight]]:
-    """An area light per object whose faces have an emissive material: the smallest rectangle,
-    with a side along one of the object's edges, that bounds its vertices in their best-fit
-    plane (exact for an emissive rectangle)."""
+    """An area light per object whose faces have an emissive material: the smallest rectangle
+    that bounds its vertices in their best-fit plane (exact for an emissive rectangle). The
+    smallest bounding rectangle has a side along an edge of the points' convex hull, so only
+    the hull's edges are tried: O(n log n) in the object's vertices."""
     emissive = [i for i, m in enumerate(scene.materials) if max(m.get("emissive", (0,))) > 0]
     if not emissive:
         return []
@@ -162,24 +166,19 @@ def emissive_lights(scene: Scene) -> list[tuple[str, AreaLight]]:
     out = []
     for obj in np.unique(scene.object_ids[faces]):
         sel = faces[scene.object_ids[faces] == obj]
-        pts = scene.vertices[scene.faces[sel]].reshape(-1, 3).astype(np.float64)
+        pts = scene.vertices[np.unique(scene.faces[sel])].astype(np.float64)
         c = pts.mean(axis=0)
         _, _, vt = np.linalg.svd(pts - c, full_matrices=False)
-        normal = vt[2]
-        tri = scene.vertices[scene.faces[sel]].astype(np.float64)
-        edges = np.concatenate(
-            [tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 1], tri[:, 0] - tri[:, 2]]
-        )
-        edges -= np.outer(edges @ normal, normal)
-        edges = edges[np.linalg.norm(edges, axis=1) > 0]
-        best = None
-        for e in edges / np.linalg.norm(edges, axis=1, keepdims=True):
-            f = np.cross(normal, e)
-            pe, pf = (pts - c) @ e, (pts - c) @ f
+        u, v = vt[0], vt[1] if len(vt) > 1 else np.cross(vt[0], [0.0, 0.0, 1.0])
+        flat = np.stack([(pts - c) @ u, (pts - c) @ v], axis=1)
+        a, b = u, v
+        best = np.inf
+        for e in _hull_edges(flat):
+            pe, pf = flat @ e, flat @ np.array([-e[1], e[0]])
             area = np.ptp(pe) * np.ptp(pf)
-            if best is None or area < best[0] - 1e-12:
-                best = (area, e, f)
-        a, b = (vt[0], vt[1]) if best is None else (best[1], best[2])
+            if area < best - 1e-12:
+                best = area
+                a, b = e[0] * u + e[1] * v, -e[1] * u + e[0] * v
         pa, pb = (pts - c) @ a, (pts - c) @ b
         centre = c + a * (pa.max() + pa.min()) / 2 + b * (pb.max() + pb.min()) / 2
         ext_a = max(pa.max() - pa.min(), 1e-9 * scene_diagonal(scene))
@@ -187,6 +186,31 @@ def emissive_lights(scene: Scene) -> list[tuple[str, AreaLight]]:
         name = scene.objects[obj] if 0 <= obj < len(scene.objects) else f"object {obj}"
         out.append((name, AreaLight(tuple(centre), tuple(a * ext_a), tuple(b * ext_b))))
     return out
+
+
+def _hull_edges(p: np.ndarray) -> np.ndarray:
+    """Unit directions of the edges of the convex hull of 2D points ``p`` (Andrew's monotone
+    chain); empty when the points are all one point."""
+    pts = np.unique(p, axis=0)
+    if len(pts) < 2:
+        return np.zeros((0, 2))
+
+    def half(seq: np.ndarray) -> list:
+        chain: list = []
+        for q in seq:
+            while len(chain) >= 2:
+                (ax, ay), (bx, by) = chain[-2], chain[-1]
+                if (bx - ax) * (q[1] - ay) - (by - ay) * (q[0] - ax) > 0:
+                    break
+                chain.pop()
+            chain.append(q)
+        return chain
+
+    lower, upper = half(pts), half(pts[::-1])
+    hull = np.array(lower[:-1] + upper[:-1])
+    d = np.roll(hull, -1, axis=0) - hull
+    n = np.linalg.norm(d, axis=1)
+    return d[n > 0] / n[n > 0, None]
 
 
 def scene_diagonal(scene: Scene) -> float:
@@ -363,125 +387,101 @@ def render(
     planned = plan(scene, area_lights=area_lights, camera=camera, quality=quality)
     chosen = _select(planned, effects)
     timings: dict[str, float] = {}
-
     t = time.perf_counter()
     g = conventional(scene, camera)
     timings["gbuffer"] = time.perf_counter() - t
-    tri = g.triangle[0]
-    mask = tri >= 0
-    base = g.color[0].astype(np.float64)
-    pos = g.position[0].astype(np.float64)
-    n = g.normal[0].astype(np.float64)
-    eye = np.array(camera.eye)
-    view = eye - pos
-    # Normals toward the eye.
-    n = np.where(((n * view).sum(-1) < 0)[..., None], -n, n)
-
-    results: dict[str, Any] = {}
-    stats_eff: dict[str, dict[str, float]] = {}
-    visibility: dict[int, np.ndarray] = {}
-    area_vis: dict[str, np.ndarray] = {}
-    refl_result = None
+    results = {}
     for e in chosen:
         t = time.perf_counter()
-        if e.kind == "soft_shadows":
-            r = soft_shadows(
-                scene,
-                camera,
-                e.params["light"],
-                samples=e.params["samples"],
-                resolution=e.params["resolution"],
-            )
-            area_vis[e.source] = r.visibility
-        elif e.kind in ("omni_shadows", "spot_shadows"):
-            light = e.params["light"]
-            r = omni_shadows(
-                scene,
-                camera,
-                light["position"],
-                e.params["radius"],
-                light_samples=e.params["samples"],
-                method=e.params["method"],
-                seed=seed,
-            )
-            visibility[e.params["index"]] = r.visibility
-        else:
-            r = reflections(
-                scene,
-                camera,
-                reflectors=e.params["reflectors"],
-                rho_scale=e.params["rho_scale"],
-                bounces=e.params["bounces"],
-                seed=seed,
-            )
-            refl_result = r
-        dt = time.perf_counter() - t
-        timings[e.name] = dt
-        results[e.name] = r
-        stats_eff[e.name] = {"estimated_seconds": e.estimate["seconds"], "seconds": dt}
-
+        results[e.name] = _run_effect(e, scene, camera, seed)
+        timings[e.name] = time.perf_counter() - t
     t = time.perf_counter()
-    diag = scene_diagonal(scene)
-    lo, hi = scene.bounds.astype(np.float64)
-    centre = (lo + hi) / 2
-    light_sum = np.zeros(base.shape)
-    lights = scene.lights
-    for k, light in enumerate(lights):
-        col = np.asarray(light.get("color", (1, 1, 1)), dtype=np.float64)
-        if light["type"] == "directional":
-            w = -np.asarray(light["direction"], dtype=np.float64)
-            cos = np.clip((n * w).sum(-1), 0, None)
-            light_sum += col * cos[..., None]
-            continue
-        lp = np.asarray(light["position"], dtype=np.float64)
-        to = lp - pos
-        d = np.linalg.norm(to, axis=-1)
-        w = to / np.maximum(d, 1e-30)[..., None]
-        cos = np.clip((n * w).sum(-1), 0, None)
-        d0 = max(float(np.linalg.norm(lp - centre)), 1e-3 * diag)
-        att = np.minimum((d0 / np.maximum(d, 1e-12)) ** 2, 16.0)
-        if light["type"] == "spot":
-            outer = light.get("outer_cone_angle") or np.pi / 4
-            axis = np.asarray(light["direction"], dtype=np.float64)
-            att = att * ((-w * axis).sum(-1) >= np.cos(outer))
-        vis = visibility.get(k, np.ones(cos.shape))
-        light_sum += col * (cos * att * vis)[..., None]
-    areas = emissive_lights(scene) + [(f"area light {k}", a) for k, a in enumerate(area_lights)]
-    for name, light in areas:
-        to = np.asarray(light.center) - pos
-        w = to / np.maximum(np.linalg.norm(to, axis=-1), 1e-30)[..., None]
-        cos = np.clip((n * w).sum(-1), 0, None)
-        vis = area_vis.get(name, np.ones(cos.shape))
-        light_sum += (cos * vis)[..., None]
-    if not lights and not areas:
-        fwd = np.array(camera.forward)
-        up = np.array([0.0, 0.0, 1.0]) if abs(fwd[2]) < 0.9 else np.array([0.0, 1.0, 0.0])
-        w = -fwd + 0.5 * up + 0.3 * np.cross(fwd, up)
-        w /= np.linalg.norm(w)
-        light_sum += np.clip((n * w).sum(-1), 0, None)[..., None]
-    image = base * (0.1 + light_sum)
-    image[~mask] = 0.0
-    if refl_result is not None:
-        image[refl_result.reflective] = refl_result.image[refl_result.reflective]
+    image, lights = _compose(scene, camera, g, chosen, results, area_lights)
     timings["compose"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - total
     # What this call ran: the sum of its effects' own counts (never process-wide differences,
     # which other calls running at the same time would pollute).
-    stats: dict[str, Any] = {k: 0 for k in OPS}
-    for r in results.values():
-        for k in OPS:
-            stats[k] += int(r.stats.get(k, 0))
+    stats: dict[str, Any] = {k: sum(int(r.stats.get(k, 0)) for r in results.values()) for k in OPS}
     stats["effects_run"] = len(chosen)
     stats["reflectors"] = sum(
         len(e.params["reflectors"]) for e in chosen if e.kind == "reflections"
     )
-    stats["lights"] = len(lights) + len(areas)
-    stats["effects"] = stats_eff
+    stats["lights"] = lights
+    stats["effects"] = {
+        e.name: {"estimated_seconds": e.estimate["seconds"], "seconds": timings[e.name]}
+        for e in chosen
+    }
     return Frame(
-        image=image.astype(np.float32),
+        image=image,
         effects=results,
         plan=chosen,
-        mask=mask,
+        mask=g.triangle[0] >= 0,
         stats=stats,
         timings=timings,
     )
+
+
+def _run_effect(e: Effect, scene: Scene, camera: Camera, seed: int) -> Any:
+    """Run one planned effect from ``camera``."""
+    if e.kind == "soft_shadows":
+        return soft_shadows(
+            scene,
+            camera,
+            e.params["light"],
+            samples=e.params["samples"],
+            resolution=e.params["resolution"],
+        )
+    if e.kind in ("omni_shadows", "spot_shadows"):
+        return omni_shadows(
+            scene,
+            camera,
+            e.params["light"]["position"],
+            e.params["radius"],
+            light_samples=e.params["samples"],
+            method=e.params["method"],
+            seed=seed,
+        )
+    return reflections(
+        scene,
+        camera,
+        reflectors=e.params["reflectors"],
+        rho_scale=e.params["rho_scale"],
+        bounces=e.params["bounces"],
+        seed=seed,
+    )
+
+
+def _compose(
+    scene: Scene,
+    camera: Camera,
+    g: Any,
+    chosen: Sequence[Effect],
+    results: dict[str, Any],
+    area_lights: Sequence[AreaLight],
+) -> tuple[np.ndarray, int]:
+    """The frame's image, shaded in Rust by the package's one model (``shading::frame``):
+    each light scaled by its shadow effect's visibility; the reflective pixels are the
+    reflections effect's image. Also returns how many lights lit it."""
+    point_vis: dict[int, np.ndarray] = {}
+    area_vis: dict[str, np.ndarray] = {}
+    reflected = None
+    for e in chosen:
+        r = results[e.name]
+        if e.kind == "soft_shadows":
+            area_vis[e.source] = r.visibility
+        elif e.kind in ("omni_shadows", "spot_shadows"):
+            point_vis[e.params["index"]] = r.visibility
+        else:
+            reflected = r
+    areas = emissive_lights(scene) + [(f"area light {k}", a) for k, a in enumerate(area_lights)]
+    image = _core.shade_frame(
+        scene._core,
+        camera,
+        g.triangle[0],
+        g.position[0].reshape(-1, 3),
+        [point_vis.get(k) for k in range(len(scene.lights))],
+        [(np.asarray(light.center, dtype=np.float64), area_vis.get(name)) for name, light in areas],
+    )
+    if reflected is not None:
+        image[reflected.reflective] = reflected.image[reflected.reflective]
+    return image, len(scene.lights) + len(areas)

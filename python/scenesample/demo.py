@@ -82,11 +82,17 @@ def main(argv: Optional[list[str]] = None) -> None:
     covered = (gpu_ids >= 0) | hits.hit
     agree = float((gpu_ids == hits.triangle)[covered].mean())
 
+    # Lit frames, shaded by the package's one shading model (src/shading.rs), no effects.
+    start = time.perf_counter()
+    frames = [ss.render(scene, c, effects=[]) for c in cams]
+    render_s = time.perf_counter() - start
+
     start = time.perf_counter()
     images.save_exr(out / "views.exr")
     rows = []
     for i in range(images.n):
         tiles = {
+            "lit": frames[i].to_srgb8(),
             "color": linear_to_srgb(images.color[i]),
             "normal": normal_to_rgb(images.normal[i]),
             "depth": depth_to_rgb(images.depth[i]),
@@ -107,6 +113,7 @@ def main(argv: Optional[list[str]] = None) -> None:
         print(f"| discretize: {stage} | {secs:.4f} |")
     print(f"| cast_rays: BVH build | {hits.timings['bvh_build']:.4f} |")
     print(f"| cast_rays: trace {len(hits):,} rays | {hits.timings['trace']:.4f} |")
+    print(f"| render {len(frames)} lit frames | {render_s:.4f} |")
     print(f"| write EXR + PNG | {write_s:.4f} |")
     sheet = out / "contact_sheet.png"
     print(f"\nwrote {out / 'views.exr'} and {sheet} (+ one PNG per view and field)")

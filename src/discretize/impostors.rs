@@ -25,19 +25,12 @@ use crate::camera::{Camera, Projection};
 use crate::error::Result;
 use crate::input_err;
 use crate::scene::Scene;
+use crate::shading::{self, Prelit};
 use crate::trace::cast_rays;
 use crate::types::Timings;
 
 /// The most memory the uncropped images (colour and depth) may take.
 pub const MAX_BYTES: u64 = 6 << 30;
-/// Ambient share of the impostors' and the reference's lighting.
-pub const AMBIENT: f64 = 0.3;
-/// The fixed light direction of `lit` (unit).
-pub const LIGHT: [f64; 3] = [
-    0.301_511_344_577_763_6,
-    0.502_518_907_629_606,
-    0.804_030_252_207_369_7,
-];
 
 /// Unit vertex normals for shading: the scene's own, or else the area-weighted mean of the
 /// faces around each vertex (so that a finely tessellated surface shades smoothly rather than
@@ -86,12 +79,18 @@ pub fn shading_normal(scene: &Scene, normals: &[DVec3], t: usize, p: DVec3) -> D
     }
 }
 
-/// The colour a surface point is drawn with, by impostor images and triangles alike: its base
-/// colour times `AMBIENT + (1 − AMBIENT)·|n·L|` (two-sided Lambert with a fixed light, `n` the
-/// shading normal).
-pub fn lit(color: [f32; 3], normal: DVec3) -> [f32; 3] {
-    let k = AMBIENT + (1.0 - AMBIENT) * normal.dot(DVec3::from_array(LIGHT)).abs();
-    color.map(|c| (c as f64 * k) as f32)
+/// The colour a surface point is drawn with, by impostor images and triangles alike: the
+/// package's shading model, view-independent (`shading::diffuse`: ambient plus two-sided
+/// Lambert of the base colour under `env`, `normal` the shading normal).
+pub fn lit(color: [f32; 3], normal: DVec3, position: DVec3, env: &Prelit) -> [f32; 3] {
+    let s = shading::Surface {
+        position,
+        normal,
+        albedo: DVec3::from_array(color.map(f64::from)),
+        metallic: 0.0,
+        roughness: 1.0,
+    };
+    shading::diffuse(&s, env).as_vec3().to_array()
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -395,6 +394,7 @@ pub fn build(scene: &Scene, opts: &ImpostorOptions) -> Result<Impostors> {
     let mut rays = 0u64;
     let verts = scene.vertices();
     let normals = vertex_normals(scene);
+    let lights = Prelit::of(scene);
     crate::process::add_total(cells.len() as u64);
     for (ci, cell) in cells.iter().enumerate() {
         crate::process::check()?;
@@ -481,7 +481,12 @@ pub fn build(scene: &Scene, opts: &ImpostorOptions) -> Result<Impostors> {
                     });
                     let p = scene.triangle(t);
                     let p_hit = p[0] * (1.0 - u - v) + p[1] * u + p[2] * v;
-                    let c = lit(base, shading_normal(scene, &normals, t, p_hit));
+                    let c = lit(
+                        base,
+                        shading_normal(scene, &normals, t, p_hit),
+                        p_hit,
+                        &lights,
+                    );
                     col[k] = [to8(c[0]), to8(c[1]), to8(c[2]), 255];
                     dep[k] = cam.project(p_hit).1 as f32;
                 }

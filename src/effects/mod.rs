@@ -1,7 +1,5 @@
 //! Multiview effects built on the samples (eye-based-point-rendering.txt §4-5): cube-mapped
-//! reflections and omnidirectional soft shadows, each by EPR, MVR and iVIR, and the shading
-//! model the reflections share.
+//! reflections and omnidirectional soft shadows, each by EPR, MVR and iVIR.
 
 pub mod omni_shadows;
 pub mod reflections;
-pub mod shading;

@@ -27,13 +27,13 @@ use std::time::Instant;
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 
-use super::shading::{self, ShadeLight};
 use crate::camera::Camera;
 use crate::discretize::epr::{self, Density, Reflector};
 use crate::discretize::{discretize_conventional, discretize_sided};
 use crate::error::Result;
 use crate::input_err;
 use crate::scene::Scene;
+use crate::shading::{self, ShadeLight};
 use crate::types::{DepthImages, Timings};
 
 /// Radiance where a ray leaves the scene.

@@ -183,6 +183,16 @@ pub fn vec3(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<glam::DVec3> {
     }
 }
 
+/// Any real array, flattened, as f32.
+pub fn flat_f32(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<f32>> {
+    let arr = as_array(obj, name, "iuf", "float32", "numbers")?;
+    let arr: PyReadonlyArrayDyn<f32> = arr.extract()?;
+    let flat = arr
+        .as_slice()
+        .map_err(|e| input(obj.py(), format!("{name}: {e}")))?;
+    Ok(flat.to_vec())
+}
+
 /// Any integer array, flattened, as i32 (values must fit).
 pub fn flat_i32(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<i32>> {
     let arr = as_array(obj, name, "iu", "int64", "integers")?;

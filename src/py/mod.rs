@@ -129,6 +129,7 @@ fn finish<T>(
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<scene::PyScene>()?;
     m.add_class::<camera::PyCamera>()?;
+    m.add_function(wrap_pyfunction!(render::shade_frame, m)?)?;
     m.add_function(wrap_pyfunction!(render::discretize_conventional, m)?)?;
     m.add_function(wrap_pyfunction!(render::discretize_nonredundant, m)?)?;
     m.add_function(wrap_pyfunction!(render::discretize_peeling, m)?)?;

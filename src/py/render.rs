@@ -151,3 +151,69 @@ pub fn read_exr<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyDi
     let img = super::run(py, || crate::io::exr::read_depth_images(&path))?;
     images_dict(py, img)
 }
+
+/// A lit frame from a one-image G-buffer (`shading::frame`): the scene's punctual lights in
+/// order, each scaled by its entry of `light_visibility` ((H, W) float32, or None for fully
+/// visible), then one area light per `(center, visibility or None)` of `areas`; the default
+/// light when there are none. Returns (H, W, 3) float32 linear RGB.
+#[pyfunction]
+pub fn shade_frame<'py>(
+    py: Python<'py>,
+    scene: &PyScene,
+    camera: &PyCamera,
+    triangle: &Bound<'py, PyAny>,
+    position: &Bound<'py, PyAny>,
+    light_visibility: Vec<Option<Bound<'py, PyAny>>>,
+    areas: Vec<(Bound<'py, PyAny>, Option<Bound<'py, PyAny>>)>,
+) -> PyResult<Bound<'py, PyAny>> {
+    use crate::shading::{self, ShadeLight};
+    let s = scene.inner.clone();
+    let cam = camera.inner.clone();
+    let (w, h) = (cam.width as usize, cam.height as usize);
+    let vis = |v: &Option<Bound<'py, PyAny>>| -> PyResult<Option<Vec<f32>>> {
+        v.as_ref()
+            .map(|a| super::convert::flat_f32(a, "visibility"))
+            .transpose()
+    };
+    let mut lights = shading::punctual(&s);
+    if light_visibility.len() != lights.len() {
+        return Err(input(
+            py,
+            format!(
+                "the scene has {} lights, light_visibility {} entries",
+                lights.len(),
+                light_visibility.len()
+            ),
+        ));
+    }
+    let mut visibility = light_visibility
+        .iter()
+        .map(vis)
+        .collect::<PyResult<Vec<_>>>()?;
+    for (center, v) in &areas {
+        lights.push(ShadeLight::area(super::convert::vec3(
+            center,
+            "area light centre",
+        )?));
+        visibility.push(vis(v)?);
+    }
+    if lights.is_empty() {
+        lights.push(shading::default_light(
+            cam.forward(),
+            cam.world_to_camera_rotation().row(1),
+        ));
+        visibility.push(None);
+    }
+    let gbuffer = DepthImages {
+        n: 1,
+        width: cam.width,
+        height: cam.height,
+        triangle: flat_i32(triangle, "triangle")?,
+        position: rows_f32(position, "position")?,
+        ..Default::default()
+    };
+    let image = super::run(py, || {
+        shading::frame(&s, &cam, &gbuffer, &lights, &visibility)
+    })?;
+    Ok(rows_owned(py, image, &[h, w, 3])?.into_any())
+}

@@ -45,6 +45,7 @@ pub struct ImpostorView {
 
 /// The lit colour and depth of a depth image of `scene` (black / +inf where empty).
 pub fn lit_image(scene: &Scene, normals: &[DVec3], img: &DepthImages) -> (Vec<[f32; 3]>, Vec<f32>) {
+    let lights = crate::shading::Prelit::of(scene);
     let color = img
         .triangle
         .par_iter()
@@ -54,7 +55,7 @@ pub fn lit_image(scene: &Scene, normals: &[DVec3], img: &DepthImages) -> (Vec<[f
                 [0.0; 3]
             } else {
                 let p = DVec3::from_array(p.map(f64::from));
-                lit(c, shading_normal(scene, normals, t as usize, p))
+                lit(c, shading_normal(scene, normals, t as usize, p), p, &lights)
             }
         })
         .collect();

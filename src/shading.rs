@@ -1,0 +1,446 @@
+//! The package's one shading model: every lit pixel — rendered frames (`render`), reflections
+//! (eye-based-point-rendering.txt §4.2 uses a physically based shader for all of EPR, iVIR and
+//! MVR), impostors and their reference, and the demo — goes through [`shade`] or its
+//! view-independent part [`diffuse`].
+//!
+//! Lambertian diffuse for the non-metallic part plus a GGX / Smith / Schlick specular lobe,
+//! under the scene's punctual lights (`KHR_lights_punctual`: colour × intensity, inverse-square
+//! falloff, glTF range and spot cones), area lights (a unit-radiance disc seen from the point:
+//! irradiance π·cos, no falloff), or, when there is no light at all, one default directional
+//! light; plus [`AMBIENT`]. Each light's contribution may be scaled by a visibility (shadows).
+
+use glam::DVec3;
+
+use crate::camera::Camera;
+use crate::error::Result;
+use crate::input_err;
+use crate::scene::{LightKind, Scene};
+use crate::types::DepthImages;
+
+/// Ambient radiance as a fraction of the albedo.
+pub const AMBIENT: f64 = 0.08;
+
+/// Radiance of the default light, arriving when a scene has no light.
+pub const DEFAULT_RADIANCE: f64 = 3.0;
+
+/// The default light's direction (unit, from a surface toward the light) where no eye fixes
+/// one: view-independent shading ([`diffuse`], the impostors).
+pub const DEFAULT_TO_LIGHT: [f64; 3] = [
+    0.301_511_344_577_763_6,
+    0.502_518_907_629_606,
+    0.804_030_252_207_369_7,
+];
+
+/// What kind of light a [`ShadeLight`] is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Kind {
+    Directional,
+    Point,
+    Spot,
+    /// An area light, seen from the surface as a unit-radiance source toward its centre.
+    Area,
+}
+
+impl From<LightKind> for Kind {
+    fn from(k: LightKind) -> Self {
+        match k {
+            LightKind::Directional => Kind::Directional,
+            LightKind::Point => Kind::Point,
+            LightKind::Spot => Kind::Spot,
+        }
+    }
+}
+
+/// A light as the shader uses it.
+#[derive(Debug, Clone, Copy)]
+pub struct ShadeLight {
+    kind: Kind,
+    position: DVec3,
+    /// Unit direction the light travels (for directional and spot lights).
+    direction: DVec3,
+    radiance: DVec3,
+    range: Option<f64>,
+    cone: Option<(f64, f64)>,
+}
+
+impl ShadeLight {
+    /// A white directional light of [`DEFAULT_RADIANCE`] arriving along `to_light` (from the
+    /// surface toward the light).
+    pub fn default_toward(to_light: DVec3) -> Self {
+        ShadeLight {
+            kind: Kind::Directional,
+            position: DVec3::ZERO,
+            direction: -to_light.normalize_or(DVec3::Z),
+            radiance: DVec3::splat(DEFAULT_RADIANCE),
+            range: None,
+            cone: None,
+        }
+    }
+
+    /// An area light centred at `center`: each point sees it as a unit-radiance source in the
+    /// direction of its centre (irradiance π·cos θ, so a white Lambertian surface facing it is
+    /// lit to its albedo), with no falloff.
+    pub fn area(center: DVec3) -> Self {
+        ShadeLight {
+            kind: Kind::Area,
+            position: center,
+            direction: DVec3::NEG_Z,
+            radiance: DVec3::splat(std::f64::consts::PI),
+            range: None,
+            cone: None,
+        }
+    }
+}
+
+/// The default light seen from an eye: from its upper left-behind (`up − forward + 0.5·left`
+/// from the surface toward the light).
+pub fn default_light(eye_forward: DVec3, eye_up: DVec3) -> ShadeLight {
+    let left = eye_up.cross(eye_forward);
+    ShadeLight::default_toward(eye_up - eye_forward + 0.5 * left)
+}
+
+/// The scene's lights, or the default light as seen from the eye when it has none.
+pub fn lights(scene: &Scene, eye_forward: DVec3, eye_up: DVec3) -> Vec<ShadeLight> {
+    let ls = punctual(scene);
+    if ls.is_empty() {
+        return vec![default_light(eye_forward, eye_up)];
+    }
+    ls
+}
+
+/// The scene's punctual lights, in order (empty when it has none).
+pub fn punctual(scene: &Scene) -> Vec<ShadeLight> {
+    scene
+        .lights()
+        .iter()
+        .map(|l| ShadeLight {
+            kind: l.kind.into(),
+            position: DVec3::from_array(l.position),
+            direction: DVec3::from_array(l.direction).normalize_or(DVec3::NEG_Z),
+            radiance: DVec3::from_array(l.color.map(f64::from)) * l.intensity as f64,
+            range: l.range.map(f64::from),
+            cone: match (l.inner_cone_angle, l.outer_cone_angle) {
+                (Some(i), Some(o)) => Some((i as f64, o as f64)),
+                (None, Some(o)) => Some((0.0, o as f64)),
+                _ => None,
+            },
+        })
+        .collect()
+}
+
+/// A surface to shade.
+#[derive(Debug, Clone, Copy)]
+pub struct Surface {
+    pub position: DVec3,
+    /// Unit shading normal (flipped toward the viewer here).
+    pub normal: DVec3,
+    pub albedo: DVec3,
+    pub metallic: f64,
+    pub roughness: f64,
+}
+
+/// The direction from `p` toward light `l` and the irradiance it brings (before cos θ).
+fn arriving(l: &ShadeLight, p: DVec3) -> (DVec3, DVec3) {
+    match l.kind {
+        Kind::Directional => (-l.direction, l.radiance),
+        Kind::Area => ((l.position - p).normalize_or(DVec3::Z), l.radiance),
+        Kind::Point | Kind::Spot => {
+            let d = l.position - p;
+            let r2 = d.length_squared().max(1e-12);
+            let mut e = l.radiance / r2;
+            if let Some(range) = l.range {
+                let x = (r2.sqrt() / range).powi(4);
+                e *= (1.0 - x).clamp(0.0, 1.0).powi(2);
+            }
+            let to = d / r2.sqrt();
+            if let (Kind::Spot, Some((inner, outer))) = (l.kind, l.cone) {
+                let cd = (-to).dot(l.direction);
+                let (ci, co) = (inner.cos(), outer.cos());
+                e *= ((cd - co) / (ci - co).max(1e-4)).clamp(0.0, 1.0).powi(2);
+            }
+            (to, e)
+        }
+    }
+}
+
+/// Outgoing radiance of `s` toward `viewer`.
+pub fn shade(s: &Surface, viewer: DVec3, lights: &[ShadeLight]) -> DVec3 {
+    shade_visible(s, viewer, lights, |_| 1.0)
+}
+
+/// [`shade`] with light `i`'s contribution scaled by `visibility(i)` (the fraction of it that
+/// reaches the point: shadows).
+pub fn shade_visible(
+    s: &Surface,
+    viewer: DVec3,
+    lights: &[ShadeLight],
+    visibility: impl Fn(usize) -> f64,
+) -> DVec3 {
+    let v = (viewer - s.position).normalize_or_zero();
+    let mut n = s.normal;
+    if n.dot(v) < 0.0 {
+        n = -n;
+    }
+    let alpha = (s.roughness.clamp(0.03, 1.0)).powi(2);
+    let f0 = DVec3::splat(0.04).lerp(s.albedo, s.metallic);
+    let diffuse = s.albedo * (1.0 - s.metallic) / std::f64::consts::PI;
+    let mut out = s.albedo * AMBIENT;
+    for (i, l) in lights.iter().enumerate() {
+        let (to_light, e) = arriving(l, s.position);
+        let nl = n.dot(to_light);
+        let seen = visibility(i);
+        if nl <= 0.0 || seen <= 0.0 {
+            continue;
+        }
+        let e = e * seen;
+        let h = (to_light + v).normalize_or(n);
+        let nh = n.dot(h).max(0.0);
+        let nv = n.dot(v).max(1e-4);
+        let vh = v.dot(h).max(0.0);
+        let a2 = alpha * alpha;
+        let dd = nh * nh * (a2 - 1.0) + 1.0;
+        let ndf = a2 / (std::f64::consts::PI * dd * dd).max(1e-12);
+        let k = alpha / 2.0;
+        let g = (nv / (nv * (1.0 - k) + k)) * (nl / (nl * (1.0 - k) + k));
+        let fresnel = f0 + (DVec3::ONE - f0) * (1.0 - vh).powi(5);
+        let spec = fresnel * (ndf * g / (4.0 * nv * nl).max(1e-6));
+        let kd = (DVec3::ONE - fresnel) * diffuse;
+        out += (kd + spec) * e * nl;
+    }
+    out
+}
+
+/// The lighting of pre-lit, view-independent images (the impostors and their triangle
+/// reference, multi-cell-orthographic-impostors.txt §3.1 pre-lights its images once for every
+/// view): a brighter ambient than [`AMBIENT`], so that the unlit side of a shape keeps its
+/// detail as the paper's images do, and the scene's lights, or the default light from
+/// [`DEFAULT_TO_LIGHT`] with the radiance that lights a facing white surface to
+/// `1 − PRELIT_AMBIENT`.
+#[derive(Debug, Clone)]
+pub struct Prelit {
+    pub ambient: f64,
+    pub lights: Vec<ShadeLight>,
+}
+
+/// Ambient share of pre-lit images.
+pub const PRELIT_AMBIENT: f64 = 0.3;
+
+impl Prelit {
+    pub fn of(scene: &Scene) -> Self {
+        let mut lights = punctual(scene);
+        if lights.is_empty() {
+            let mut l = ShadeLight::default_toward(DVec3::from_array(DEFAULT_TO_LIGHT));
+            l.radiance = DVec3::splat((1.0 - PRELIT_AMBIENT) * std::f64::consts::PI);
+            lights.push(l);
+        }
+        Prelit {
+            ambient: PRELIT_AMBIENT,
+            lights,
+        }
+    }
+}
+
+/// The view-independent part of [`shade`] under `env`: ambient plus Lambertian diffuse of the
+/// whole base colour, lit from whichever side the light is on (no viewer decides which side is
+/// seen, and no specular lobe, which depends on the viewer).
+pub fn diffuse(s: &Surface, env: &Prelit) -> DVec3 {
+    let mut out = s.albedo * env.ambient;
+    for l in &env.lights {
+        let (to_light, e) = arriving(l, s.position);
+        out += s.albedo / std::f64::consts::PI * e * s.normal.dot(to_light).abs();
+    }
+    out
+}
+
+/// A frame: the lit colour of every pixel of `gbuffer` (one image from `camera`), black where it
+/// has no surface. `lights` are shaded in order, light i scaled at each pixel by
+/// `visibility[i]` when given (row-major, one value per pixel).
+pub fn frame(
+    scene: &Scene,
+    camera: &Camera,
+    gbuffer: &DepthImages,
+    lights: &[ShadeLight],
+    visibility: &[Option<Vec<f32>>],
+) -> Result<Vec<[f32; 3]>> {
+    use rayon::prelude::*;
+    let pixels = camera.width as usize * camera.height as usize;
+    if gbuffer.n != 1 || gbuffer.triangle.len() != pixels {
+        return input_err!(
+            "a frame shades one {}x{} image; got {} image(s) of {} pixels",
+            camera.width,
+            camera.height,
+            gbuffer.n,
+            gbuffer.triangle.len() / gbuffer.n.max(1)
+        );
+    }
+    if visibility.len() != lights.len() {
+        return input_err!(
+            "{} lights but {} visibility maps",
+            lights.len(),
+            visibility.len()
+        );
+    }
+    if let Some(v) = visibility.iter().flatten().find(|v| v.len() != pixels) {
+        return input_err!(
+            "a visibility map has {} values for {pixels} pixels",
+            v.len()
+        );
+    }
+    let eye = camera.eye();
+    Ok((0..pixels)
+        .into_par_iter()
+        .map(|px| {
+            let t = gbuffer.triangle[px];
+            if t < 0 {
+                return [0.0; 3];
+            }
+            let p = DVec3::from_array(gbuffer.position[px].map(f64::from));
+            let s = surface(scene, t as usize, p);
+            let seen = |i: usize| visibility[i].as_ref().map_or(1.0, |v| v[px] as f64);
+            shade_visible(&s, eye, lights, seen).as_vec3().to_array()
+        })
+        .collect())
+}
+
+/// The surface of triangle `t` at `p`: interpolated vertex normal (geometric when the scene has
+/// none) and colour, and the material's metallic and roughness (0 and 1 without a material).
+pub fn surface(scene: &Scene, t: usize, p: DVec3) -> Surface {
+    let f = scene.faces()[t];
+    let v = f.map(|i| DVec3::from_array(scene.vertices()[i as usize].map(f64::from)));
+    let geometric = scene.face_normal(t);
+    let w = barycentric(&v, p);
+    let colors = scene.colors();
+    let albedo = f
+        .iter()
+        .zip(w)
+        .map(|(&i, wi)| DVec3::from_array(colors[i as usize].map(f64::from)) * wi)
+        .sum::<DVec3>();
+    let normal = match scene.normals() {
+        Some(ns) => {
+            let n = f
+                .iter()
+                .zip(w)
+                .map(|(&i, wi)| DVec3::from_array(ns[i as usize].map(f64::from)) * wi)
+                .sum::<DVec3>();
+            let n = n.normalize_or_zero();
+            // Keep the interpolated normal on the geometric side of the face.
+            if n == DVec3::ZERO {
+                geometric
+            } else if n.dot(geometric) < 0.0 {
+                -n
+            } else {
+                n
+            }
+        }
+        None => geometric,
+    };
+    let (metallic, roughness) = usize::try_from(scene.material_ids()[t])
+        .ok()
+        .and_then(|m| scene.materials().get(m))
+        .map(|m| (m.metallic as f64, m.roughness as f64))
+        .unwrap_or((0.0, 1.0));
+    Surface {
+        position: p,
+        normal,
+        albedo,
+        metallic,
+        roughness,
+    }
+}
+
+/// Barycentric weights of `p` (projected onto the triangle's plane), clamped into the triangle
+/// so that points just outside it (splat centres) interpolate its edge values.
+fn barycentric(v: &[DVec3; 3], p: DVec3) -> [f64; 3] {
+    let e0 = v[1] - v[0];
+    let e1 = v[2] - v[0];
+    let d = p - v[0];
+    let (a, b, c) = (e0.dot(e0), e0.dot(e1), e1.dot(e1));
+    let (pd0, pd1) = (d.dot(e0), d.dot(e1));
+    let den = a * c - b * b;
+    if den.abs() <= f64::MIN_POSITIVE {
+        return [1.0 / 3.0; 3];
+    }
+    let w1 = ((c * pd0 - b * pd1) / den).clamp(0.0, 1.0);
+    let w2 = ((a * pd1 - b * pd0) / den).clamp(0.0, 1.0 - w1);
+    [1.0 - w1 - w2, w1, w2]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lambert_under_a_head_on_light() {
+        let s = Surface {
+            position: DVec3::ZERO,
+            normal: DVec3::Z,
+            albedo: DVec3::splat(0.5),
+            metallic: 0.0,
+            roughness: 1.0,
+        };
+        let l = ShadeLight {
+            kind: Kind::Directional,
+            position: DVec3::ZERO,
+            direction: DVec3::NEG_Z,
+            radiance: DVec3::ONE,
+            range: None,
+            cone: None,
+        };
+        let c = shade(&s, DVec3::new(0.0, 0.0, 5.0), &[l]);
+        // Diffuse 0.5/π·(1 − F) plus a small rough specular, plus ambient.
+        assert!(c.x > 0.5 / std::f64::consts::PI * 0.9 && c.x < 0.5, "{c}");
+        let dark = shade(&s, DVec3::new(0.0, 0.0, 5.0), &[]);
+        assert!((dark.x - 0.5 * AMBIENT).abs() < 1e-12);
+    }
+
+    #[test]
+    fn visibility_scales_each_light_and_prelit_is_two_sided() {
+        let s = Surface {
+            position: DVec3::ZERO,
+            normal: DVec3::Z,
+            albedo: DVec3::splat(0.5),
+            metallic: 0.0,
+            roughness: 1.0,
+        };
+        let head_on = ShadeLight::default_toward(DVec3::Z);
+        let eye = DVec3::new(0.0, 0.0, 5.0);
+        let lit = shade(&s, eye, &[head_on]);
+        let half = shade_visible(&s, eye, &[head_on], |_| 0.5);
+        let dark = shade_visible(&s, eye, &[head_on], |_| 0.0);
+        assert!((dark.x - 0.5 * AMBIENT).abs() < 1e-12);
+        assert!(((half.x - dark.x) * 2.0 - (lit.x - dark.x)).abs() < 1e-12);
+        // Pre-lit: ambient 0.3 plus 0.7 under the default light head on, from either side.
+        let mut env = Prelit {
+            ambient: PRELIT_AMBIENT,
+            lights: vec![ShadeLight::default_toward(DVec3::Z)],
+        };
+        env.lights[0].radiance = DVec3::splat((1.0 - PRELIT_AMBIENT) * std::f64::consts::PI);
+        let front = diffuse(&s, &env);
+        let back = diffuse(
+            &Surface {
+                normal: -DVec3::Z,
+                ..s
+            },
+            &env,
+        );
+        assert!((front.x - 0.5).abs() < 1e-12 && (back.x - front.x).abs() < 1e-12);
+        // An area light lights a facing white surface to its albedo.
+        let area = shade_visible(
+            &s,
+            eye,
+            &[ShadeLight::area(DVec3::new(0.0, 0.0, 2.0))],
+            |_| 1.0,
+        );
+        assert!(area.x > 0.5 * 0.9, "{area}");
+    }
+
+    #[test]
+    fn barycentric_weights_sum_to_one_and_clamp() {
+        let v = [DVec3::ZERO, DVec3::X, DVec3::Y];
+        let w = barycentric(&v, DVec3::new(0.25, 0.25, 3.0));
+        assert!((w[0] - 0.5).abs() < 1e-12 && (w[1] - 0.25).abs() < 1e-12);
+        let w = barycentric(&v, DVec3::new(2.0, 2.0, 0.0));
+        assert!(w.iter().all(|x| (0.0..=1.0).contains(x)));
+        assert!((w.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+    }
+}
