@@ -188,10 +188,40 @@ def emissive_lights(scene: Scene) -> list[tuple[str, AreaLight]]:
     return out
 
 
+def _outside_octagon(p: np.ndarray) -> np.ndarray:
+    """``p`` (sorted) without the points strictly inside the convex polygon of its extremes along
+    x, y and the two diagonals (Akl-Toussaint): they cannot be on the hull, and dropping them
+    first keeps the hull's Python loop short on finely tessellated objects."""
+    if len(p) < 16:
+        return p
+    keys = np.stack([p[:, 0], p[:, 0] + p[:, 1], p[:, 1], p[:, 1] - p[:, 0]], axis=1)
+    order = [
+        np.argmax(keys[:, 0]),
+        np.argmax(keys[:, 1]),
+        np.argmax(keys[:, 2]),
+        np.argmax(keys[:, 3]),
+        np.argmin(keys[:, 0]),
+        np.argmin(keys[:, 1]),
+        np.argmin(keys[:, 2]),
+        np.argmin(keys[:, 3]),
+    ]  # counter-clockwise around the set
+    poly = p[order]
+    poly = poly[np.r_[True, np.any(np.diff(poly, axis=0) != 0, axis=1)]]
+    if len(poly) < 3:
+        return p
+    inside = np.ones(len(p), dtype=bool)
+    for a, b in zip(poly, np.roll(poly, -1, axis=0)):
+        if np.all(a == b):
+            continue
+        cross = (b[0] - a[0]) * (p[:, 1] - a[1]) - (b[1] - a[1]) * (p[:, 0] - a[0])
+        inside &= cross > 0
+    return p[~inside]
+
+
 def _hull_edges(p: np.ndarray) -> np.ndarray:
     """Unit directions of the edges of the convex hull of 2D points ``p`` (Andrew's monotone
     chain); empty when the points are all one point."""
-    pts = np.unique(p, axis=0)
+    pts = _outside_octagon(np.unique(p, axis=0))
     if len(pts) < 2:
         return np.zeros((0, 2))
 
