@@ -2,7 +2,7 @@
 # with mypy.stubtest.
 from collections.abc import Sequence
 from os import PathLike
-from typing import Any, Callable, Optional, Union, final
+from typing import Any, Callable, Optional, TypedDict, Union, final
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -194,18 +194,179 @@ class Camera:
     def __eq__(self, value: object, /) -> bool: ...
     def __ne__(self, value: object, /) -> bool: ...
 
+# The dicts the native functions return, key by key; tests/test_stub_keys.py checks them against
+# real calls (private names, which stubtest skips). Timings and stats map names to seconds or
+# counts, so they stay dict[str, float].
+
+class _Ops(TypedDict):
+    cube_maps: int
+    splat_passes: int
+    shadow_views: int
+    rays_cast: int
+
+class _ImagesDict(TypedDict):
+    depth: np.ndarray
+    triangle: np.ndarray
+    normal: np.ndarray
+    position: np.ndarray
+    color: np.ndarray
+    cameras: list[Camera]
+    method: str
+    timings: dict[str, float]
+
+class _SamplingDict(TypedDict):
+    samples: np.ndarray
+    redundant: np.ndarray
+    disoccluded: np.ndarray
+    useful: np.ndarray
+    available_avg: np.ndarray
+    available_min: np.ndarray
+    frames: int
+    disoccluded_mask: np.ndarray
+    useful_mask: np.ndarray
+    timings: dict[str, float]
+
+class _MeshDict(TypedDict):
+    vertices: np.ndarray
+    faces: np.ndarray
+    sample: np.ndarray
+    timings: dict[str, float]
+
+class _ShadowDict(TypedDict):
+    visibility: np.ndarray
+    visible: np.ndarray
+    mask: np.ndarray
+    occluder_triangles: int
+    timings: dict[str, float]
+    ops: _Ops
+
+class _PointsDict(TypedDict):
+    center: np.ndarray
+    length: np.ndarray
+    triangle: np.ndarray
+    normal: np.ndarray
+    material: np.ndarray
+    views: np.ndarray
+    cameras: list[Camera]
+    timings: dict[str, float]
+    stats: dict[str, float]
+
+class _OmniDict(TypedDict):
+    visibility: np.ndarray
+    visible: np.ndarray
+    mask: np.ndarray
+    light_samples: np.ndarray
+    resolution: int
+    stats: dict[str, float]
+    timings: dict[str, float]
+    ops: _Ops
+
+class _SplatDict(TypedDict):
+    depth: np.ndarray
+    index: np.ndarray
+    packed: np.ndarray
+    timings: dict[str, float]
+    ops: _Ops
+
+class _ReflectionsDict(TypedDict):
+    image: np.ndarray
+    reflective: np.ndarray
+    stats: dict[str, float]
+    timings: dict[str, float]
+    ops: _Ops
+
+class _SlabFieldDict(TypedDict):
+    ids: np.ndarray
+    slab: np.ndarray
+    rays: int
+    timings: dict[str, float]
+
+class _FieldDict(TypedDict):
+    cell_of: np.ndarray
+    cells: np.ndarray
+    cell_bounds: np.ndarray
+    offsets: np.ndarray
+    triangles: np.ndarray
+    groups: int
+    sorted_scene: Scene
+    cell_seconds: float
+    fields: list[_SlabFieldDict]
+
+class _FieldViewDict(TypedDict):
+    marked: np.ndarray
+    pixels: int
+    outside: int
+    triangles_drawn: int
+    resample_seconds: float
+    render_seconds: float
+    image: _ImagesDict
+
+class _ImpostorsDict(TypedDict):
+    lo: np.ndarray
+    size: np.ndarray
+    index: np.ndarray
+    directions: np.ndarray
+    color: np.ndarray
+    depth: np.ndarray
+    crops: np.ndarray
+    triangle_counts: np.ndarray
+    offsets: np.ndarray
+    triangles: np.ndarray
+    rays: int
+    timings: dict[str, float]
+
+class _ImpostorViewDict(TypedDict):
+    color: np.ndarray
+    depth: np.ndarray
+    used: np.ndarray
+    stats: dict[str, float]
+    timings: dict[str, float]
+
+class _LitDict(TypedDict):
+    color: np.ndarray
+    depth: np.ndarray
+    seconds: float
+
+class _HitsDict(TypedDict):
+    t: np.ndarray
+    triangle: np.ndarray
+    barycentric: np.ndarray
+    timings: dict[str, float]
+
+class _OcclusionDict(TypedDict):
+    hit: np.ndarray
+    timings: dict[str, float]
+
+class _BvhStatsDict(TypedDict):
+    triangles: int
+    nodes: int
+    blocks: int
+    bytes: int
+    depth: int
+    sah: float
+    build_seconds: float
+
+class _DeviceInfo(TypedDict):
+    name: str
+    backend: str
+    device_type: str
+    driver: str
+    timestamps: bool
+    max_texture_dimension_2d: int
+    max_storage_buffer_binding_size: int
+
 def discretize_conventional(
     scene: Scene, cameras: list[Camera], cull_backfaces: bool = False
-) -> dict[str, Any]: ...
+) -> _ImagesDict: ...
 def discretize_nonredundant(
     scene: Scene,
     cameras: list[Camera],
     redundancy: str = "pixel",
     cull_backfaces: bool = False,
-) -> dict[str, Any]: ...
+) -> _ImagesDict: ...
 def discretize_peeling(
     scene: Scene, camera: Camera, layers: int, cull_backfaces: bool = False
-) -> dict[str, Any]: ...
+) -> _ImagesDict: ...
 def sampling_metrics(
     scene: Scene,
     triangle: ArrayLike,
@@ -217,8 +378,8 @@ def sampling_metrics(
     frames: list[Camera],
     redundancy: str,
     cull_backfaces: bool,
-) -> dict[str, Any]: ...
-def reconstruct(images: Any, method: str, offset: Optional[Any] = None) -> dict[str, Any]: ...
+) -> _SamplingDict: ...
+def reconstruct(images: Any, method: str, offset: Optional[Any] = None) -> _MeshDict: ...
 def soft_shadows(
     scene: Scene,
     camera: Camera,
@@ -232,7 +393,7 @@ def soft_shadows(
     reconstruction: str,
     shadow_resolution: int,
     layers: int,
-) -> dict[str, Any]: ...
+) -> _ShadowDict: ...
 def epr_points(
     scene: Scene,
     eye: Camera,
@@ -244,7 +405,7 @@ def epr_points(
     rho_scale: float,
     seed: int,
     progress: Optional[Callable[[int, int], object]] = None,
-) -> dict[str, Any]: ...
+) -> _PointsDict: ...
 def epr_shadow_points(
     scene: Scene,
     eye: Camera,
@@ -256,7 +417,7 @@ def epr_shadow_points(
     density: str,
     rho_scale: float,
     seed: int,
-) -> dict[str, Any]: ...
+) -> _PointsDict: ...
 def omni_shadows(
     scene: Scene,
     eye: Camera,
@@ -268,7 +429,7 @@ def omni_shadows(
     resolution: int,
     max_resolution: int,
     seed: int,
-) -> dict[str, Any]: ...
+) -> _OmniDict: ...
 def splat(
     scene: Scene,
     center: ArrayLike,
@@ -277,7 +438,7 @@ def splat(
     views: ArrayLike,
     cameras: Sequence[Camera],
     clip_to_triangle: bool,
-) -> dict[str, Any]: ...
+) -> _SplatDict: ...
 def reflections(
     scene: Scene,
     eye: Camera,
@@ -290,7 +451,7 @@ def reflections(
     supersample: int,
     rho_scale: float,
     seed: int,
-) -> dict[str, Any]: ...
+) -> _ReflectionsDict: ...
 def default_slab(scene: Scene, axis: Optional[int], margin: float, widen: float) -> np.ndarray: ...
 def visibility_field(
     scene: Scene,
@@ -303,7 +464,7 @@ def visibility_field(
     supersample: int,
     jitter: Optional[int],
     progress: Optional[Callable[[int, int], object]] = None,
-) -> dict[str, Any]: ...
+) -> _FieldDict: ...
 def field_view(
     sorted_scene: Scene,
     triangles: np.ndarray,
@@ -313,14 +474,14 @@ def field_view(
     camera: Camera,
     interpolate: str,
     subsample: int,
-) -> dict[str, Any]: ...
+) -> _FieldViewDict: ...
 def render_cells(
     sorted_scene: Scene,
     triangles: np.ndarray,
     offsets: np.ndarray,
     marked: np.ndarray,
     camera: Camera,
-) -> tuple[dict[str, Any], int]: ...
+) -> tuple[_ImagesDict, int]: ...
 
 @final
 class Impostors: ...
@@ -334,15 +495,15 @@ def impostors(
     fov: Optional[float],
     grow: bool,
     progress: Optional[Callable[[int, int], object]] = None,
-) -> tuple[Impostors, dict[str, Any]]: ...
+) -> tuple[Impostors, _ImpostorsDict]: ...
 def impostor_view(
     handle: Impostors,
     camera: Camera,
     triangle_budget: Optional[int],
     use_scene: bool,
     screen_threshold: float,
-) -> dict[str, Any]: ...
-def render_lit(scene: Scene, camera: Camera) -> dict[str, Any]: ...
+) -> _ImpostorViewDict: ...
+def render_lit(scene: Scene, camera: Camera) -> _LitDict: ...
 def shade_frame(
     scene: Scene,
     camera: Camera,
@@ -360,7 +521,7 @@ def cast_rays(
     t_max: float = ...,
     max_hits: int = 1,
     threads: Optional[int] = None,
-) -> dict[str, Any]: ...
+) -> _HitsDict: ...
 def occluded(
     scene: Scene,
     origins: ArrayLike,
@@ -368,9 +529,9 @@ def occluded(
     t_min: float = 0.0,
     t_max: float = ...,
     threads: Optional[int] = None,
-) -> dict[str, Any]: ...
-def bvh_stats(scene: Scene) -> dict[str, Any]: ...
-def device_info() -> dict[str, Any]: ...
+) -> _OcclusionDict: ...
+def bvh_stats(scene: Scene) -> _BvhStatsDict: ...
+def device_info() -> _DeviceInfo: ...
 def write_exr(
     path: _Path,
     width: int,
@@ -383,4 +544,4 @@ def write_exr(
     cameras: list[Camera],
     method: str,
 ) -> None: ...
-def read_exr(path: _Path) -> dict[str, Any]: ...
+def read_exr(path: _Path) -> _ImagesDict: ...
