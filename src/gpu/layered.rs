@@ -15,7 +15,7 @@ use std::sync::Mutex;
 use std::time::Instant;
 
 use bytemuck::{Pod, Zeroable};
-use glam::DMat4;
+use glam::{DMat4, DVec3};
 
 use super::depth::{finish_chunk, Pending, RasterStats};
 use super::raster::{
@@ -181,17 +181,7 @@ pub fn render(
     let n = cameras.len() as u64;
     check_image_size(ctx, w, h)?;
     let nonredundant = test == LayerTest::PixelRedundancy;
-    // Non-redundant passes read every image but the last as a layer of `earlier`.
-    let layers = (n as u32).saturating_sub(1).max(1);
-    if nonredundant && layers > ctx.limits.max_texture_array_layers.min(MAX_EARLIER as u32) {
-        let most = ctx.limits.max_texture_array_layers.min(MAX_EARLIER as u32) + 1;
-        return Err(Error::GpuLimit(format!(
-            "non-redundant rendering tests each image against the ones before it, at most \
-             {} of them on this device; got {n} cameras, split them into calls of at most \
-             {most}",
-            most - 1
-        )));
-    }
+    let layers = earlier_layers(ctx, n, nonredundant)?;
     let row = align(w as u64 * 4, wgpu::COPY_BYTES_PER_ROW_ALIGNMENT as u64);
     let image_bytes = row * h as u64;
     let _guard = ctx
@@ -226,152 +216,24 @@ pub fn render(
     };
     let start = Instant::now();
     let device = &ctx.device;
-    let pipeline = ctx.layered_pipeline();
     let centre = scene.center();
     let bounds = scene.bounds();
 
-    use wgpu::util::DeviceExt;
     let stride = align(
         VIEW_SIZE,
         ctx.limits.min_uniform_buffer_offset_alignment as u64,
     );
-    let mut uniforms = vec![0u8; (stride * n) as usize];
-    let mut clip = Vec::with_capacity(cameras.len());
-    for (i, cam) in cameras.iter().enumerate() {
-        let (near, far) = cam.clip_range(bounds);
-        let m = cam.projection_matrix(near, far) * cam.view_matrix_relative(centre);
-        // fs_peel keeps fragments below k·previous + c, the window depth of camera z
-        // d (1 + m) for the previous layer's d. Perspective (z = b / d - a): k = 1 / (1 + m),
-        // c = -a m / (1 + m). Orthographic (z = f / (f - n) - d / (f - n)): k = 1 + m,
-        // c = -m f / (f - n).
-        let m_tie = crate::types::SAME_HIT as f64;
-        let (k, c) = match cam.projection {
-            Projection::Orthographic { .. } => (1.0 + m_tie, -m_tie * far / (far - near)),
-            Projection::Perspective { .. } => {
-                let a = if far.is_finite() {
-                    near / (far - near)
-                } else {
-                    0.0
-                };
-                (1.0 / (1.0 + m_tie), -a * m_tie / (1.0 + m_tie))
-            }
-        };
-        let u = ViewUniform {
-            view_proj: m.as_mat4().to_cols_array_2d(),
-            peel: [k as f32, c as f32, 0.0, 0.0],
-        };
-        let at = i * stride as usize;
-        uniforms[at..at + VIEW_SIZE as usize].copy_from_slice(bytemuck::bytes_of(&u));
-        clip.push(m);
-    }
-    let uniform_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("layered view uniforms"),
-        contents: &uniforms,
-        usage: wgpu::BufferUsages::UNIFORM,
-    });
-    // Row i, texels 4(j − VARYING_IMAGES) + 0..4: the columns of image i's matrix for earlier
-    // image j >= VARYING_IMAGES (a 4x1 stand-in when no pass has such an image).
-    let later = (n as usize).saturating_sub(1 + VARYING_IMAGES as usize);
-    let columns = 4 * later.max(1);
-    let mut texels = vec![[0f32; 4]; columns * n as usize];
-    if nonredundant && later > 0 {
-        for (i, block) in reprojections(cameras, &clip, centre, w, h)
-            .into_iter()
-            .enumerate()
-        {
-            let dst = &mut texels[i * columns..];
-            for (k, m) in block.iter().skip(VARYING_IMAGES as usize).enumerate() {
-                dst[4 * k..4 * k + 4].copy_from_slice(m);
-            }
-        }
-    }
-    let reproject = device.create_texture_with_data(
-        &ctx.queue,
-        &texture_2d_descriptor(
-            "reprojections",
-            (columns as u32, n as u32, 1),
-            wgpu::TextureFormat::Rgba32Float,
-            wgpu::TextureUsages::TEXTURE_BINDING,
-        ),
-        wgpu::util::TextureDataOrder::LayerMajor,
-        bytemuck::cast_slice(&texels),
+    let (uniforms, clip) = view_uniforms(cameras, centre, bounds, stride);
+    let res = Resources::new(
+        ctx,
+        cameras,
+        &clip,
+        centre,
+        &uniforms,
+        test,
+        layers,
+        cull_backfaces,
     );
-    // Peeling never reads earlier ids: a 1x1 stand-in fills the binding.
-    let earlier_size = if nonredundant {
-        (w, h, layers)
-    } else {
-        (1, 1, 1)
-    };
-    let earlier = device.create_texture(&texture_2d_descriptor(
-        "earlier triangle ids",
-        earlier_size,
-        TRI_FORMAT,
-        wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-    ));
-    let tri = texture_2d(
-        device,
-        "layered triangle ids",
-        (w, h),
-        TRI_FORMAT,
-        wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
-    );
-    let tri_view = tri.create_view(&Default::default());
-    // Two depth textures: pass i renders into depths[i % 2] and reads the other.
-    let depth_usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
-    let depths = ["layered depth a", "layered depth b"]
-        .map(|label| texture_2d(device, label, (w, h), DEPTH_FORMAT, depth_usage));
-    let depth_views = depths
-        .each_ref()
-        .map(|d| d.create_view(&Default::default()));
-    let reproject_view = reproject.create_view(&Default::default());
-    let earlier_view = earlier.create_view(&wgpu::TextureViewDescriptor {
-        dimension: Some(wgpu::TextureViewDimension::D2Array),
-        ..Default::default()
-    });
-    let mut project_into = [[[0f32; 4]; 4]; VARYING_IMAGES as usize];
-    for (m, (cam, clip)) in project_into.iter_mut().zip(cameras.iter().zip(&clip)) {
-        *m = projection_into(cam, clip, centre, w, h)
-            .as_mat4()
-            .to_cols_array_2d();
-    }
-    let project_into_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("projections into earlier images"),
-        contents: bytemuck::cast_slice(&project_into),
-        usage: wgpu::BufferUsages::UNIFORM,
-    });
-    let binds = [1, 0].map(|other: usize| {
-        device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("layered.wgsl bindings"),
-            layout: &pipeline.layout,
-            entries: &[
-                uniform_window(0, &uniform_buf, VIEW_SIZE),
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::TextureView(&reproject_view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: wgpu::BindingResource::TextureView(&earlier_view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: wgpu::BindingResource::TextureView(&depth_views[other]),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 4,
-                    resource: project_into_buf.as_entire_binding(),
-                },
-            ],
-        })
-    });
-    let cull = cull_backfaces as usize;
-    let passes: Vec<wgpu::RenderPipeline> = (0..n as u32)
-        .map(|i| match (i, test) {
-            (0, _) => pipeline.fixed[1][cull].clone(),
-            (_, LayerTest::Peel) => pipeline.fixed[0][cull].clone(),
-            (_, LayerTest::PixelRedundancy) => pipeline.nonredundant(device, i, cull_backfaces),
-        })
-        .collect();
     stats.raster_seconds = start.elapsed().as_secs_f64();
     // One submission per image, so that the caller consumes image i while the GPU renders
     // image i + 1 (as `depth::rasterize` does with its chunks); the passes still see each other's
@@ -390,19 +252,19 @@ pub fn render(
         let pass = IdPass {
             faces: distinct.map(|d| (&d.faces, d.triangles.len() as u32)),
             ranges: None,
-            tri_view: &tri_view,
-            depth_view: &depth_views[i as usize % 2],
+            tri_view: &res.tri_view,
+            depth_view: &res.depth_views[i as usize % 2],
             store_depth: true,
-            pipeline: &passes[i as usize],
-            bind: &binds[i as usize % 2],
+            pipeline: &res.passes[i as usize],
+            bind: &res.binds[i as usize % 2],
             offsets: &[(i * stride) as u32],
         };
         draw_ids(&mut encoder, &buffers, &pass, queries.as_ref(), 0);
         if nonredundant && (i as u32) < layers {
             encoder.copy_texture_to_texture(
-                tri.as_image_copy(),
+                res.tri.as_image_copy(),
                 wgpu::TexelCopyTextureInfo {
-                    texture: &earlier,
+                    texture: &res.earlier,
                     mip_level: 0,
                     origin: wgpu::Origin3d {
                         x: 0,
@@ -418,7 +280,7 @@ pub fn render(
                 },
             );
         }
-        copy(&mut encoder, &tri, &readback, 0, row, w, h);
+        copy(&mut encoder, &res.tri, &readback, 0, row, w, h);
         let submission = submit_readback(ctx, encoder, &readback, queries.as_ref());
         let next = Pending {
             readback,
@@ -439,6 +301,227 @@ pub fn render(
         finish_chunk(ctx, done, &mut stats, &mut on_image)?;
     }
     Ok(stats)
+}
+
+/// The GPU resources of one layered render: view uniforms, the reprojection matrices, the
+/// earlier images' ids (non-redundant passes), the id target, two depth textures the passes
+/// alternate between (each reads the other), their bind groups and one pipeline per pass.
+struct Resources {
+    /// Bound, never touched again: held for the render's lifetime.
+    _held: (
+        wgpu::Texture,
+        [wgpu::Texture; 2],
+        wgpu::Buffer,
+        wgpu::Buffer,
+    ),
+    tri: wgpu::Texture,
+    tri_view: wgpu::TextureView,
+    earlier: wgpu::Texture,
+    depth_views: [wgpu::TextureView; 2],
+    binds: [wgpu::BindGroup; 2],
+    passes: Vec<wgpu::RenderPipeline>,
+}
+
+impl Resources {
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        ctx: &GpuContext,
+        cameras: &[Camera],
+        clip: &[DMat4],
+        centre: DVec3,
+        uniforms: &[u8],
+        test: LayerTest,
+        layers: u32,
+        cull_backfaces: bool,
+    ) -> Resources {
+        use wgpu::util::DeviceExt;
+        let device = &ctx.device;
+        let pipeline = ctx.layered_pipeline();
+        let (w, h) = (cameras[0].width, cameras[0].height);
+        let n = cameras.len() as u64;
+        let nonredundant = test == LayerTest::PixelRedundancy;
+        let clip = clip.to_vec();
+        let uniform_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("layered view uniforms"),
+            contents: uniforms,
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        // Row i, texels 4(j − VARYING_IMAGES) + 0..4: the columns of image i's matrix for earlier
+        // image j >= VARYING_IMAGES (a 4x1 stand-in when no pass has such an image).
+        let later = (n as usize).saturating_sub(1 + VARYING_IMAGES as usize);
+        let columns = 4 * later.max(1);
+        let mut texels = vec![[0f32; 4]; columns * n as usize];
+        if nonredundant && later > 0 {
+            for (i, block) in reprojections(cameras, &clip, centre, w, h)
+                .into_iter()
+                .enumerate()
+            {
+                let dst = &mut texels[i * columns..];
+                for (k, m) in block.iter().skip(VARYING_IMAGES as usize).enumerate() {
+                    dst[4 * k..4 * k + 4].copy_from_slice(m);
+                }
+            }
+        }
+        let reproject = device.create_texture_with_data(
+            &ctx.queue,
+            &texture_2d_descriptor(
+                "reprojections",
+                (columns as u32, n as u32, 1),
+                wgpu::TextureFormat::Rgba32Float,
+                wgpu::TextureUsages::TEXTURE_BINDING,
+            ),
+            wgpu::util::TextureDataOrder::LayerMajor,
+            bytemuck::cast_slice(&texels),
+        );
+        // Peeling never reads earlier ids: a 1x1 stand-in fills the binding.
+        let earlier_size = if nonredundant {
+            (w, h, layers)
+        } else {
+            (1, 1, 1)
+        };
+        let earlier = device.create_texture(&texture_2d_descriptor(
+            "earlier triangle ids",
+            earlier_size,
+            TRI_FORMAT,
+            wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        ));
+        let tri = texture_2d(
+            device,
+            "layered triangle ids",
+            (w, h),
+            TRI_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+        );
+        let tri_view = tri.create_view(&Default::default());
+        // Two depth textures: pass i renders into depths[i % 2] and reads the other.
+        let depth_usage =
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
+        let depths = ["layered depth a", "layered depth b"]
+            .map(|label| texture_2d(device, label, (w, h), DEPTH_FORMAT, depth_usage));
+        let depth_views = depths
+            .each_ref()
+            .map(|d| d.create_view(&Default::default()));
+        let reproject_view = reproject.create_view(&Default::default());
+        let earlier_view = earlier.create_view(&wgpu::TextureViewDescriptor {
+            dimension: Some(wgpu::TextureViewDimension::D2Array),
+            ..Default::default()
+        });
+        let mut project_into = [[[0f32; 4]; 4]; VARYING_IMAGES as usize];
+        for (m, (cam, clip)) in project_into.iter_mut().zip(cameras.iter().zip(&clip)) {
+            *m = projection_into(cam, clip, centre, w, h)
+                .as_mat4()
+                .to_cols_array_2d();
+        }
+        let project_into_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("projections into earlier images"),
+            contents: bytemuck::cast_slice(&project_into),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let binds = [1, 0].map(|other: usize| {
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("layered.wgsl bindings"),
+                layout: &pipeline.layout,
+                entries: &[
+                    uniform_window(0, &uniform_buf, VIEW_SIZE),
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: wgpu::BindingResource::TextureView(&reproject_view),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 2,
+                        resource: wgpu::BindingResource::TextureView(&earlier_view),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 3,
+                        resource: wgpu::BindingResource::TextureView(&depth_views[other]),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 4,
+                        resource: project_into_buf.as_entire_binding(),
+                    },
+                ],
+            })
+        });
+        let cull = cull_backfaces as usize;
+        let passes: Vec<wgpu::RenderPipeline> = (0..n as u32)
+            .map(|i| match (i, test) {
+                (0, _) => pipeline.fixed[1][cull].clone(),
+                (_, LayerTest::Peel) => pipeline.fixed[0][cull].clone(),
+                (_, LayerTest::PixelRedundancy) => pipeline.nonredundant(device, i, cull_backfaces),
+            })
+            .collect();
+
+        Resources {
+            _held: (reproject, depths, uniform_buf, project_into_buf),
+            tri,
+            tri_view,
+            earlier,
+            depth_views,
+            binds,
+            passes,
+        }
+    }
+}
+
+/// How many earlier images a non-redundant pass reads (every image but the last, as layers of
+/// one texture array); a device limit error when there are more than the device holds.
+fn earlier_layers(ctx: &GpuContext, n: u64, nonredundant: bool) -> Result<u32> {
+    let layers = (n as u32).saturating_sub(1).max(1);
+    if nonredundant && layers > ctx.limits.max_texture_array_layers.min(MAX_EARLIER as u32) {
+        let most = ctx.limits.max_texture_array_layers.min(MAX_EARLIER as u32) + 1;
+        return Err(Error::GpuLimit(format!(
+            "non-redundant rendering tests each image against the ones before it, at most \
+             {} of them on this device; got {n} cameras, split them into calls of at most \
+             {most}",
+            most - 1
+        )));
+    }
+    Ok(layers)
+}
+
+/// `fs_peel`'s tie constants for a camera with clip range `near..far`: it keeps fragments below
+/// k·previous + c, the window depth of camera z d (1 + m) for the previous layer's d, m the
+/// relative tie [`SAME_HIT`](crate::types::SAME_HIT). Perspective (z = b / d - a): k = 1 / (1 +
+/// m), c = -a m / (1 + m). Orthographic (z = f / (f - n) - d / (f - n)): k = 1 + m,
+/// c = -m f / (f - n).
+fn peel_tie(cam: &Camera, near: f64, far: f64) -> (f64, f64) {
+    let m_tie = crate::types::SAME_HIT as f64;
+    match cam.projection {
+        Projection::Orthographic { .. } => (1.0 + m_tie, -m_tie * far / (far - near)),
+        Projection::Perspective { .. } => {
+            let a = if far.is_finite() {
+                near / (far - near)
+            } else {
+                0.0
+            };
+            (1.0 / (1.0 + m_tie), -a * m_tie / (1.0 + m_tie))
+        }
+    }
+}
+
+/// Every camera's view uniform (its clip matrix relative to `centre` and its peel constants),
+/// `stride` bytes apart, and the clip matrices.
+fn view_uniforms(
+    cameras: &[Camera],
+    centre: DVec3,
+    bounds: [[f32; 3]; 2],
+    stride: u64,
+) -> (Vec<u8>, Vec<DMat4>) {
+    let mut uniforms = vec![0u8; stride as usize * cameras.len()];
+    let mut clip = Vec::with_capacity(cameras.len());
+    for (i, cam) in cameras.iter().enumerate() {
+        let (near, far) = cam.clip_range(bounds);
+        let m = cam.projection_matrix(near, far) * cam.view_matrix_relative(centre);
+        let (k, c) = peel_tie(cam, near, far);
+        let u = ViewUniform {
+            view_proj: m.as_mat4().to_cols_array_2d(),
+            peel: [k as f32, c as f32, 0.0, 0.0],
+        };
+        let at = i * stride as usize;
+        uniforms[at..at + VIEW_SIZE as usize].copy_from_slice(bytemuck::bytes_of(&u));
+        clip.push(m);
+    }
+    (uniforms, clip)
 }
 
 /// `project_into` of layered.wgsl for camera `cam` with clip matrix `clip` (relative to
