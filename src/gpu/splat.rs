@@ -121,18 +121,9 @@ pub struct SplatStats {
     pub readback_seconds: f64,
 }
 
-/// Splat the points into one buffer per camera (each at its own resolution); returns the keys
-/// (depth bits << 32 | point index, `u64::MAX` empty), view after view, row-major. `centre` is
-/// the origin the points' geometry is given relative to.
-pub fn splat(
-    ctx: &GpuContext,
-    points: &PointBuffersIn,
-    cameras: &[Camera],
-    centre: DVec3,
-    bounds: [[f32; 3]; 2],
-    clip_to_triangle: bool,
-) -> Result<(Vec<u64>, SplatStats)> {
-    crate::counters::add(crate::counters::Op::SplatPasses, 1);
+/// The device features and limits splatting needs: 64-bit atomics, and one view's buffer within
+/// a storage binding. Returns the binding size and each view's buffer bytes.
+fn check_limits(ctx: &GpuContext, cameras: &[Camera]) -> Result<(u64, Vec<u64>)> {
     let needed = wgpu::Features::SHADER_INT64 | wgpu::Features::SHADER_INT64_ATOMIC_MIN_MAX;
     if !ctx.device.features().contains(needed) {
         return Err(Error::GpuUnavailable(format!(
@@ -157,6 +148,113 @@ pub fn splat(
             c.width, c.height
         )));
     }
+    Ok((binding, view_bytes))
+}
+
+/// The `n` points in chunks of at most one binding's worth of geometry bytes that each fit one
+/// texture of `rows` rows.
+fn point_chunks(n: usize, binding: u64, rows: u64) -> Vec<std::ops::Range<usize>> {
+    let per_chunk = ((binding / GEOMETRY_BYTES).min(rows * TEXTURE_ROW as u64 / 4) as usize).max(1);
+    (0..n.max(1))
+        .step_by(per_chunk)
+        .map(|s| s..(s + per_chunk).min(n))
+        .collect()
+}
+
+/// One texture of the points' geometry per chunk of [`point_chunks`].
+fn geometry_textures(
+    ctx: &GpuContext,
+    points: &PointBuffersIn,
+    point_chunks: &[std::ops::Range<usize>],
+) -> Result<Vec<wgpu::TextureView>> {
+    point_chunks
+        .iter()
+        .map(|r| {
+            row_texture(
+                ctx,
+                "splat geometry",
+                wgpu::TextureFormat::Rgba32Float,
+                4 * r.len(),
+                |mut view| {
+                    let bytes: &[u8] = bytemuck::cast_slice(&points.geometry[r.clone()]);
+                    view.slice(..bytes.len()).copy_from_slice(bytes);
+                },
+            )
+        })
+        .collect::<Result<_>>()
+}
+
+/// Each camera's splat uniform. The clip range only shapes the projection's depth row, unused
+/// here (a splat's depth comes from `forward_depth`).
+fn view_uniforms(
+    cameras: &[Camera],
+    centre: DVec3,
+    bounds: [[f32; 3]; 2],
+    clip_to_triangle: bool,
+) -> Vec<ViewUniform> {
+    cameras
+        .iter()
+        .map(|cam| {
+            let (near, far) = cam.clip_range(bounds);
+            let m = cam.projection_matrix(near, far) * cam.view_matrix_relative(centre);
+            let f = cam.forward();
+            let eye = cam.eye() - centre;
+            ViewUniform {
+                view_proj: m.as_mat4().to_cols_array_2d(),
+                forward_depth: [f.x as f32, f.y as f32, f.z as f32, eye.dot(f) as f32],
+                near: [cam.znear.unwrap_or(0.0) as f32, 0.0, 0.0, 0.0],
+                size: [cam.width, cam.height, 0, clip_to_triangle as u32],
+                range: [0; 4],
+            }
+        })
+        .collect()
+}
+
+/// Chunks of consecutive views whose buffers (at most `binding` bytes together), and whose point
+/// lists (at most `list_limit`), each fit one binding.
+fn view_chunks(
+    view_bytes: &[u64],
+    counts: &[usize],
+    binding: u64,
+    list_limit: u64,
+) -> Result<Vec<std::ops::Range<usize>>> {
+    let mut chunks: Vec<std::ops::Range<usize>> = Vec::new();
+    let mut start_view = 0;
+    let (mut bytes, mut list_bytes) = (0, 0);
+    for (i, (&b, &count)) in view_bytes.iter().zip(counts).enumerate() {
+        let lb = count as u64 * 4;
+        if lb > list_limit {
+            return Err(Error::GpuLimit(format!(
+                "view {i} alone receives {} points, whose list takes {lb} bytes, more than this \
+                 device's limit of {list_limit} bytes; splat fewer points",
+                count
+            )));
+        }
+        if i > start_view && (bytes + b > binding || list_bytes + lb > list_limit) {
+            chunks.push(start_view..i);
+            start_view = i;
+            (bytes, list_bytes) = (0, 0);
+        }
+        bytes += b;
+        list_bytes += lb;
+    }
+    chunks.push(start_view..view_bytes.len());
+    Ok(chunks)
+}
+
+/// Splat the points into one buffer per camera (each at its own resolution); returns the keys
+/// (depth bits << 32 | point index, `u64::MAX` empty), view after view, row-major. `centre` is
+/// the origin the points' geometry is given relative to.
+pub fn splat(
+    ctx: &GpuContext,
+    points: &PointBuffersIn,
+    cameras: &[Camera],
+    centre: DVec3,
+    bounds: [[f32; 3]; 2],
+    clip_to_triangle: bool,
+) -> Result<(Vec<u64>, SplatStats)> {
+    crate::counters::add(crate::counters::Op::SplatPasses, 1);
+    let (binding, view_bytes) = check_limits(ctx, cameras)?;
     let n = points.geometry.len();
     if n > u32::MAX as usize {
         return Err(Error::GpuLimit(format!(
@@ -180,76 +278,18 @@ pub fn splat(
         )));
     }
     let rows = ctx.limits.max_texture_dimension_2d as u64;
-    // The points' geometry, in chunks of at most one binding's worth of bytes that each fit one
-    // texture.
-    let per_chunk = ((binding / GEOMETRY_BYTES).min(rows * TEXTURE_ROW as u64 / 4) as usize).max(1);
-    let point_chunks: Vec<std::ops::Range<usize>> = (0..n.max(1))
-        .step_by(per_chunk)
-        .map(|s| s..(s + per_chunk).min(n))
-        .collect();
-    let geometry: Vec<wgpu::TextureView> = point_chunks
-        .iter()
-        .map(|r| {
-            row_texture(
-                ctx,
-                "splat geometry",
-                wgpu::TextureFormat::Rgba32Float,
-                4 * r.len(),
-                |mut view| {
-                    let bytes: &[u8] = bytemuck::cast_slice(&points.geometry[r.clone()]);
-                    view.slice(..bytes.len()).copy_from_slice(bytes);
-                },
-            )
-        })
-        .collect::<Result<_>>()?;
-    // The clip range only shapes the projection's depth row, unused here (a splat's depth comes
-    // from `forward_depth`).
-    let view_data: Vec<ViewUniform> = cameras
-        .iter()
-        .map(|cam| {
-            let (near, far) = cam.clip_range(bounds);
-            let m = cam.projection_matrix(near, far) * cam.view_matrix_relative(centre);
-            let f = cam.forward();
-            let eye = cam.eye() - centre;
-            ViewUniform {
-                view_proj: m.as_mat4().to_cols_array_2d(),
-                forward_depth: [f.x as f32, f.y as f32, f.z as f32, eye.dot(f) as f32],
-                near: [cam.znear.unwrap_or(0.0) as f32, 0.0, 0.0, 0.0],
-                size: [cam.width, cam.height, 0, clip_to_triangle as u32],
-                range: [0; 4],
-            }
-        })
-        .collect();
+    let point_chunks = point_chunks(n, binding, rows);
+    let geometry = geometry_textures(ctx, points, &point_chunks)?;
+    let view_data = view_uniforms(cameras, centre, bounds, clip_to_triangle);
     stats.upload_seconds = start.elapsed().as_secs_f64();
 
     let start = Instant::now();
     let lists = points_per_view(points, cameras, centre);
     stats.pairs_seconds = start.elapsed().as_secs_f64();
 
-    // Chunks of consecutive views whose buffers, and whose point lists, each fit one binding.
-    let mut chunks: Vec<std::ops::Range<usize>> = Vec::new();
-    let mut start_view = 0;
-    let (mut bytes, mut list_bytes) = (0, 0);
     // A chunk's lists go in one texture: at most a binding's worth of bytes, and its rows.
     let list_limit = binding.min(rows * TEXTURE_ROW as u64 * 4);
-    for (i, (&b, &count)) in view_bytes.iter().zip(&lists.counts).enumerate() {
-        let lb = count as u64 * 4;
-        if lb > list_limit {
-            return Err(Error::GpuLimit(format!(
-                "view {i} alone receives {} points, whose list takes {lb} bytes, more than this \
-                 device's limit of {list_limit} bytes; splat fewer points",
-                count
-            )));
-        }
-        if i > start_view && (bytes + b > binding || list_bytes + lb > list_limit) {
-            chunks.push(start_view..i);
-            start_view = i;
-            (bytes, list_bytes) = (0, 0);
-        }
-        bytes += b;
-        list_bytes += lb;
-    }
-    chunks.push(start_view..cameras.len());
+    let chunks = view_chunks(&view_bytes, &lists.counts, binding, list_limit)?;
     let stride = align(
         VIEW_SIZE,
         ctx.limits.min_uniform_buffer_offset_alignment as u64,
@@ -263,31 +303,14 @@ pub fn splat(
         // Ctrl-C between chunks of views (the previous chunk's readback is dropped).
         crate::process::check()?;
         let start = Instant::now();
-        // The chunk's lists one after another, and one dispatch per (view, point chunk, run of
-        // at most `per_dispatch` points): (point chunk, uniform).
-        let mut dispatches: Vec<(usize, ViewUniform)> = Vec::new();
-        let mut offset = 0u32;
-        let mut first = 0;
-        for (v, (cam, data)) in range
-            .clone()
-            .zip(cameras[range.clone()].iter().zip(&view_data[range.clone()]))
-        {
-            // The list is in point order: each point chunk is one run of it.
-            let mut from = 0;
-            for (k, r) in point_chunks.iter().enumerate() {
-                let to = lists.below(v, r.end);
-                for s in (from..to).step_by(per_dispatch) {
-                    let count = (to - s).min(per_dispatch);
-                    let mut u = *data;
-                    u.size[2] = offset;
-                    u.range = [count as u32, (first + s) as u32, r.start as u32, 0];
-                    dispatches.push((k, u));
-                }
-                from = to;
-            }
-            first += lists.counts[v];
-            offset += cam.width * cam.height;
-        }
+        let (dispatches, offset, first) = dispatches(
+            range.clone(),
+            cameras,
+            &view_data,
+            &point_chunks,
+            &lists,
+            per_dispatch,
+        );
         let mut uniforms = vec![0u8; stride as usize * dispatches.len().max(1)];
         for (d, (_, u)) in dispatches.iter().enumerate() {
             let at = d * stride as usize;
@@ -470,6 +493,40 @@ impl PairLists {
             .map(|part| part.partition_point(|&p| (p as usize) < end))
             .sum()
     }
+}
+
+/// The dispatches of the views in `range`: their lists one after another, and one dispatch per
+/// (view, point chunk, run of at most `per_dispatch` points), as (point chunk, uniform). Also
+/// the chunk's pixels and list length.
+fn dispatches(
+    range: std::ops::Range<usize>,
+    cameras: &[Camera],
+    view_data: &[ViewUniform],
+    point_chunks: &[std::ops::Range<usize>],
+    lists: &PairLists,
+    per_dispatch: usize,
+) -> (Vec<(usize, ViewUniform)>, u32, usize) {
+    let mut out: Vec<(usize, ViewUniform)> = Vec::new();
+    let mut offset = 0u32;
+    let mut first = 0;
+    for v in range {
+        // The list is in point order: each point chunk is one run of it.
+        let mut from = 0;
+        for (k, r) in point_chunks.iter().enumerate() {
+            let to = lists.below(v, r.end);
+            for s in (from..to).step_by(per_dispatch) {
+                let count = (to - s).min(per_dispatch);
+                let mut u = view_data[v];
+                u.size[2] = offset;
+                u.range = [count as u32, (first + s) as u32, r.start as u32, 0];
+                out.push((k, u));
+            }
+            from = to;
+        }
+        first += lists.counts[v];
+        offset += cameras[v].width * cameras[v].height;
+    }
+    (out, offset, first)
 }
 
 fn points_per_view(points: &PointBuffersIn, cameras: &[Camera], centre: DVec3) -> PairLists {
