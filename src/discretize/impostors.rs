@@ -308,9 +308,8 @@ pub fn impostor_camera(
     }
 }
 
-/// Render every cell's images (§3.1 step 4).
-pub fn build(scene: &Scene, opts: &ImpostorOptions) -> Result<Impostors> {
-    let total = Instant::now();
+/// The options [`build`] accepts, and a scene it can build from.
+fn check_options(scene: &Scene, opts: &ImpostorOptions) -> Result<()> {
     if opts.depth > 10 {
         return input_err!("octree depth {} is too deep (at most 10)", opts.depth);
     }
@@ -331,22 +330,26 @@ pub fn build(scene: &Scene, opts: &ImpostorOptions) -> Result<Impostors> {
     if scene.triangle_count() == 0 {
         return input_err!("the scene has no triangles");
     }
-    let start = Instant::now();
-    let Leaves {
-        root,
-        leaf,
-        cells,
-        in_box,
-    } = octree(scene, opts.depth);
-    let directions = icosahedron_directions(opts.subdivisions);
-    // The triangles each cell draws as geometry: by centroid, so each once.
+    Ok(())
+}
+
+/// The triangles each cell draws as geometry, by centroid so each once: the triangle ids
+/// sorted by cell, and each cell's offset into them (CSR).
+fn triangles_by_centroid(
+    scene: &Scene,
+    depth: u32,
+    root: DVec3,
+    leaf: f64,
+    cells: &[Cell],
+    in_box: &[Vec<u32>],
+) -> (Vec<u32>, Vec<u32>) {
     let centroid_cell: Vec<usize> = {
         let lookup: std::collections::HashMap<[u32; 3], usize> = cells
             .iter()
             .enumerate()
             .map(|(i, c)| (c.index, i))
             .collect();
-        let n = 1u32 << opts.depth;
+        let n = 1u32 << depth;
         (0..scene.triangle_count())
             .map(|t| {
                 let p = scene.triangle(t);
@@ -374,128 +377,58 @@ pub fn build(scene: &Scene, opts: &ImpostorOptions) -> Result<Impostors> {
     for i in 0..cells.len() {
         offsets[i + 1] += offsets[i];
     }
-    let cell_seconds = start.elapsed().as_secs_f64();
+    (order, offsets)
+}
 
-    let res = opts.resolution as usize;
-    let d_count = directions.len();
-    let bytes = (cells.len() * d_count * res * res * 8) as u64;
-    if bytes > MAX_BYTES {
-        return input_err!(
-            "{} cells x {d_count} views x {res}^2 texels need {bytes} bytes of images before \
-             cropping, more than the {MAX_BYTES} allowed: lower depth, subdivisions or \
-             resolution",
-            cells.len()
-        );
-    }
-    let start = Instant::now();
-    let mut full_color = vec![[0u8; 4]; cells.len() * d_count * res * res];
-    let mut full_depth = vec![f32::INFINITY; cells.len() * d_count * res * res];
-    let mut counts = Vec::with_capacity(cells.len());
-    let mut rays = 0u64;
-    let verts = scene.vertices();
-    let normals = vertex_normals(scene);
-    let lights = Prelit::of(scene);
-    crate::process::add_total(cells.len() as u64);
-    for (ci, cell) in cells.iter().enumerate() {
-        crate::process::check()?;
-        crate::process::advance(1);
-        let set: Vec<u32> = if opts.grow {
-            let (c, r) = (cell.center(), cell.radius());
-            (0..scene.triangle_count() as u32)
-                .into_par_iter()
-                .filter(|&t| sphere_overlap(&scene.triangle(t as usize), c, r))
-                .collect()
-        } else {
-            in_box[ci].clone()
-        };
-        counts.push(set.len() as u32);
-        let faces: Vec<[u32; 3]> = set.iter().map(|&t| scene.faces()[t as usize]).collect();
-        let sub = Scene::from_arrays(verts.to_vec(), faces, None, Some(scene.colors().to_vec()))?;
-        let cams = directions
-            .iter()
-            .map(|&d| impostor_camera(cell, d, opts.resolution, opts.projection))
-            .collect::<Result<Vec<_>>>()?;
-        // Rays of every image of this cell, clipped to the box without `grow`.
-        let (lo, hi) = (cell.lo, cell.lo + DVec3::splat(cell.size));
-        let per_image: Vec<ImageRays> = cams
-            .par_iter()
-            .map(|cam| {
-                let mut o = Vec::with_capacity(res * res);
-                let mut dir = Vec::with_capacity(res * res);
-                let mut t0 = Vec::with_capacity(res * res);
-                for y in 0..res {
-                    for x in 0..res {
-                        let (org, d) = cam.ray_z1(DVec2::new(x as f64 + 0.5, y as f64 + 0.5));
-                        let (a, b) = if opts.grow {
-                            (0.0, 1e30)
-                        } else {
-                            slab_range(org, d, lo, hi)
-                        };
-                        if b <= a {
-                            // Misses the box: cast anyway (one batch), its hit ignored.
-                            o.push(org.as_vec3().to_array());
-                            dir.push(d.as_vec3().to_array());
-                            t0.push(f64::INFINITY);
-                        } else if opts.grow {
-                            o.push(org.as_vec3().to_array());
-                            dir.push(d.as_vec3().to_array());
-                            t0.push(0.0);
-                        } else {
-                            o.push((org + d * a).as_vec3().to_array());
-                            dir.push((d * (b - a)).as_vec3().to_array());
-                            t0.push(a);
-                        }
-                    }
-                }
-                (o, dir, t0)
-            })
-            .collect();
-        let origins: Vec<[f32; 3]> = per_image.iter().flat_map(|p| p.0.iter().copied()).collect();
-        let dirs: Vec<[f32; 3]> = per_image.iter().flat_map(|p| p.1.iter().copied()).collect();
-        let t_max = if opts.grow { f32::MAX } else { 1.0 };
-        let hits = cast_rays(&sub, &origins, &dirs, 0.0, t_max)?;
-        rays += origins.len() as u64;
-        let base = ci * d_count * res * res;
-        full_color[base..base + d_count * res * res]
-            .par_chunks_mut(res * res)
-            .zip(full_depth[base..base + d_count * res * res].par_chunks_mut(res * res))
-            .enumerate()
-            .for_each(|(di, (col, dep))| {
-                let cam = &cams[di];
-                for k in 0..res * res {
-                    let i = di * res * res + k;
-                    let Ok(local) = usize::try_from(hits.triangle[i]) else {
-                        continue;
+/// Every image's rays for `cell`: clipped to the cell's box without `grow`.
+fn cell_rays(cams: &[Camera], cell: &Cell, res: usize, grow: bool) -> Vec<ImageRays> {
+    let (lo, hi) = (cell.lo, cell.lo + DVec3::splat(cell.size));
+    cams.par_iter()
+        .map(|cam| {
+            let mut o = Vec::with_capacity(res * res);
+            let mut dir = Vec::with_capacity(res * res);
+            let mut t0 = Vec::with_capacity(res * res);
+            for y in 0..res {
+                for x in 0..res {
+                    let (org, d) = cam.ray_z1(DVec2::new(x as f64 + 0.5, y as f64 + 0.5));
+                    let (a, b) = if grow {
+                        (0.0, 1e30)
+                    } else {
+                        slab_range(org, d, lo, hi)
                     };
-                    if per_image[di].2[k].is_infinite() {
-                        continue;
+                    if b <= a {
+                        // Misses the box: cast anyway (one batch), its hit ignored.
+                        o.push(org.as_vec3().to_array());
+                        dir.push(d.as_vec3().to_array());
+                        t0.push(f64::INFINITY);
+                    } else if grow {
+                        o.push(org.as_vec3().to_array());
+                        dir.push(d.as_vec3().to_array());
+                        t0.push(0.0);
+                    } else {
+                        o.push((org + d * a).as_vec3().to_array());
+                        dir.push((d * (b - a)).as_vec3().to_array());
+                        t0.push(a);
                     }
-                    let t = set[local] as usize;
-                    let f = scene.faces()[t];
-                    let [u, v] = hits.barycentric[i].map(f64::from);
-                    let cs = f.map(|j| scene.colors()[j as usize]);
-                    let base = [0, 1, 2].map(|a| {
-                        (cs[0][a] as f64 * (1.0 - u - v)
-                            + cs[1][a] as f64 * u
-                            + cs[2][a] as f64 * v) as f32
-                    });
-                    let p = scene.triangle(t);
-                    let p_hit = p[0] * (1.0 - u - v) + p[1] * u + p[2] * v;
-                    let c = lit(
-                        base,
-                        shading_normal(scene, &normals, t, p_hit),
-                        p_hit,
-                        &lights,
-                    );
-                    col[k] = [to8(c[0]), to8(c[1]), to8(c[2]), 255];
-                    dep[k] = cam.project(p_hit).1 as f32;
                 }
-            });
-    }
-    let render_seconds = start.elapsed().as_secs_f64();
+            }
+            (o, dir, t0)
+        })
+        .collect()
+}
 
-    // Crop every image to its covered texels.
-    let start = Instant::now();
+/// Images cropped to their covered texels, all stored at the largest crop's size.
+struct Cropped {
+    /// Per image: x, y, width, height of its crop in the full image (all 0 when empty).
+    crops: Vec<[u32; 4]>,
+    width: usize,
+    height: usize,
+    color: Vec<[u8; 4]>,
+    depth: Vec<f32>,
+}
+
+/// Crop every `res`² image of `full_color` / `full_depth` to its covered texels.
+fn crop(full_color: &[[u8; 4]], full_depth: &[f32], res: usize) -> Cropped {
     let crops: Vec<[u32; 4]> = full_color
         .par_chunks(res * res)
         .map(|img| {
@@ -544,6 +477,123 @@ pub fn build(scene: &Scene, opts: &ImpostorOptions) -> Result<Impostors> {
                 }
             }
         });
+    Cropped {
+        crops,
+        width,
+        height,
+        color,
+        depth,
+    }
+}
+
+/// Render every cell's images (§3.1 step 4).
+pub fn build(scene: &Scene, opts: &ImpostorOptions) -> Result<Impostors> {
+    let total = Instant::now();
+    check_options(scene, opts)?;
+    let start = Instant::now();
+    let Leaves {
+        root,
+        leaf,
+        cells,
+        in_box,
+    } = octree(scene, opts.depth);
+    let directions = icosahedron_directions(opts.subdivisions);
+    let (order, offsets) = triangles_by_centroid(scene, opts.depth, root, leaf, &cells, &in_box);
+    let cell_seconds = start.elapsed().as_secs_f64();
+
+    let res = opts.resolution as usize;
+    let d_count = directions.len();
+    let bytes = (cells.len() * d_count * res * res * 8) as u64;
+    if bytes > MAX_BYTES {
+        return input_err!(
+            "{} cells x {d_count} views x {res}^2 texels need {bytes} bytes of images before \
+             cropping, more than the {MAX_BYTES} allowed: lower depth, subdivisions or \
+             resolution",
+            cells.len()
+        );
+    }
+    let start = Instant::now();
+    let mut full_color = vec![[0u8; 4]; cells.len() * d_count * res * res];
+    let mut full_depth = vec![f32::INFINITY; cells.len() * d_count * res * res];
+    let mut counts = Vec::with_capacity(cells.len());
+    let mut rays = 0u64;
+    let verts = scene.vertices();
+    let normals = vertex_normals(scene);
+    let lights = Prelit::of(scene);
+    crate::process::add_total(cells.len() as u64);
+    for (ci, cell) in cells.iter().enumerate() {
+        crate::process::check()?;
+        crate::process::advance(1);
+        let set: Vec<u32> = if opts.grow {
+            let (c, r) = (cell.center(), cell.radius());
+            (0..scene.triangle_count() as u32)
+                .into_par_iter()
+                .filter(|&t| sphere_overlap(&scene.triangle(t as usize), c, r))
+                .collect()
+        } else {
+            in_box[ci].clone()
+        };
+        counts.push(set.len() as u32);
+        let faces: Vec<[u32; 3]> = set.iter().map(|&t| scene.faces()[t as usize]).collect();
+        let sub = Scene::from_arrays(verts.to_vec(), faces, None, Some(scene.colors().to_vec()))?;
+        let cams = directions
+            .iter()
+            .map(|&d| impostor_camera(cell, d, opts.resolution, opts.projection))
+            .collect::<Result<Vec<_>>>()?;
+        let per_image = cell_rays(&cams, cell, res, opts.grow);
+        let origins: Vec<[f32; 3]> = per_image.iter().flat_map(|p| p.0.iter().copied()).collect();
+        let dirs: Vec<[f32; 3]> = per_image.iter().flat_map(|p| p.1.iter().copied()).collect();
+        let t_max = if opts.grow { f32::MAX } else { 1.0 };
+        let hits = cast_rays(&sub, &origins, &dirs, 0.0, t_max)?;
+        rays += origins.len() as u64;
+        let base = ci * d_count * res * res;
+        full_color[base..base + d_count * res * res]
+            .par_chunks_mut(res * res)
+            .zip(full_depth[base..base + d_count * res * res].par_chunks_mut(res * res))
+            .enumerate()
+            .for_each(|(di, (col, dep))| {
+                let cam = &cams[di];
+                for k in 0..res * res {
+                    let i = di * res * res + k;
+                    let Ok(local) = usize::try_from(hits.triangle[i]) else {
+                        continue;
+                    };
+                    if per_image[di].2[k].is_infinite() {
+                        continue;
+                    }
+                    let t = set[local] as usize;
+                    let f = scene.faces()[t];
+                    let [u, v] = hits.barycentric[i].map(f64::from);
+                    let cs = f.map(|j| scene.colors()[j as usize]);
+                    let base = [0, 1, 2].map(|a| {
+                        (cs[0][a] as f64 * (1.0 - u - v)
+                            + cs[1][a] as f64 * u
+                            + cs[2][a] as f64 * v) as f32
+                    });
+                    let p = scene.triangle(t);
+                    let p_hit = p[0] * (1.0 - u - v) + p[1] * u + p[2] * v;
+                    let c = lit(
+                        base,
+                        shading_normal(scene, &normals, t, p_hit),
+                        p_hit,
+                        &lights,
+                    );
+                    col[k] = [to8(c[0]), to8(c[1]), to8(c[2]), 255];
+                    dep[k] = cam.project(p_hit).1 as f32;
+                }
+            });
+    }
+    let render_seconds = start.elapsed().as_secs_f64();
+
+    // Crop every image to its covered texels.
+    let start = Instant::now();
+    let Cropped {
+        crops,
+        width,
+        height,
+        color,
+        depth,
+    } = crop(&full_color, &full_depth, res);
     let crop_seconds = start.elapsed().as_secs_f64();
     Ok(Impostors {
         cells,
