@@ -164,66 +164,46 @@ pub struct ShadowStats {
     pub upload_seconds: f64,
 }
 
-/// Visibility bits of every point from every light sample: `lights[s]` is the shadow camera of
-/// sample s (all of one square resolution, positioned at the sample); occluders are
-/// `vertices`/`faces`; `points` and `normals` (unit, facing the viewer; zero where there is no
-/// point) are world space. Returns, per sample, `ceil(P / 32)` words whose bit k of word w is
-/// point 32w + k, and the time taken. `diagonal` scales the absolute bias.
-#[allow(clippy::too_many_arguments)]
-pub fn visibility(
-    ctx: &GpuContext,
-    vertices: &[[f32; 3]],
-    faces: &[[u32; 3]],
-    centre: DVec3,
-    bounds: [[f32; 3]; 2],
-    lights: &[Camera],
-    points: &[DVec3],
-    normals: &[DVec3],
-    diagonal: f64,
-) -> Result<(Vec<u32>, ShadowStats)> {
-    crate::counters::add(crate::counters::Op::ShadowViews, lights.len() as u64);
-    let Some(first) = lights.first() else {
-        return Ok((Vec::new(), ShadowStats::default()));
-    };
-    let res = first.width;
-    super::raster::check_image_size(ctx, res, res)?;
-    let words = points.len().div_ceil(32).max(1) as u64;
-    let out_bytes = words * 4 * lights.len() as u64;
+/// The sizes of a visibility pass over `points` points from `lights` light samples, each
+/// checked against the device: (32-bit words per light, output bytes, workgroups).
+fn check_sizes(ctx: &GpuContext, points: usize, lights: usize) -> Result<(u64, u64, u64)> {
+    let words = points.div_ceil(32).max(1) as u64;
+    let out_bytes = words * 4 * lights as u64;
     let limit = ctx
         .limits
         .max_storage_buffer_binding_size
         .min(ctx.limits.max_buffer_size);
-    let point_bytes = points.len().max(1) as u64 * 16;
+    let point_bytes = points.max(1) as u64 * 16;
     if out_bytes > limit || point_bytes > limit {
         return Err(Error::GpuLimit(format!(
             "{} points seen from {} light samples need {out_bytes} bytes of visibility bits on \
              the GPU, more than this device's storage limit of {limit} bytes; use fewer light \
              samples or a smaller output image",
-            points.len(),
-            lights.len()
+            points, lights
         )));
     }
     let groups = words.div_ceil(64);
     if groups > ctx.limits.max_compute_workgroups_per_dimension as u64 {
         return Err(Error::GpuLimit(format!(
             "{} output points exceed one compute dispatch on this device",
-            points.len()
+            points
         )));
     }
-    let _guard = ctx
-        .lock
-        .lock()
-        .map_err(|_| Error::Gpu("GPU lock poisoned".into()))?;
-    let buffers = SceneBuffers::from_triangles(ctx, vertices, faces, centre)?;
-    let start = Instant::now();
-    let device = &ctx.device;
-    let pipeline = ctx.shadow_pipeline();
-    use wgpu::util::DeviceExt;
+    Ok((words, out_bytes, groups))
+}
 
-    let stride = align(
-        LIGHT_SIZE,
-        ctx.limits.min_uniform_buffer_offset_alignment as u64,
-    );
+/// Every light sample's uniform, `stride` bytes apart: its clip matrix relative to `centre`,
+/// its position, its reversed-depth constants and the test's biases.
+fn light_uniforms(
+    lights: &[Camera],
+    centre: DVec3,
+    bounds: [[f32; 3]; 2],
+    stride: u64,
+    points: usize,
+    words: u64,
+    diagonal: f64,
+) -> Result<Vec<u8>> {
+    let res = lights[0].width;
     let mut uniforms = vec![0u8; (stride * lights.len() as u64) as usize];
     for (s, cam) in lights.iter().enumerate() {
         if (cam.width, cam.height) != (res, res) {
@@ -248,11 +228,112 @@ pub fn visibility(
                 cam.pixel_footprint(1.0) as f32,
                 (ABS_BIAS * diagonal) as f32,
             ],
-            sizes: [res, points.len() as u32, (s as u64 * words) as u32, 0],
+            sizes: [res, points as u32, (s as u64 * words) as u32, 0],
         };
         let at = s * stride as usize;
         uniforms[at..at + LIGHT_SIZE as usize].copy_from_slice(bytemuck::bytes_of(&u));
     }
+    Ok(uniforms)
+}
+
+/// What each light sample's two passes (its shadow map, then the test of every point against
+/// it) bind.
+struct Passes<'a> {
+    map_view: &'a wgpu::TextureView,
+    raster_bind: &'a wgpu::BindGroup,
+    bind: &'a wgpu::BindGroup,
+    buffers: &'a SceneBuffers,
+    stride: u64,
+    groups: u32,
+}
+
+impl Passes<'_> {
+    /// Encode light sample `s`'s shadow map and test.
+    fn encode(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        s: usize,
+        queries: Option<&Timestamps>,
+    ) {
+        let pipeline = ctx.shadow_pipeline();
+        let offset = (s as u64 * self.stride) as u32;
+        {
+            let mut rp = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("shadow map"),
+                color_attachments: &[],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: self.map_view,
+                    depth_ops: Some(wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(0.0),
+                        store: wgpu::StoreOp::Store,
+                    }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: queries.map(|t| t.writes(s as u32)),
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            rp.set_pipeline(&pipeline.depth);
+            rp.set_bind_group(0, self.raster_bind, &[offset]);
+            rp.set_vertex_buffer(0, self.buffers.positions.slice(..));
+            rp.set_index_buffer(self.buffers.faces.slice(..), wgpu::IndexFormat::Uint32);
+            rp.draw_indexed(0..3 * self.buffers.triangle_count, 0, 0..1);
+        }
+        let mut cp = encoder.begin_compute_pass(&Default::default());
+        cp.set_pipeline(&pipeline.test);
+        cp.set_bind_group(0, self.bind, &[offset]);
+        cp.dispatch_workgroups(self.groups, 1, 1);
+    }
+}
+
+/// Visibility bits of every point from every light sample: `lights[s]` is the shadow camera of
+/// sample s (all of one square resolution, positioned at the sample); occluders are
+/// `vertices`/`faces`; `points` and `normals` (unit, facing the viewer; zero where there is no
+/// point) are world space. Returns, per sample, `ceil(P / 32)` words whose bit k of word w is
+/// point 32w + k, and the time taken. `diagonal` scales the absolute bias.
+#[allow(clippy::too_many_arguments)]
+pub fn visibility(
+    ctx: &GpuContext,
+    vertices: &[[f32; 3]],
+    faces: &[[u32; 3]],
+    centre: DVec3,
+    bounds: [[f32; 3]; 2],
+    lights: &[Camera],
+    points: &[DVec3],
+    normals: &[DVec3],
+    diagonal: f64,
+) -> Result<(Vec<u32>, ShadowStats)> {
+    crate::counters::add(crate::counters::Op::ShadowViews, lights.len() as u64);
+    let Some(first) = lights.first() else {
+        return Ok((Vec::new(), ShadowStats::default()));
+    };
+    let res = first.width;
+    super::raster::check_image_size(ctx, res, res)?;
+    let (words, out_bytes, groups) = check_sizes(ctx, points.len(), lights.len())?;
+    let _guard = ctx
+        .lock
+        .lock()
+        .map_err(|_| Error::Gpu("GPU lock poisoned".into()))?;
+    let buffers = SceneBuffers::from_triangles(ctx, vertices, faces, centre)?;
+    let start = Instant::now();
+    let device = &ctx.device;
+    let pipeline = ctx.shadow_pipeline();
+    use wgpu::util::DeviceExt;
+
+    let stride = align(
+        LIGHT_SIZE,
+        ctx.limits.min_uniform_buffer_offset_alignment as u64,
+    );
+    let uniforms = light_uniforms(
+        lights,
+        centre,
+        bounds,
+        stride,
+        points.len(),
+        words,
+        diagonal,
+    )?;
     let uniform_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("light samples"),
         contents: &uniforms,
@@ -328,34 +409,16 @@ pub fn visibility(
     });
     let queries = Timestamps::new(ctx, lights.len() as u32);
     let mut encoder = device.create_command_encoder(&Default::default());
+    let passes = Passes {
+        map_view: &map_view,
+        raster_bind: &raster_bind,
+        bind: &bind,
+        buffers: &buffers,
+        stride,
+        groups: groups as u32,
+    };
     for s in 0..lights.len() {
-        let offset = (s as u64 * stride) as u32;
-        {
-            let mut rp = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("shadow map"),
-                color_attachments: &[],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: &map_view,
-                    depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(0.0),
-                        store: wgpu::StoreOp::Store,
-                    }),
-                    stencil_ops: None,
-                }),
-                timestamp_writes: queries.as_ref().map(|t| t.writes(s as u32)),
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
-            rp.set_pipeline(&pipeline.depth);
-            rp.set_bind_group(0, &raster_bind, &[offset]);
-            rp.set_vertex_buffer(0, buffers.positions.slice(..));
-            rp.set_index_buffer(buffers.faces.slice(..), wgpu::IndexFormat::Uint32);
-            rp.draw_indexed(0..3 * buffers.triangle_count, 0, 0..1);
-        }
-        let mut cp = encoder.begin_compute_pass(&Default::default());
-        cp.set_pipeline(&pipeline.test);
-        cp.set_bind_group(0, &bind, &[offset]);
-        cp.dispatch_workgroups(groups as u32, 1, 1);
+        passes.encode(ctx, &mut encoder, s, queries.as_ref());
     }
     encoder.copy_buffer_to_buffer(&out, 0, &readback, 0, out_bytes);
     let submission = submit_readback(ctx, encoder, &readback, queries.as_ref());
