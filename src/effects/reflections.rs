@@ -114,18 +114,8 @@ impl Cube {
     }
 }
 
-/// Render reflections of `reflectors` seen from `eye`.
-pub fn reflections(
-    scene: &Scene,
-    eye: &Camera,
-    reflectors: &[Reflector],
-    opts: &ReflectionOptions,
-) -> Result<ReflectionResult> {
-    let total = Instant::now();
-    if reflectors.is_empty() {
-        return input_err!("reflections need at least one reflector");
-    }
-    crate::counters::add(crate::counters::Op::CubeMaps, reflectors.len() as u64);
+/// The options [`reflections`] accepts for `reflectors`.
+fn check_options(reflectors: &[Reflector], opts: &ReflectionOptions) -> Result<()> {
     if opts.resolutions.len() != reflectors.len() || opts.resolutions.contains(&0) {
         return input_err!(
             "one cube-map resolution (>= 1) per reflector: {} reflectors, resolutions {:?}",
@@ -139,6 +129,111 @@ pub fn reflections(
     if opts.supersample == 0 || opts.supersample > 256 {
         return input_err!("supersample must be 1..=256, got {}", opts.supersample);
     }
+    Ok(())
+}
+
+/// MVR's cube maps (§6 baseline): every face rasterized from the reflector's centre, with the
+/// scene's sidedness. One raster call per resolution (a call needs one size): usually one in all.
+fn mvr_cubes(scene: &Scene, reflectors: &[Reflector], resolutions: &[u32]) -> Result<Vec<Cube>> {
+    let views = epr::cube_views(reflectors, resolutions)?;
+    let mut cubes = Vec::with_capacity(reflectors.len());
+    let mut images: Vec<Option<TexelSamples>> = vec![None; reflectors.len()];
+    let mut sizes: Vec<u32> = resolutions.to_vec();
+    sizes.sort_unstable();
+    sizes.dedup();
+    for size in sizes {
+        let ks: Vec<usize> = (0..reflectors.len())
+            .filter(|&k| resolutions[k] == size)
+            .collect();
+        let cams: Vec<Camera> = ks
+            .iter()
+            .flat_map(|&k| views[6 * k..6 * k + 6].iter().cloned())
+            .collect();
+        let img = discretize_sided(scene, &cams)?;
+        let per = 6 * size as usize * size as usize;
+        for (j, &k) in ks.iter().enumerate() {
+            images[k] = Some((
+                img.triangle[j * per..(j + 1) * per].to_vec(),
+                img.position[j * per..(j + 1) * per].to_vec(),
+            ));
+        }
+    }
+    for ((r, faces), img) in reflectors.iter().zip(views.chunks(6)).zip(images) {
+        let faces = faces.to_vec();
+        let (triangle, position) = img.unwrap_or_default();
+        cubes.push(Cube {
+            res: faces[0].width,
+            faces,
+            center: r.center,
+            triangle,
+            position,
+        });
+    }
+    Ok(cubes)
+}
+
+/// EPR's and iVIR's cube maps (§3.5): one splat pass of `points` into every cube face, each at
+/// its reflector's resolution; each texel takes the nearest point's triangle and centre.
+fn splat_cubes(
+    scene: &Scene,
+    reflectors: &[Reflector],
+    resolutions: &[u32],
+    points: &crate::types::Points,
+) -> Result<Vec<Cube>> {
+    let views = epr::cube_views(reflectors, resolutions)?;
+    let mut cubes = Vec::with_capacity(reflectors.len());
+    let (keys, _) = crate::splat::splat_views(scene, points, &views, true)?;
+    let mut index = Vec::with_capacity(reflectors.len());
+    let mut at = 0;
+    for &res in resolutions {
+        let n = 6 * res as usize * res as usize;
+        index.push(
+            keys[at..at + n]
+                .iter()
+                .map(|&k| {
+                    if k == u64::MAX {
+                        -1
+                    } else {
+                        (k & 0xffff_ffff) as i64
+                    }
+                })
+                .collect::<Vec<i64>>(),
+        );
+        at += n;
+    }
+    for (k, r) in reflectors.iter().enumerate() {
+        let faces = views[6 * k..6 * k + 6].to_vec();
+        let (tri, pos): (Vec<i32>, Vec<[f32; 3]>) = index[k]
+            .iter()
+            .map(|&i| match usize::try_from(i) {
+                Ok(i) => (points.triangle[i], points.center[i]),
+                Err(_) => (-1, [f32::NAN; 3]),
+            })
+            .unzip();
+        cubes.push(Cube {
+            res: resolutions[k],
+            faces,
+            center: r.center,
+            triangle: tri,
+            position: pos,
+        });
+    }
+    Ok(cubes)
+}
+
+/// Render reflections of `reflectors` seen from `eye`.
+pub fn reflections(
+    scene: &Scene,
+    eye: &Camera,
+    reflectors: &[Reflector],
+    opts: &ReflectionOptions,
+) -> Result<ReflectionResult> {
+    let total = Instant::now();
+    if reflectors.is_empty() {
+        return input_err!("reflections need at least one reflector");
+    }
+    crate::counters::add(crate::counters::Op::CubeMaps, reflectors.len() as u64);
+    check_options(reflectors, opts)?;
     let mut timings = Timings::new();
     let mut stats = Vec::new();
 
@@ -157,44 +252,11 @@ pub fn reflections(
 
     // The cube maps' samples.
     let start = Instant::now();
-    let mut cubes = Vec::with_capacity(reflectors.len());
+    let cubes: Vec<Cube>;
     let mut point_count = 0usize;
     match opts.method {
         Method::Mvr => {
-            let views = epr::cube_views(reflectors, &opts.resolutions)?;
-            // One raster call per resolution (a call needs one size): usually one in all.
-            let mut images: Vec<Option<TexelSamples>> = vec![None; reflectors.len()];
-            let mut sizes: Vec<u32> = opts.resolutions.clone();
-            sizes.sort_unstable();
-            sizes.dedup();
-            for size in sizes {
-                let ks: Vec<usize> = (0..reflectors.len())
-                    .filter(|&k| opts.resolutions[k] == size)
-                    .collect();
-                let cams: Vec<Camera> = ks
-                    .iter()
-                    .flat_map(|&k| views[6 * k..6 * k + 6].iter().cloned())
-                    .collect();
-                let img = discretize_sided(scene, &cams)?;
-                let per = 6 * size as usize * size as usize;
-                for (j, &k) in ks.iter().enumerate() {
-                    images[k] = Some((
-                        img.triangle[j * per..(j + 1) * per].to_vec(),
-                        img.position[j * per..(j + 1) * per].to_vec(),
-                    ));
-                }
-            }
-            for ((r, faces), img) in reflectors.iter().zip(views.chunks(6)).zip(images) {
-                let faces = faces.to_vec();
-                let (triangle, position) = img.unwrap_or_default();
-                cubes.push(Cube {
-                    res: faces[0].width,
-                    faces,
-                    center: r.center,
-                    triangle,
-                    position,
-                });
-            }
+            cubes = mvr_cubes(scene, reflectors, &opts.resolutions)?;
             timings.add("views", start.elapsed().as_secs_f64());
         }
         Method::Epr | Method::Ivir => {
@@ -215,44 +277,7 @@ pub fn reflections(
             point_count = points.len();
             timings.add("points", start.elapsed().as_secs_f64());
             let start = Instant::now();
-            let views = epr::cube_views(reflectors, &opts.resolutions)?;
-            // One splat pass into every cube face, each at its reflector's resolution.
-            let (keys, _) = crate::splat::splat_views(scene, &points, &views, true)?;
-            let mut index = Vec::with_capacity(reflectors.len());
-            let mut at = 0;
-            for &res in &opts.resolutions {
-                let n = 6 * res as usize * res as usize;
-                index.push(
-                    keys[at..at + n]
-                        .iter()
-                        .map(|&k| {
-                            if k == u64::MAX {
-                                -1
-                            } else {
-                                (k & 0xffff_ffff) as i64
-                            }
-                        })
-                        .collect::<Vec<i64>>(),
-                );
-                at += n;
-            }
-            for (k, r) in reflectors.iter().enumerate() {
-                let faces = views[6 * k..6 * k + 6].to_vec();
-                let (tri, pos): (Vec<i32>, Vec<[f32; 3]>) = index[k]
-                    .iter()
-                    .map(|&i| match usize::try_from(i) {
-                        Ok(i) => (points.triangle[i], points.center[i]),
-                        Err(_) => (-1, [f32::NAN; 3]),
-                    })
-                    .unzip();
-                cubes.push(Cube {
-                    res: opts.resolutions[k],
-                    faces,
-                    center: r.center,
-                    triangle: tri,
-                    position: pos,
-                });
-            }
+            cubes = splat_cubes(scene, reflectors, &opts.resolutions, &points)?;
             timings.add("views", start.elapsed().as_secs_f64());
         }
     }
