@@ -2,7 +2,7 @@
 # with mypy.stubtest.
 from collections.abc import Sequence
 from os import PathLike
-from typing import Any, Callable, Optional, TypedDict, Union, final
+from typing import Any, Callable, Literal, Optional, TypedDict, Union, final
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -42,6 +42,16 @@ __all__ = [
 __version__: str
 
 _Path = Union[str, PathLike[str]]
+_Redundancy = Literal["pixel", "visibility"]
+_ImageMethod = Literal["conventional", "nonredundant", "peeling"]
+_MeshMethod = Literal["mesh", "hybrid", "points"]
+_Discretization = Literal["nonredundant", "conventional", "peeling", "geometry", "raytraced"]
+_Density = Literal["eye", "offscreen"]
+_OmniMethod = Literal["epr", "mvr", "ivir", "raytraced"]
+_ReflectionMethod = Literal["epr", "mvr", "ivir"]
+_Grouping = Literal["objects", "scene"]
+_Interpolation = Literal["none", "uv", "st", "uv+st"]
+_Projection = Literal["orthographic", "perspective"]
 
 @final
 class Scene:
@@ -361,7 +371,7 @@ def discretize_conventional(
 def discretize_nonredundant(
     scene: Scene,
     cameras: list[Camera],
-    redundancy: str = "pixel",
+    redundancy: _Redundancy = "pixel",
     cull_backfaces: bool = False,
 ) -> _ImagesDict: ...
 def discretize_peeling(
@@ -373,13 +383,13 @@ def sampling_metrics(
     position: ArrayLike,
     depth: ArrayLike,
     cameras: list[Camera],
-    method: str,
+    method: _ImageMethod,
     reference: list[Camera],
     frames: list[Camera],
-    redundancy: str,
+    redundancy: _Redundancy,
     cull_backfaces: bool,
 ) -> _SamplingDict: ...
-def reconstruct(images: Any, method: str, offset: Optional[Any] = None) -> _MeshDict: ...
+def reconstruct(images: Any, method: _MeshMethod, offset: Optional[Any] = None) -> _MeshDict: ...
 def soft_shadows(
     scene: Scene,
     camera: Camera,
@@ -387,10 +397,10 @@ def soft_shadows(
     u: ArrayLike,
     v: ArrayLike,
     samples: tuple[int, int],
-    discretization: str,
+    discretization: _Discretization,
     resolution: int,
     corners: bool,
-    reconstruction: str,
+    reconstruction: _MeshMethod,
     shadow_resolution: int,
     layers: int,
 ) -> _ShadowDict: ...
@@ -401,7 +411,7 @@ def epr_points(
     radii: Sequence[float],
     triangles: Sequence[ArrayLike],
     resolutions: Sequence[int],
-    density: str,
+    density: _Density,
     rho_scale: float,
     seed: int,
     progress: Optional[Callable[[int, int], object]] = None,
@@ -414,7 +424,7 @@ def epr_shadow_points(
     samples: int,
     resolution: int,
     max_resolution: int,
-    density: str,
+    density: _Density,
     rho_scale: float,
     seed: int,
 ) -> _PointsDict: ...
@@ -424,7 +434,7 @@ def omni_shadows(
     center: ArrayLike,
     radius: float,
     samples: int,
-    method: str,
+    method: _OmniMethod,
     rho_scale: float,
     resolution: int,
     max_resolution: int,
@@ -446,7 +456,7 @@ def reflections(
     radii: Sequence[float],
     triangles: Sequence[ArrayLike],
     resolutions: Sequence[int],
-    method: str,
+    method: _ReflectionMethod,
     bounces: int,
     supersample: int,
     rho_scale: float,
@@ -459,7 +469,7 @@ def visibility_field(
     uv: tuple[int, int],
     st: tuple[int, int],
     grid: tuple[int, int, int],
-    grouping: str,
+    grouping: _Grouping,
     ids_per_sample: int,
     supersample: int,
     jitter: Optional[int],
@@ -472,7 +482,7 @@ def field_view(
     slabs: Sequence[ArrayLike],
     ids: Sequence[np.ndarray],
     camera: Camera,
-    interpolate: str,
+    interpolate: _Interpolation,
     subsample: int,
 ) -> _FieldViewDict: ...
 def render_cells(
@@ -491,7 +501,7 @@ def impostors(
     depth: int,
     subdivisions: int,
     resolution: int,
-    projection_name: str,
+    projection_name: _Projection,
     fov: Optional[float],
     grow: bool,
     progress: Optional[Callable[[int, int], object]] = None,

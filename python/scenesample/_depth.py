@@ -5,7 +5,7 @@ from them (§4, Algorithm 4). Public through :mod:`scenesample.methods` and the 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any, Optional, Union
+from typing import Any, Literal, Optional, Union
 
 import numpy as np
 
@@ -80,7 +80,7 @@ def nonredundant(
     scene: Scene,
     cameras: Union[Camera, Sequence[Camera]],
     *,
-    redundancy: str = "pixel",
+    redundancy: Literal["pixel", "visibility"] = "pixel",
     cull_backfaces: bool = False,
 ) -> DepthImages:
     """Non-redundant images (non-redundant-rendering.txt §3, Algorithm 1): one image per

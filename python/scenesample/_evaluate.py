@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
-from typing import Any, Optional
+from typing import Any, Literal, Optional
 
 import numpy as np
 
@@ -23,6 +23,7 @@ from .results import DepthImages, Mesh
 __all__ = ["evaluate", "intermediate_cameras"]
 
 METRICS = ("sampling", "shadow", "geometry", "image", "reflection", "impostor", "cells")
+Metric = Literal["sampling", "shadow", "geometry", "image", "reflection", "impostor", "cells"]
 
 
 def default_metric(result: Any, reference: Any) -> str:
@@ -75,11 +76,11 @@ def intermediate_cameras(region: Sequence[Any], count: int, seed: int = 0) -> li
 def evaluate(
     images: Any,
     scene: Any,
-    metric: Optional[str] = None,
+    metric: Optional[Metric] = None,
     *,
     region: Optional[Sequence[Any]] = None,
     intermediate: int = 1000,
-    redundancy: str = "pixel",
+    redundancy: Literal["pixel", "visibility"] = "pixel",
     seed: int = 0,
     cameras: Optional[Sequence[Any]] = None,
     tolerance: float = 0.01,
