@@ -102,6 +102,47 @@ fn counting<R>(progress: Option<&Arc<Progress>>, f: impl FnOnce() -> R) -> R {
     r
 }
 
+/// Whose turn it is to run a call on the pools: 0 when free, else the holder's process id << 32
+/// | 1. One call at a time: two calls sharing a pool deadlock when a worker, waiting inside one
+/// call's parallel step, steals the other call's whole job and blocks in it on a lock (the GPU's)
+/// the first call holds. The pool already uses every core, so taking turns costs nothing.
+static TURN: AtomicU64 = AtomicU64::new(0);
+
+/// This call's turn ([`take_turn`]); given back when dropped, even if the work panics.
+struct Turn;
+
+impl Drop for Turn {
+    fn drop(&mut self) {
+        TURN.store(0, Ordering::Release);
+    }
+}
+
+/// Wait for this process's turn, calling `poll` every [`POLL`] meanwhile (so Ctrl-C still
+/// interrupts a call that waits). A turn held in the parent before a fork is free in the child.
+fn take_turn<E>(
+    poll: &mut impl FnMut() -> std::result::Result<(), E>,
+) -> std::result::Result<Turn, E> {
+    let pid = std::process::id();
+    let mine = (u64::from(pid) << 32) | 1;
+    let mut last = Instant::now();
+    loop {
+        let now = TURN.load(Ordering::Acquire);
+        let free = now == 0 || (now >> 32) as u32 != pid;
+        if free
+            && TURN
+                .compare_exchange(now, mine, Ordering::AcqRel, Ordering::Acquire)
+                .is_ok()
+        {
+            return Ok(Turn);
+        }
+        std::thread::sleep(Duration::from_millis(1));
+        if last.elapsed() >= POLL {
+            last = Instant::now();
+            poll()?;
+        }
+    }
+}
+
 /// Calls being interrupted now. Long loops stop while it is nonzero ([`check`]).
 static INTERRUPTING: AtomicUsize = AtomicUsize::new(0);
 
@@ -142,7 +183,8 @@ pub fn check() -> Result<()> {
 /// How often the calling thread polls for an interruption while the work runs.
 pub const POLL: Duration = Duration::from_millis(20);
 
-/// Run `work` on this process's pool while the calling thread calls `poll` every [`POLL`].
+/// Run `work` on this process's pool while the calling thread calls `poll` every [`POLL`]. Calls
+/// from several threads take turns ([`TURN`]).
 /// When `poll` fails, the loops of `work` see [`check`] fail; this waits for `work` to stop
 /// and returns `poll`'s error. A `work` stopped by another call's interruption (calls from
 /// several threads share the flag) runs again once that one has ended, so only the call that
@@ -157,6 +199,7 @@ pub fn interruptible<T: Send, E>(
         Err(e) => return Ok(Err(e)),
     };
     let home = std::thread::current();
+    let _turn = take_turn(&mut poll)?;
     loop {
         let done = AtomicBool::new(false);
         let mut out = None;
