@@ -94,16 +94,17 @@ impl ShadeLight {
 
 /// The default light seen from an eye: from its upper left-behind (`up − forward + 0.5·left`
 /// from the surface toward the light).
-pub fn default_light(eye_forward: DVec3, eye_up: DVec3) -> ShadeLight {
-    let left = eye_up.cross(eye_forward);
-    ShadeLight::default_toward(eye_up - eye_forward + 0.5 * left)
+pub fn default_light(eye: &Camera) -> ShadeLight {
+    let (forward, up) = (eye.forward(), eye.world_to_camera_rotation().row(1));
+    let left = up.cross(forward);
+    ShadeLight::default_toward(up - forward + 0.5 * left)
 }
 
 /// The scene's lights, or the default light as seen from the eye when it has none.
-pub fn lights(scene: &Scene, eye_forward: DVec3, eye_up: DVec3) -> Vec<ShadeLight> {
+pub fn lights(scene: &Scene, eye: &Camera) -> Vec<ShadeLight> {
     let ls = punctual(scene);
     if ls.is_empty() {
-        return vec![default_light(eye_forward, eye_up)];
+        return vec![default_light(eye)];
     }
     ls
 }
@@ -369,15 +370,20 @@ fn barycentric(v: &[DVec3; 3], p: DVec3) -> [f64; 3] {
 mod tests {
     use super::*;
 
-    #[test]
-    fn lambert_under_a_head_on_light() {
-        let s = Surface {
+    /// A rough, grey (albedo 0.5) dielectric at the origin facing +z.
+    fn grey_facing_z() -> Surface {
+        Surface {
             position: DVec3::ZERO,
             normal: DVec3::Z,
             albedo: DVec3::splat(0.5),
             metallic: 0.0,
             roughness: 1.0,
-        };
+        }
+    }
+
+    #[test]
+    fn lambert_under_a_head_on_light() {
+        let s = grey_facing_z();
         let l = ShadeLight {
             kind: Kind::Directional,
             position: DVec3::ZERO,
@@ -395,13 +401,7 @@ mod tests {
 
     #[test]
     fn visibility_scales_each_light_and_prelit_is_two_sided() {
-        let s = Surface {
-            position: DVec3::ZERO,
-            normal: DVec3::Z,
-            albedo: DVec3::splat(0.5),
-            metallic: 0.0,
-            roughness: 1.0,
-        };
+        let s = grey_facing_z();
         let head_on = ShadeLight::default_toward(DVec3::Z);
         let eye = DVec3::new(0.0, 0.0, 5.0);
         let lit = shade(&s, eye, &[head_on]);

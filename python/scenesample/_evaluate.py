@@ -11,7 +11,7 @@ import numpy as np
 from . import _core
 from ._depth import conventional
 from ._field import FieldView, cells_metric
-from ._images import image_metrics, impostor_metrics, is_image_like, reflection_metrics
+from ._images import image_metrics, impostor_metrics, reflection_metrics
 from ._impostors import ImpostorView
 from ._omni import OmniShadowResult
 from ._reflections import ReflectionResult
@@ -195,8 +195,9 @@ def evaluate(
     if metric not in METRICS:
         raise InputError(f"metric must be one of {list(METRICS)}, got {metric!r}")
     if metric in ("image", "reflection", "impostor"):
+        # Anything else that is not image-like is refused by the metric itself.
         for name, v in (("result", images), ("reference", scene)):
-            if isinstance(v, Scene) or not is_image_like(v):
+            if isinstance(v, Scene):
                 raise InputError(
                     f"metric={metric!r} compares two image-like results; the {name} is "
                     f"{type(v).__name__}"

@@ -13,7 +13,7 @@ import numpy as np
 from .errors import InputError
 from .imageio import linear_to_srgb
 
-__all__ = ["display", "image_metrics", "is_image_like", "reflection_metrics", "impostor_metrics"]
+__all__ = ["display", "image_metrics", "reflection_metrics", "impostor_metrics"]
 
 
 def _linear(x: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -30,7 +30,10 @@ def _linear(x: Any) -> tuple[np.ndarray, np.ndarray]:
         mask = getattr(x, "mask", None)
         cover = np.ones(img.shape[:2], bool) if mask is None else np.asarray(mask, bool)
         return img[None], cover[None]
-    arr = np.asarray(x, dtype=np.float64)
+    try:
+        arr = np.asarray(x, dtype=np.float64)
+    except (TypeError, ValueError):
+        arr = np.zeros(0)
     if arr.ndim == 2:
         arr = np.repeat(arr[..., None], 3, axis=-1)
     if arr.ndim != 3 or arr.shape[2] != 3:
@@ -39,15 +42,6 @@ def _linear(x: Any) -> tuple[np.ndarray, np.ndarray]:
             f"{type(x).__name__} of shape {arr.shape}"
         )
     return arr[None], np.ones(arr.shape[:2], bool)[None]
-
-
-def is_image_like(x: Any) -> bool:
-    """Whether :func:`display` can read ``x``."""
-    try:
-        _linear(x)
-    except (InputError, TypeError, ValueError):
-        return False
-    return True
 
 
 def display(x: Any) -> tuple[np.ndarray, np.ndarray]:

@@ -283,7 +283,7 @@ pub fn reflections(
     }
     let texels: usize = cubes.iter().map(|c| c.triangle.len()).sum();
 
-    let lights = shading::lights(scene, eye.forward(), eye_up(eye));
+    let lights = shading::lights(scene, eye);
     let ctx = Shader {
         scene,
         owner: &owner,
@@ -338,10 +338,6 @@ pub fn reflections(
         stats,
         timings,
     })
-}
-
-fn eye_up(eye: &Camera) -> DVec3 {
-    eye.world_to_camera_rotation().row(1)
 }
 
 /// What the eye sees at one pixel.

@@ -198,10 +198,7 @@ pub fn shade_frame<'py>(
         visibility.push(vis(v)?);
     }
     if lights.is_empty() {
-        lights.push(shading::default_light(
-            cam.forward(),
-            cam.world_to_camera_rotation().row(1),
-        ));
+        lights.push(shading::default_light(&cam));
         visibility.push(None);
     }
     let gbuffer = DepthImages {
