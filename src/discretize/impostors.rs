@@ -524,12 +524,8 @@ pub fn build(scene: &Scene, opts: &ImpostorOptions) -> Result<Impostors> {
     for (ci, cell) in cells.iter().enumerate() {
         crate::process::check()?;
         crate::process::advance(1);
-        let set: Vec<u32> = if opts.grow {
-            let (c, r) = (cell.center(), cell.radius());
-            (0..scene.triangle_count() as u32)
-                .into_par_iter()
-                .filter(|&t| sphere_overlap(&scene.triangle(t as usize), c, r))
-                .collect()
+        let set = if opts.grow {
+            triangles_in_sphere(scene, cell)
         } else {
             in_box[ci].clone()
         };
@@ -552,7 +548,6 @@ pub fn build(scene: &Scene, opts: &ImpostorOptions) -> Result<Impostors> {
             .zip(full_depth[base..base + d_count * res * res].par_chunks_mut(res * res))
             .enumerate()
             .for_each(|(di, (col, dep))| {
-                let cam = &cams[di];
                 for k in 0..res * res {
                     let i = di * res * res + k;
                     let Ok(local) = usize::try_from(hits.triangle[i]) else {
@@ -562,24 +557,8 @@ pub fn build(scene: &Scene, opts: &ImpostorOptions) -> Result<Impostors> {
                         continue;
                     }
                     let t = set[local] as usize;
-                    let f = scene.faces()[t];
-                    let [u, v] = hits.barycentric[i].map(f64::from);
-                    let cs = f.map(|j| scene.colors()[j as usize]);
-                    let base = [0, 1, 2].map(|a| {
-                        (cs[0][a] as f64 * (1.0 - u - v)
-                            + cs[1][a] as f64 * u
-                            + cs[2][a] as f64 * v) as f32
-                    });
-                    let p = scene.triangle(t);
-                    let p_hit = p[0] * (1.0 - u - v) + p[1] * u + p[2] * v;
-                    let c = lit(
-                        base,
-                        shading_normal(scene, &normals, t, p_hit),
-                        p_hit,
-                        &lights,
-                    );
-                    col[k] = [to8(c[0]), to8(c[1]), to8(c[2]), 255];
-                    dep[k] = cam.project(p_hit).1 as f32;
+                    let uv = hits.barycentric[i].map(f64::from);
+                    (col[k], dep[k]) = texel(scene, (&normals, &lights), t, uv, &cams[di]);
                 }
             });
     }
@@ -621,6 +600,42 @@ pub fn build(scene: &Scene, opts: &ImpostorOptions) -> Result<Impostors> {
 /// One image's rays: origins, directions, and where each starts along its pixel ray (+inf:
 /// the ray misses the cell and its hit is ignored).
 type ImageRays = (Vec<[f32; 3]>, Vec<[f32; 3]>, Vec<f64>);
+
+/// The triangles that reach into the sphere around a cell (the grown cells' triangle set).
+fn triangles_in_sphere(scene: &Scene, cell: &Cell) -> Vec<u32> {
+    let (c, r) = (cell.center(), cell.radius());
+    (0..scene.triangle_count() as u32)
+        .into_par_iter()
+        .filter(|&t| sphere_overlap(&scene.triangle(t as usize), c, r))
+        .collect()
+}
+
+/// One impostor texel: triangle `t` hit at barycentric `(u, v)`, its interpolated colour lit
+/// under the pre-lit environment (8-bit RGBA), and the hit's depth along `cam`.
+fn texel(
+    scene: &Scene,
+    (normals, lights): (&[DVec3], &Prelit),
+    t: usize,
+    [u, v]: [f64; 2],
+    cam: &Camera,
+) -> ([u8; 4], f32) {
+    let cs = scene.faces()[t].map(|j| scene.colors()[j as usize]);
+    let base = [0, 1, 2].map(|a| {
+        (cs[0][a] as f64 * (1.0 - u - v) + cs[1][a] as f64 * u + cs[2][a] as f64 * v) as f32
+    });
+    let p = scene.triangle(t);
+    let p_hit = p[0] * (1.0 - u - v) + p[1] * u + p[2] * v;
+    let c = lit(
+        base,
+        shading_normal(scene, normals, t, p_hit),
+        p_hit,
+        lights,
+    );
+    (
+        [to8(c[0]), to8(c[1]), to8(c[2]), 255],
+        cam.project(p_hit).1 as f32,
+    )
+}
 
 fn to8(x: f32) -> u8 {
     (x.clamp(0.0, 1.0) * 255.0).round() as u8

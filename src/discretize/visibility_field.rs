@@ -309,6 +309,67 @@ pub struct Supersample {
     pub jitter: Option<u64>,
 }
 
+/// The rays of one uv sample `(iu, iv)` (§3.3, pre-filtering): from `ss²` sub-positions in
+/// its uv cell to `ss²` sub-positions in every st cell, as origins and direction vectors
+/// whose end (t = 1) lies on the st plane; `offset(at, j)` places sub-position j of stream `at`.
+fn beam_rays(
+    slab: &Slab,
+    offset: &impl Fn(u64, usize) -> f64,
+    dims: [u32; 4],
+    ss: usize,
+    [iu, iv]: [usize; 2],
+) -> (Vec<[f32; 3]>, Vec<[f32; 3]>) {
+    let [du, dv, ds, dt] = dims.map(|d| d as usize);
+    let rays_per_uv = ds * dt * ss.pow(4);
+    let mut origins = Vec::with_capacity(rays_per_uv);
+    let mut dirs = Vec::with_capacity(rays_per_uv);
+    for is in 0..ds {
+        for it in 0..dt {
+            // A distinct stream of jitter per sample and axis.
+            let at = ((((iu * dv + iv) * ds + is) * dt + it) * 4) as u64;
+            for ou in (0..ss).map(|j| offset(at, j)) {
+                for ov in (0..ss).map(|j| offset(at + 1, j)) {
+                    let a = slab
+                        .uv
+                        .point((iu as f64 + ou) / du as f64, (iv as f64 + ov) / dv as f64);
+                    for os in (0..ss).map(|j| offset(at + 2, j)) {
+                        for ot in (0..ss).map(|j| offset(at + 3, j)) {
+                            let b = slab
+                                .st
+                                .point((is as f64 + os) / ds as f64, (it as f64 + ot) / dt as f64);
+                            origins.push(a.as_vec3().to_array());
+                            dirs.push((b - a).as_vec3().to_array());
+                        }
+                    }
+                }
+            }
+        }
+    }
+    (origins, dirs)
+}
+
+/// Ranks the cells one sample's rays hit (§3.3: the cells seen most often first, ties by
+/// cell index) and writes the first `out.len()` of them.
+fn rank_cells(tris: &[i32], cell_of: &[u32], out: &mut [i32]) {
+    let mut hit: Vec<u32> = tris
+        .iter()
+        .filter(|&&t| t >= 0)
+        .map(|&t| cell_of[t as usize])
+        .collect();
+    hit.sort_unstable();
+    let mut counts: Vec<(usize, u32)> = Vec::new();
+    for c in hit {
+        match counts.last_mut() {
+            Some((k, last)) if *last == c => *k += 1,
+            _ => counts.push((1, c)),
+        }
+    }
+    counts.sort_by(|a, b| b.0.cmp(&a.0).then(a.1.cmp(&b.1)));
+    for (slot, &(_, c)) in out.iter_mut().zip(&counts) {
+        *slot = c as i32;
+    }
+}
+
 /// Sample the field (§3.3): `uv` and `st` samples per plane, `n` ids per sample.
 pub fn sample(
     scene: &Scene,
@@ -359,7 +420,6 @@ pub fn sample(
     let mut rank_seconds = 0.0;
     // One uv sample at a time: its (S·T·ss⁴) rays in one batch.
     let st_count = ds * dt;
-    let rays_per_uv = st_count * ss.pow(4);
     // Progress in slab samples (iu, iv, is, it); one (iu, iv) row of them per step.
     crate::process::add_total((du * dv * st_count) as u64);
     for iu in 0..du {
@@ -367,31 +427,7 @@ pub fn sample(
             crate::process::check()?;
             crate::process::advance(st_count as u64);
             let start = Instant::now();
-            let mut origins = Vec::with_capacity(rays_per_uv);
-            let mut dirs = Vec::with_capacity(rays_per_uv);
-            for is in 0..ds {
-                for it in 0..dt {
-                    // A distinct stream of jitter per sample and axis.
-                    let at = ((((iu * dv + iv) * ds + is) * dt + it) * 4) as u64;
-                    for ou in (0..ss).map(|j| offset(at, j)) {
-                        for ov in (0..ss).map(|j| offset(at + 1, j)) {
-                            let a = slab
-                                .uv
-                                .point((iu as f64 + ou) / du as f64, (iv as f64 + ov) / dv as f64);
-                            for os in (0..ss).map(|j| offset(at + 2, j)) {
-                                for ot in (0..ss).map(|j| offset(at + 3, j)) {
-                                    let b = slab.st.point(
-                                        (is as f64 + os) / ds as f64,
-                                        (it as f64 + ot) / dt as f64,
-                                    );
-                                    origins.push(a.as_vec3().to_array());
-                                    dirs.push((b - a).as_vec3().to_array());
-                                }
-                            }
-                        }
-                    }
-                }
-            }
+            let (origins, dirs) = beam_rays(slab, &offset, dims, ss, [iu, iv]);
             let hits = crate::trace::cast_rays(scene, &origins, &dirs, 0.0, 1.0)?;
             cast_seconds += start.elapsed().as_secs_f64();
             let start = Instant::now();
@@ -400,25 +436,7 @@ pub fn sample(
             ids[base..base + st_count * n as usize]
                 .par_chunks_mut(n as usize)
                 .zip(hits.triangle.par_chunks(per))
-                .for_each(|(out, tris)| {
-                    let mut hit: Vec<u32> = tris
-                        .iter()
-                        .filter(|&&t| t >= 0)
-                        .map(|&t| cells.cell_of[t as usize])
-                        .collect();
-                    hit.sort_unstable();
-                    let mut counts: Vec<(usize, u32)> = Vec::new();
-                    for c in hit {
-                        match counts.last_mut() {
-                            Some((k, last)) if *last == c => *k += 1,
-                            _ => counts.push((1, c)),
-                        }
-                    }
-                    counts.sort_by(|a, b| b.0.cmp(&a.0).then(a.1.cmp(&b.1)));
-                    for (slot, &(_, c)) in out.iter_mut().zip(&counts) {
-                        *slot = c as i32;
-                    }
-                });
+                .for_each(|(out, tris)| rank_cells(tris, &cells.cell_of, out));
             rank_seconds += start.elapsed().as_secs_f64();
         }
     }

@@ -167,20 +167,7 @@ pub fn omni_shadows(
     opts: &OmniOptions,
 ) -> Result<OmniResult> {
     let total = Instant::now();
-    if !(center.is_finite() && radius.is_finite() && radius >= 0.0) {
-        return input_err!(
-            "the light's centre {center:?} and radius {radius} must be finite, the radius >= 0"
-        );
-    }
-    if opts.samples == 0 {
-        return input_err!("light_samples must be at least 1");
-    }
-    if opts.max_resolution == 0 || opts.resolution == Some(0) {
-        return input_err!("cube-map resolutions must be at least 1");
-    }
-    if !(opts.rho_scale.is_finite() && opts.rho_scale > 0.0) {
-        return input_err!("rho_scale must be finite and > 0, got {}", opts.rho_scale);
-    }
+    check_light(center, radius, opts)?;
     let mut timings = Timings::new();
     let mut stats = Vec::new();
 
@@ -207,65 +194,24 @@ pub fn omni_shadows(
             timings.add("shadow", start.elapsed().as_secs_f64());
             bits
         }
-        OmniMethod::Mvr => {
-            let start = Instant::now();
-            let cams = epr::shadow_views(&samples, res, near)?;
-            let ctx = gpu::context()?;
-            let (per_face, _) = gpu::shadow::visibility(
-                &ctx,
-                scene.vertices(),
-                scene.faces(),
-                scene.center(),
-                scene.bounds(),
-                &cams,
-                &points,
-                &normals,
-                diagonal,
-            )?;
-            // A point outside a face's view is lit by that face: AND over the six.
-            let words = points.len().div_ceil(32).max(1);
-            let mut bits = vec![u32::MAX; words * s_count];
-            for (v, face) in per_face.chunks(words).enumerate() {
-                for (w, &b) in face.iter().enumerate() {
-                    bits[(v / 6) * words + w] &= b;
-                }
-            }
-            timings.add("shadow", start.elapsed().as_secs_f64());
-            stats.push((
-                "triangles_drawn".to_string(),
-                (scene.triangle_count() * cams.len()) as f64,
-            ));
-            bits
-        }
-        OmniMethod::Epr | OmniMethod::Ivir => {
-            let density = if opts.method == OmniMethod::Epr {
-                Density::Eye {
-                    rho_scale: opts.rho_scale,
-                }
-            } else {
-                Density::OffScreen
-            };
-            let start = Instant::now();
-            let pts = epr::generate_shadow(scene, eye, &samples, res, near, density, opts.seed)?;
-            timings.add("points", start.elapsed().as_secs_f64());
-            stats.extend(pts.stats.iter().cloned());
-            let cams = epr::shadow_views(&samples, res, near)?;
-            let start = Instant::now();
-            // Clipped to the triangle: unclipped squares overhang silhouettes and over-shadow.
-            let (keys, splat_timings) = splat_views(scene, &pts, &cams, true)?;
-            timings.add("splat", start.elapsed().as_secs_f64());
-            if let Some(gpu) = splat_timings.get("splat") {
-                timings.add("splat_gpu", gpu);
-            }
-            let start = Instant::now();
-            let bits = test_splatted(&keys, &pts, &cams, &samples, &points, &normals, diagonal);
-            timings.add("test", start.elapsed().as_secs_f64());
-            stats.push((
-                "buffer_bytes".to_string(),
-                (keys.len() * std::mem::size_of::<u64>()) as f64,
-            ));
-            bits
-        }
+        OmniMethod::Mvr => mvr_bits(
+            scene,
+            &samples,
+            (res, near),
+            (&points, &normals),
+            &mut timings,
+            &mut stats,
+        )?,
+        OmniMethod::Epr | OmniMethod::Ivir => splatted_bits(
+            scene,
+            eye,
+            &samples,
+            (res, near),
+            (&points, &normals),
+            opts,
+            &mut timings,
+            &mut stats,
+        )?,
     };
 
     let (visible, visibility) = per_pixel(&bits, &mask, s_count);
@@ -288,6 +234,113 @@ pub fn omni_shadows(
         stats,
         timings,
     })
+}
+
+/// Refuses a non-finite or negative light, no light samples, a zero resolution and a
+/// non-positive `rho_scale`.
+fn check_light(center: DVec3, radius: f64, opts: &OmniOptions) -> Result<()> {
+    if !(center.is_finite() && radius.is_finite() && radius >= 0.0) {
+        return input_err!(
+            "the light's centre {center:?} and radius {radius} must be finite, the radius >= 0"
+        );
+    }
+    if opts.samples == 0 {
+        return input_err!("light_samples must be at least 1");
+    }
+    if opts.max_resolution == 0 || opts.resolution == Some(0) {
+        return input_err!("cube-map resolutions must be at least 1");
+    }
+    if !(opts.rho_scale.is_finite() && opts.rho_scale > 0.0) {
+        return input_err!("rho_scale must be finite and > 0, got {}", opts.rho_scale);
+    }
+    Ok(())
+}
+
+/// MVR (§5): six rasterized shadow views per light sample; a receiver is lit by a sample when
+/// every face's test passes (a point outside a face's view is lit by that face). Returns the
+/// visibility bits, one word per 32 receivers, per light sample.
+fn mvr_bits(
+    scene: &Scene,
+    samples: &[DVec3],
+    (res, near): (u32, f64),
+    (points, normals): (&[DVec3], &[DVec3]),
+    timings: &mut Timings,
+    stats: &mut Vec<(String, f64)>,
+) -> Result<Vec<u32>> {
+    let s_count = samples.len();
+    let diagonal = scene.diagonal();
+    let start = Instant::now();
+    let cams = epr::shadow_views(samples, res, near)?;
+    let ctx = gpu::context()?;
+    let (per_face, _) = gpu::shadow::visibility(
+        &ctx,
+        scene.vertices(),
+        scene.faces(),
+        scene.center(),
+        scene.bounds(),
+        &cams,
+        points,
+        normals,
+        diagonal,
+    )?;
+    // A point outside a face's view is lit by that face: AND over the six.
+    let words = points.len().div_ceil(32).max(1);
+    let mut bits = vec![u32::MAX; words * s_count];
+    for (v, face) in per_face.chunks(words).enumerate() {
+        for (w, &b) in face.iter().enumerate() {
+            bits[(v / 6) * words + w] &= b;
+        }
+    }
+    timings.add("shadow", start.elapsed().as_secs_f64());
+    stats.push((
+        "triangles_drawn".to_string(),
+        (scene.triangle_count() * cams.len()) as f64,
+    ));
+    Ok(bits)
+}
+
+/// EPR or iVIR (§5.1, splatted as §3.5): the shadow points of the eye's receivers, splatted
+/// into six views per light sample and tested against the splatted keys. Returns the
+/// visibility bits as `mvr_bits`.
+#[allow(clippy::too_many_arguments)]
+fn splatted_bits(
+    scene: &Scene,
+    eye: &Camera,
+    samples: &[DVec3],
+    (res, near): (u32, f64),
+    (points, normals): (&[DVec3], &[DVec3]),
+    opts: &OmniOptions,
+    timings: &mut Timings,
+    stats: &mut Vec<(String, f64)>,
+) -> Result<Vec<u32>> {
+    let diagonal = scene.diagonal();
+    let density = if opts.method == OmniMethod::Epr {
+        Density::Eye {
+            rho_scale: opts.rho_scale,
+        }
+    } else {
+        Density::OffScreen
+    };
+    let start = Instant::now();
+    let pts = epr::generate_shadow(scene, eye, samples, res, near, density, opts.seed)?;
+    timings.add("points", start.elapsed().as_secs_f64());
+    stats.extend(pts.stats.iter().cloned());
+    let cams = epr::shadow_views(samples, res, near)?;
+    let start = Instant::now();
+    // Clipped to the triangle: unclipped squares overhang silhouettes and over-shadow.
+    let (keys, splat_timings) = splat_views(scene, &pts, &cams, true)?;
+    timings.add("splat", start.elapsed().as_secs_f64());
+    if let Some(gpu) = splat_timings.get("splat") {
+        timings.add("splat_gpu", gpu);
+    }
+    let start = Instant::now();
+    let bits = test_splatted(&keys, &pts, &cams, samples, points, normals, diagonal);
+    timings.add("test", start.elapsed().as_secs_f64());
+    stats.push((
+        "buffer_bytes".to_string(),
+        (keys.len() * std::mem::size_of::<u64>()) as f64,
+    ));
+    Ok(bits)
 }
 
 /// Test every receiver against the splatted cube faces of every light sample: bits as

@@ -173,26 +173,7 @@ pub fn sampling_metrics(
 ) -> Result<SamplingMetrics> {
     let total = Instant::now();
     let n = images.n;
-    if reference.is_empty() {
-        return input_err!(
-            "the sampling metrics need the reference cameras the images were made for"
-        );
-    }
-    if images.method == "nonredundant" || images.method == "conventional" {
-        if reference.len() != n {
-            return input_err!(
-                "{} images but {} reference cameras; a {} set has one image per reference camera",
-                n,
-                reference.len(),
-                images.method
-            );
-        }
-    } else if images.method != "peeling" {
-        return input_err!(
-            "unknown method {:?}: expected 'conventional', 'nonredundant' or 'peeling'",
-            images.method
-        );
-    }
+    check_sets(images, reference)?;
     let mut out = SamplingMetrics {
         frames: frames.len(),
         ..Default::default()
@@ -239,41 +220,8 @@ pub fn sampling_metrics(
 
     // Metrics 3 and 4, frame by frame.
     let start = Instant::now();
-    let mut useful: Vec<Vec<bool>> = disoccluded.iter().map(|d| vec![false; d.len()]).collect();
-    let mut available: Vec<Vec<f64>> = vec![Vec::with_capacity(frames.len()); n];
-    if !frames.is_empty() {
-        let ctx = gpu::context()?;
-        let mut failure = None;
-        gpu::depth::rasterize(&ctx, scene, frames, cull_backfaces, None, |first, ids| {
-            if failure.is_some() {
-                return;
-            }
-            let npx = frames[0].width as usize * frames[0].height as usize;
-            let cams = &frames[first..first + ids.len() / npx];
-            let chunk = match resolve_ids(scene, cams, ids.to_vec()) {
-                Ok((chunk, _)) => chunk,
-                Err(e) => {
-                    failure = Some(e);
-                    return;
-                }
-            };
-            for f in 0..cams.len() {
-                let r = consume_frame(scene, images, &chunk, f, &disoccluded, &mut useful, mode)
-                    .map(|avail| {
-                        for (k, a) in avail.into_iter().enumerate() {
-                            available[k].push(a);
-                        }
-                    });
-                if let Err(e) = r {
-                    failure = Some(e);
-                    return;
-                }
-            }
-        })?;
-        if let Some(e) = failure {
-            return Err(e);
-        }
-    }
+    let (useful, available) =
+        frame_metrics(scene, images, frames, &disoccluded, mode, cull_backfaces)?;
     let npx = images.width as usize * images.height as usize;
     out.disoccluded_mask = vec![false; n * npx];
     out.useful_mask = vec![false; n * npx];
@@ -296,6 +244,85 @@ pub fn sampling_metrics(
     out.timings.add("frames", start.elapsed().as_secs_f64());
     out.timings.add("total", total.elapsed().as_secs_f64());
     Ok(out)
+}
+
+/// Refuses a set without its reference cameras, a one-image-per-camera set whose counts
+/// differ, and a method the metrics do not know.
+fn check_sets(images: &DepthImages, reference: &[Camera]) -> Result<()> {
+    let n = images.n;
+    if reference.is_empty() {
+        return input_err!(
+            "the sampling metrics need the reference cameras the images were made for"
+        );
+    }
+    if images.method == "nonredundant" || images.method == "conventional" {
+        if reference.len() != n {
+            return input_err!(
+                "{} images but {} reference cameras; a {} set has one image per reference camera",
+                n,
+                reference.len(),
+                images.method
+            );
+        }
+    } else if images.method != "peeling" {
+        return input_err!(
+            "unknown method {:?}: expected 'conventional', 'nonredundant' or 'peeling'",
+            images.method
+        );
+    }
+    Ok(())
+}
+
+/// Per image: which disoccluded samples some frame sees, and each frame's fraction of them.
+type FrameMetrics = (Vec<Vec<bool>>, Vec<Vec<f64>>);
+
+/// Metrics 3 and 4 (§6.1.2): renders the frames and, per image, marks the disoccluded samples
+/// some frame sees (`useful`) and records each frame's fraction of them (`available`).
+fn frame_metrics(
+    scene: &Scene,
+    images: &DepthImages,
+    frames: &[Camera],
+    disoccluded: &[Vec<Sample>],
+    mode: Redundancy,
+    cull_backfaces: bool,
+) -> Result<FrameMetrics> {
+    let n = images.n;
+    let mut useful: Vec<Vec<bool>> = disoccluded.iter().map(|d| vec![false; d.len()]).collect();
+    let mut available: Vec<Vec<f64>> = vec![Vec::with_capacity(frames.len()); n];
+    if !frames.is_empty() {
+        let ctx = gpu::context()?;
+        let mut failure = None;
+        gpu::depth::rasterize(&ctx, scene, frames, cull_backfaces, None, |first, ids| {
+            if failure.is_some() {
+                return;
+            }
+            let npx = frames[0].width as usize * frames[0].height as usize;
+            let cams = &frames[first..first + ids.len() / npx];
+            let chunk = match resolve_ids(scene, cams, ids.to_vec()) {
+                Ok((chunk, _)) => chunk,
+                Err(e) => {
+                    failure = Some(e);
+                    return;
+                }
+            };
+            for f in 0..cams.len() {
+                let r = consume_frame(scene, images, &chunk, f, disoccluded, &mut useful, mode)
+                    .map(|avail| {
+                        for (k, a) in avail.into_iter().enumerate() {
+                            available[k].push(a);
+                        }
+                    });
+                if let Err(e) = r {
+                    failure = Some(e);
+                    return;
+                }
+            }
+        })?;
+        if let Some(e) = failure {
+            return Err(e);
+        }
+    }
+    Ok((useful, available))
 }
 
 /// One intermediate frame (image `f` of `chunk`): marks the disoccluded samples it needs as

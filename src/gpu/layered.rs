@@ -22,7 +22,7 @@ use super::raster::{
     align, check_image_size, copy, draw_ids, id_pipeline_with, submit_readback, texture_2d,
     texture_2d_descriptor, uniform_window, IdPass, Timestamps, DEPTH_FORMAT, TRI_FORMAT,
 };
-use super::{GpuContext, SceneBuffers};
+use super::{Distinct, GpuContext, SceneBuffers};
 use crate::camera::{Camera, Projection};
 use crate::error::{Error, Result};
 use crate::scene::Scene;
@@ -183,7 +183,6 @@ pub fn render(
     let nonredundant = test == LayerTest::PixelRedundancy;
     let layers = earlier_layers(ctx, n, nonredundant)?;
     let row = align(w as u64 * 4, wgpu::COPY_BYTES_PER_ROW_ALIGNMENT as u64);
-    let image_bytes = row * h as u64;
     let _guard = ctx
         .lock
         .lock()
@@ -194,19 +193,7 @@ pub fn render(
     // back to triangle ids as each image comes back.
     let distinct = buffers.distinct(ctx, scene);
     let mut on_image = |i: usize, ids: &[i32]| match distinct {
-        Some(d) => {
-            let ids: Vec<i32> = ids
-                .iter()
-                .map(|&t| {
-                    if t < 0 {
-                        t
-                    } else {
-                        d.triangles[t as usize] as i32
-                    }
-                })
-                .collect();
-            on_image(i, &ids)
-        }
+        Some(d) => on_image(i, &d.triangle_ids(ids)),
         None => on_image(i, ids),
     };
     let mut stats = RasterStats {
@@ -215,7 +202,6 @@ pub fn render(
         ..Default::default()
     };
     let start = Instant::now();
-    let device = &ctx.device;
     let centre = scene.center();
     let bounds = scene.bounds();
 
@@ -241,57 +227,17 @@ pub fn render(
     let mut in_flight: Option<Pending> = None;
     for i in 0..n {
         let start = Instant::now();
-        let queries = Timestamps::new(ctx, 1);
-        let readback = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("layered readback"),
-            size: image_bytes,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let mut encoder = device.create_command_encoder(&Default::default());
-        let pass = IdPass {
-            faces: distinct.map(|d| (&d.faces, d.triangles.len() as u32)),
-            ranges: None,
-            tri_view: &res.tri_view,
-            depth_view: &res.depth_views[i as usize % 2],
-            store_depth: true,
-            pipeline: &res.passes[i as usize],
-            bind: &res.binds[i as usize % 2],
-            offsets: &[(i * stride) as u32],
-        };
-        draw_ids(&mut encoder, &buffers, &pass, queries.as_ref(), 0);
-        if nonredundant && (i as u32) < layers {
-            encoder.copy_texture_to_texture(
-                res.tri.as_image_copy(),
-                wgpu::TexelCopyTextureInfo {
-                    texture: &res.earlier,
-                    mip_level: 0,
-                    origin: wgpu::Origin3d {
-                        x: 0,
-                        y: 0,
-                        z: i as u32,
-                    },
-                    aspect: wgpu::TextureAspect::All,
-                },
-                wgpu::Extent3d {
-                    width: w,
-                    height: h,
-                    depth_or_array_layers: 1,
-                },
-            );
-        }
-        copy(&mut encoder, &res.tri, &readback, 0, row, w, h);
-        let submission = submit_readback(ctx, encoder, &readback, queries.as_ref());
-        let next = Pending {
-            readback,
-            queries,
-            submission,
-            first: i as usize,
-            n: 1,
-            w,
-            h,
-            row_tri: row,
-        };
+        let next = res.submit(
+            ctx,
+            &buffers,
+            distinct,
+            ImageStep {
+                i,
+                stride,
+                copy_earlier: nonredundant && (i as u32) < layers,
+                row,
+            },
+        );
         stats.raster_seconds += start.elapsed().as_secs_f64();
         if let Some(done) = in_flight.replace(next) {
             finish_chunk(ctx, done, &mut stats, &mut on_image)?;
@@ -346,33 +292,7 @@ impl Resources {
             contents: uniforms,
             usage: wgpu::BufferUsages::UNIFORM,
         });
-        // Row i, texels 4(j − VARYING_IMAGES) + 0..4: the columns of image i's matrix for earlier
-        // image j >= VARYING_IMAGES (a 4x1 stand-in when no pass has such an image).
-        let later = (n as usize).saturating_sub(1 + VARYING_IMAGES as usize);
-        let columns = 4 * later.max(1);
-        let mut texels = vec![[0f32; 4]; columns * n as usize];
-        if nonredundant && later > 0 {
-            for (i, block) in reprojections(cameras, &clip, centre, w, h)
-                .into_iter()
-                .enumerate()
-            {
-                let dst = &mut texels[i * columns..];
-                for (k, m) in block.iter().skip(VARYING_IMAGES as usize).enumerate() {
-                    dst[4 * k..4 * k + 4].copy_from_slice(m);
-                }
-            }
-        }
-        let reproject = device.create_texture_with_data(
-            &ctx.queue,
-            &texture_2d_descriptor(
-                "reprojections",
-                (columns as u32, n as u32, 1),
-                wgpu::TextureFormat::Rgba32Float,
-                wgpu::TextureUsages::TEXTURE_BINDING,
-            ),
-            wgpu::util::TextureDataOrder::LayerMajor,
-            bytemuck::cast_slice(&texels),
-        );
+        let reproject = reprojection_texture(ctx, cameras, &clip, centre, nonredundant);
         // Peeling never reads earlier ids: a 1x1 stand-in fills the binding.
         let earlier_size = if nonredundant {
             (w, h, layers)
@@ -461,6 +381,122 @@ impl Resources {
             passes,
         }
     }
+}
+
+/// One image of `render`'s loop: its index, the uniform stride, whether its ids are kept for
+/// later images, and the readback's row pitch.
+struct ImageStep {
+    i: u64,
+    stride: u64,
+    copy_earlier: bool,
+    row: u64,
+}
+
+impl Resources {
+    /// Encodes and submits image `step.i`'s pass and the readback of its ids.
+    fn submit(
+        &self,
+        ctx: &GpuContext,
+        buffers: &SceneBuffers,
+        distinct: Option<&Distinct>,
+        step: ImageStep,
+    ) -> Pending {
+        let ImageStep { i, stride, row, .. } = step;
+        let device = &ctx.device;
+        let (w, h) = (self.tri.width(), self.tri.height());
+        let image_bytes = row * h as u64;
+        let queries = Timestamps::new(ctx, 1);
+        let readback = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("layered readback"),
+            size: image_bytes,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut encoder = device.create_command_encoder(&Default::default());
+        let pass = IdPass {
+            faces: distinct.map(|d| (&d.faces, d.triangles.len() as u32)),
+            ranges: None,
+            tri_view: &self.tri_view,
+            depth_view: &self.depth_views[i as usize % 2],
+            store_depth: true,
+            pipeline: &self.passes[i as usize],
+            bind: &self.binds[i as usize % 2],
+            offsets: &[(i * stride) as u32],
+        };
+        draw_ids(&mut encoder, buffers, &pass, queries.as_ref(), 0);
+        if step.copy_earlier {
+            encoder.copy_texture_to_texture(
+                self.tri.as_image_copy(),
+                wgpu::TexelCopyTextureInfo {
+                    texture: &self.earlier,
+                    mip_level: 0,
+                    origin: wgpu::Origin3d {
+                        x: 0,
+                        y: 0,
+                        z: i as u32,
+                    },
+                    aspect: wgpu::TextureAspect::All,
+                },
+                wgpu::Extent3d {
+                    width: w,
+                    height: h,
+                    depth_or_array_layers: 1,
+                },
+            );
+        }
+        copy(&mut encoder, &self.tri, &readback, 0, row, w, h);
+        let submission = submit_readback(ctx, encoder, &readback, queries.as_ref());
+        Pending {
+            readback,
+            queries,
+            submission,
+            first: i as usize,
+            n: 1,
+            w,
+            h,
+            row_tri: row,
+        }
+    }
+}
+
+/// Row i, texels 4(j − VARYING_IMAGES) + 0..4: the columns of image i's matrix into earlier
+/// image j >= VARYING_IMAGES (a 4x1 stand-in when no pass has such an image; §3.2's
+/// reprojection of a fragment into the images before it).
+fn reprojection_texture(
+    ctx: &GpuContext,
+    cameras: &[Camera],
+    clip: &[DMat4],
+    centre: DVec3,
+    nonredundant: bool,
+) -> wgpu::Texture {
+    use wgpu::util::DeviceExt;
+    let (w, h) = (cameras[0].width, cameras[0].height);
+    let n = cameras.len();
+    let later = n.saturating_sub(1 + VARYING_IMAGES as usize);
+    let columns = 4 * later.max(1);
+    let mut texels = vec![[0f32; 4]; columns * n];
+    if nonredundant && later > 0 {
+        for (i, block) in reprojections(cameras, clip, centre, w, h)
+            .into_iter()
+            .enumerate()
+        {
+            let dst = &mut texels[i * columns..];
+            for (k, m) in block.iter().skip(VARYING_IMAGES as usize).enumerate() {
+                dst[4 * k..4 * k + 4].copy_from_slice(m);
+            }
+        }
+    }
+    ctx.device.create_texture_with_data(
+        &ctx.queue,
+        &texture_2d_descriptor(
+            "reprojections",
+            (columns as u32, n as u32, 1),
+            wgpu::TextureFormat::Rgba32Float,
+            wgpu::TextureUsages::TEXTURE_BINDING,
+        ),
+        wgpu::util::TextureDataOrder::LayerMajor,
+        bytemuck::cast_slice(&texels),
+    )
 }
 
 /// How many earlier images a non-redundant pass reads (every image but the last, as layers of

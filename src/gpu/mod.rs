@@ -229,6 +229,22 @@ pub struct Distinct {
     pub triangles: Vec<u32>,
 }
 
+impl Distinct {
+    /// Maps the kept faces' indices an id pass wrote back to triangle ids (negatives, "no
+    /// triangle", stay as they are).
+    pub fn triangle_ids(&self, ids: &[i32]) -> Vec<i32> {
+        ids.iter()
+            .map(|&t| {
+                if t < 0 {
+                    t
+                } else {
+                    self.triangles[t as usize] as i32
+                }
+            })
+            .collect()
+    }
+}
+
 /// A scene's buffers on the current device, cached on the scene; a Mutex because the upload can
 /// fail, and a forked child replaces its parent's.
 #[derive(Default)]

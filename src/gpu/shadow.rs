@@ -287,6 +287,63 @@ impl Passes<'_> {
     }
 }
 
+/// The test pass's bindings (`shadow.wgsl`): the light uniforms, the points and normals
+/// relative to the scene centre, the shadow map and the visibility bits.
+fn test_bindings(
+    ctx: &GpuContext,
+    uniform_buf: &wgpu::Buffer,
+    map_view: &wgpu::TextureView,
+    out: &wgpu::Buffer,
+    (points, normals): (&[DVec3], &[DVec3]),
+    centre: DVec3,
+) -> wgpu::BindGroup {
+    use wgpu::util::DeviceExt;
+    let device = &ctx.device;
+    let rel = |v: &[DVec3], shift: DVec3| -> Vec<[f32; 4]> {
+        let mut out: Vec<[f32; 4]> = v
+            .iter()
+            .map(|p| (*p - shift).as_vec3().extend(0.0).to_array())
+            .collect();
+        if out.is_empty() {
+            out.push([0.0; 4]);
+        }
+        out
+    };
+    let points_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("shadow points"),
+        contents: bytemuck::cast_slice(&rel(points, centre)),
+        usage: wgpu::BufferUsages::STORAGE,
+    });
+    let normals_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("shadow normals"),
+        contents: bytemuck::cast_slice(&rel(normals, DVec3::ZERO)),
+        usage: wgpu::BufferUsages::STORAGE,
+    });
+    device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("shadow.wgsl bindings"),
+        layout: &ctx.shadow_pipeline().layout,
+        entries: &[
+            uniform_window(0, uniform_buf, LIGHT_SIZE),
+            wgpu::BindGroupEntry {
+                binding: 1,
+                resource: points_buf.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 2,
+                resource: normals_buf.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 3,
+                resource: wgpu::BindingResource::TextureView(map_view),
+            },
+            wgpu::BindGroupEntry {
+                binding: 4,
+                resource: out.as_entire_binding(),
+            },
+        ],
+    })
+}
+
 /// Visibility bits of every point from every light sample: `lights[s]` is the shadow camera of
 /// sample s (all of one square resolution, positioned at the sample); occluders are
 /// `vertices`/`faces`; `points` and `normals` (unit, facing the viewer; zero where there is no
@@ -339,26 +396,6 @@ pub fn visibility(
         contents: &uniforms,
         usage: wgpu::BufferUsages::UNIFORM,
     });
-    let rel = |v: &[DVec3], shift: DVec3| -> Vec<[f32; 4]> {
-        let mut out: Vec<[f32; 4]> = v
-            .iter()
-            .map(|p| (*p - shift).as_vec3().extend(0.0).to_array())
-            .collect();
-        if out.is_empty() {
-            out.push([0.0; 4]);
-        }
-        out
-    };
-    let points_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("shadow points"),
-        contents: bytemuck::cast_slice(&rel(points, centre)),
-        usage: wgpu::BufferUsages::STORAGE,
-    });
-    let normals_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("shadow normals"),
-        contents: bytemuck::cast_slice(&rel(normals, DVec3::ZERO)),
-        usage: wgpu::BufferUsages::STORAGE,
-    });
     let out = device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("visibility bits"),
         size: out_bytes,
@@ -379,29 +416,14 @@ pub fn visibility(
         wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
     );
     let map_view = map.create_view(&Default::default());
-    let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("shadow.wgsl bindings"),
-        layout: &pipeline.layout,
-        entries: &[
-            uniform_window(0, &uniform_buf, LIGHT_SIZE),
-            wgpu::BindGroupEntry {
-                binding: 1,
-                resource: points_buf.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 2,
-                resource: normals_buf.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 3,
-                resource: wgpu::BindingResource::TextureView(&map_view),
-            },
-            wgpu::BindGroupEntry {
-                binding: 4,
-                resource: out.as_entire_binding(),
-            },
-        ],
-    });
+    let bind = test_bindings(
+        ctx,
+        &uniform_buf,
+        &map_view,
+        &out,
+        (points, normals),
+        centre,
+    );
     let raster_bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
         label: Some("shadow.wgsl raster bindings"),
         layout: &pipeline.raster_layout,

@@ -265,10 +265,7 @@ pub fn splat(
         .lock
         .lock()
         .map_err(|_| Error::Gpu("GPU lock poisoned".into()))?;
-    let device = &ctx.device;
     let mut stats = SplatStats::default();
-
-    use wgpu::util::DeviceExt;
     let start = Instant::now();
     if ctx.limits.max_texture_dimension_2d < TEXTURE_ROW {
         return Err(Error::GpuLimit(format!(
@@ -290,112 +287,24 @@ pub fn splat(
     // A chunk's lists go in one texture: at most a binding's worth of bytes, and its rows.
     let list_limit = binding.min(rows * TEXTURE_ROW as u64 * 4);
     let chunks = view_chunks(&view_bytes, &lists.counts, binding, list_limit)?;
-    let stride = align(
-        VIEW_SIZE,
-        ctx.limits.min_uniform_buffer_offset_alignment as u64,
-    );
-    let per_dispatch = (MAX_GROUPS * GROUP) as usize;
     let total_pixels: u64 = view_bytes.iter().sum::<u64>() / 8;
     let mut out = vec![0u64; total_pixels as usize];
     let mut pending: Option<Pending> = None;
     let mut at_pixel = 0usize;
+    let inputs = SplatInputs {
+        cameras,
+        view_data: &view_data,
+        point_chunks: &point_chunks,
+        geometry: &geometry,
+        lists: &lists,
+    };
     for range in chunks {
         // Ctrl-C between chunks of views (the previous chunk's readback is dropped).
         crate::process::check()?;
         let start = Instant::now();
-        let (dispatches, offset, first) = dispatches(
-            range.clone(),
-            cameras,
-            &view_data,
-            &point_chunks,
-            &lists,
-            per_dispatch,
-        );
-        let mut uniforms = vec![0u8; stride as usize * dispatches.len().max(1)];
-        for (d, (_, u)) in dispatches.iter().enumerate() {
-            let at = d * stride as usize;
-            uniforms[at..at + VIEW_SIZE as usize].copy_from_slice(bytemuck::bytes_of(u));
-        }
-        let list_view = row_texture(
-            ctx,
-            "splat lists",
-            wgpu::TextureFormat::R32Uint,
-            first,
-            |mut view| {
-                let mut at = 0;
-                for part in range.clone().flat_map(|v| lists.view(v)) {
-                    let bytes: &[u8] = bytemuck::cast_slice(part);
-                    view.slice(at..at + bytes.len()).copy_from_slice(bytes);
-                    at += bytes.len();
-                }
-            },
-        )?;
-        let uniform_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("splat views"),
-            contents: &uniforms,
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
-        let bytes = offset as u64 * 8;
-        let target = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("splat buffers"),
-            size: bytes,
-            usage: wgpu::BufferUsages::STORAGE
-                | wgpu::BufferUsages::COPY_SRC
-                | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let readback = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("splat readback"),
-            size: bytes,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let binds: Vec<wgpu::BindGroup> = geometry
-            .iter()
-            .map(|g| {
-                device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("splat.wgsl bindings"),
-                    layout: &ctx.splat_pipeline().layout,
-                    entries: &[
-                        uniform_window(0, &uniform_buf, VIEW_SIZE),
-                        wgpu::BindGroupEntry {
-                            binding: 1,
-                            resource: wgpu::BindingResource::TextureView(g),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 2,
-                            resource: wgpu::BindingResource::TextureView(&list_view),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 3,
-                            resource: target.as_entire_binding(),
-                        },
-                    ],
-                })
-            })
-            .collect();
-        let mut encoder = device.create_command_encoder(&Default::default());
-        // Zero is "empty": the shader stores complemented keys with atomicMax.
-        encoder.clear_buffer(&target, 0, None);
-        {
-            let mut pass = encoder.begin_compute_pass(&Default::default());
-            pass.set_pipeline(&ctx.splat_pipeline().pipeline);
-            for (d, (k, u)) in dispatches.iter().enumerate() {
-                pass.set_bind_group(0, &binds[*k], &[(d as u64 * stride) as u32]);
-                pass.dispatch_workgroups(u.range[0].div_ceil(GROUP), 1, 1);
-            }
-        }
-        encoder.copy_buffer_to_buffer(&target, 0, &readback, 0, bytes);
-        let submission = ctx.queue.submit([encoder.finish()]);
-        readback.slice(..).map_async(wgpu::MapMode::Read, |_| {});
+        let next = submit_views(ctx, &inputs, range, at_pixel)?;
         stats.splat_seconds += start.elapsed().as_secs_f64();
-        let next = Pending {
-            at: at_pixel,
-            pixels: offset as usize,
-            readback,
-            submission,
-        };
-        at_pixel += offset as usize;
+        at_pixel += next.pixels;
         if let Some(done) = pending.replace(next) {
             finish(ctx, done, &mut out, &mut stats)?;
         }
@@ -404,6 +313,131 @@ pub fn splat(
         finish(ctx, done, &mut out, &mut stats)?;
     }
     Ok((out, stats))
+}
+
+/// What every chunk of views reads: the cameras, their uniforms, the point textures and the
+/// per-view point lists.
+struct SplatInputs<'a> {
+    cameras: &'a [Camera],
+    view_data: &'a [ViewUniform],
+    point_chunks: &'a [std::ops::Range<usize>],
+    geometry: &'a [wgpu::TextureView],
+    lists: &'a PairLists,
+}
+
+/// Encodes and submits one chunk of views (§4.1's splat pass over the points each view lists),
+/// and starts the readback of its key buffers; `at` is the chunk's first pixel in the output.
+fn submit_views(
+    ctx: &GpuContext,
+    inputs: &SplatInputs,
+    range: std::ops::Range<usize>,
+    at: usize,
+) -> Result<Pending> {
+    use wgpu::util::DeviceExt;
+    let device = &ctx.device;
+    let SplatInputs {
+        cameras,
+        view_data,
+        point_chunks,
+        geometry,
+        lists,
+    } = inputs;
+    let stride = align(
+        VIEW_SIZE,
+        ctx.limits.min_uniform_buffer_offset_alignment as u64,
+    );
+    let per_dispatch = (MAX_GROUPS * GROUP) as usize;
+    let (dispatches, offset, first) = dispatches(
+        range.clone(),
+        cameras,
+        view_data,
+        point_chunks,
+        lists,
+        per_dispatch,
+    );
+    let mut uniforms = vec![0u8; stride as usize * dispatches.len().max(1)];
+    for (d, (_, u)) in dispatches.iter().enumerate() {
+        let at = d * stride as usize;
+        uniforms[at..at + VIEW_SIZE as usize].copy_from_slice(bytemuck::bytes_of(u));
+    }
+    let list_view = row_texture(
+        ctx,
+        "splat lists",
+        wgpu::TextureFormat::R32Uint,
+        first,
+        |mut view| {
+            let mut at = 0;
+            for part in range.clone().flat_map(|v| lists.view(v)) {
+                let bytes: &[u8] = bytemuck::cast_slice(part);
+                view.slice(at..at + bytes.len()).copy_from_slice(bytes);
+                at += bytes.len();
+            }
+        },
+    )?;
+    let uniform_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("splat views"),
+        contents: &uniforms,
+        usage: wgpu::BufferUsages::UNIFORM,
+    });
+    let bytes = offset as u64 * 8;
+    let target = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("splat buffers"),
+        size: bytes,
+        usage: wgpu::BufferUsages::STORAGE
+            | wgpu::BufferUsages::COPY_SRC
+            | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let readback = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("splat readback"),
+        size: bytes,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let binds: Vec<wgpu::BindGroup> = geometry
+        .iter()
+        .map(|g| {
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("splat.wgsl bindings"),
+                layout: &ctx.splat_pipeline().layout,
+                entries: &[
+                    uniform_window(0, &uniform_buf, VIEW_SIZE),
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: wgpu::BindingResource::TextureView(g),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 2,
+                        resource: wgpu::BindingResource::TextureView(&list_view),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 3,
+                        resource: target.as_entire_binding(),
+                    },
+                ],
+            })
+        })
+        .collect();
+    let mut encoder = device.create_command_encoder(&Default::default());
+    // Zero is "empty": the shader stores complemented keys with atomicMax.
+    encoder.clear_buffer(&target, 0, None);
+    {
+        let mut pass = encoder.begin_compute_pass(&Default::default());
+        pass.set_pipeline(&ctx.splat_pipeline().pipeline);
+        for (d, (k, u)) in dispatches.iter().enumerate() {
+            pass.set_bind_group(0, &binds[*k], &[(d as u64 * stride) as u32]);
+            pass.dispatch_workgroups(u.range[0].div_ceil(GROUP), 1, 1);
+        }
+    }
+    encoder.copy_buffer_to_buffer(&target, 0, &readback, 0, bytes);
+    let submission = ctx.queue.submit([encoder.finish()]);
+    readback.slice(..).map_async(wgpu::MapMode::Read, |_| {});
+    Ok(Pending {
+        at,
+        pixels: offset as usize,
+        readback,
+        submission,
+    })
 }
 
 /// A 2D texture of `format` with `texels` texels, `TEXTURE_ROW` per row (at least one row),

@@ -82,92 +82,17 @@ pub fn reconstruct(
     screen_threshold: f64,
 ) -> Result<ImpostorView> {
     let total = Instant::now();
-    let c_count = imp.cells.len();
-    if imp.offsets.len() != c_count + 1 {
-        return input_err!("the impostors' cell table is inconsistent");
-    }
-    if triangle_budget != Some(0) && sorted.is_none() {
-        return input_err!("a triangle budget needs the scene (scene=...)");
-    }
-    if let Some(s) = sorted {
-        if s.triangle_count() != imp.triangles.len() || s.vertices().len() != imp.normals.len() {
-            return input_err!("the scene is not the one the impostors were made from");
-        }
-    }
-    if !(screen_threshold.is_finite() && screen_threshold >= 0.0) {
-        return input_err!("screen_threshold must be finite and >= 0, got {screen_threshold}");
-    }
+    check_inputs(imp, sorted, triangle_budget, screen_threshold)?;
     let (w, h) = (camera.width as usize, camera.height as usize);
-    let eye = camera.eye();
 
-    // 1. Frustum culling: a cell is kept when the sphere around its box, or around its own
-    // triangles, reaches into the view.
     let start = Instant::now();
-    let planes = camera.frustum_planes(1.0, 0.0, DVec3::ZERO);
-    let tri_spheres: Vec<(DVec3, f64)> = (0..c_count)
-        .map(|c| {
-            let (a, b) = (imp.offsets[c] as usize, imp.offsets[c + 1] as usize);
-            let Some(s) = sorted else {
-                return (imp.cells[c].center(), 0.0);
-            };
-            let mut lo = DVec3::splat(f64::INFINITY);
-            let mut hi = DVec3::splat(f64::NEG_INFINITY);
-            for i in a..b {
-                for p in s.triangle(i) {
-                    lo = lo.min(p);
-                    hi = hi.max(p);
-                }
-            }
-            if a == b {
-                (imp.cells[c].center(), 0.0)
-            } else {
-                ((lo + hi) / 2.0, (hi - lo).length() / 2.0)
-            }
-        })
-        .collect();
-    let outside = |c: DVec3, r: f64| planes.iter().any(|&(n, d)| n.dot(c) + d < -r);
-    let mut used = vec![CULLED; c_count];
-    let mut order: Vec<usize> = (0..c_count)
-        .filter(|&c| {
-            let cell = &imp.cells[c];
-            let (tc, tr) = tri_spheres[c];
-            !(outside(cell.center(), cell.radius()) && outside(tc, tr))
-        })
-        .collect();
-    // 2. Nearest first.
-    order.sort_by(|&a, &b| {
-        let da = (imp.cells[a].center() - eye).length_squared();
-        let db = (imp.cells[b].center() - eye).length_squared();
-        da.total_cmp(&db).then(a.cmp(&b))
-    });
+    let order = cells_in_view(imp, sorted, camera);
     let cull_seconds = start.elapsed().as_secs_f64();
-
-    // 3. Triangles for the nearest cells while the budget lasts (and, with a threshold, while
-    // they look big enough); the rest as impostors.
-    let mut left = triangle_budget.unwrap_or(u64::MAX);
-    let mut budget_open = triangle_budget != Some(0);
-    let mut ranges: Vec<(u32, u32)> = Vec::new();
-    let mut drawn = 0u64;
-    for &c in &order {
-        let n = (imp.offsets[c + 1] - imp.offsets[c]) as u64;
-        let big = screen_threshold == 0.0
-            || projected_size(camera, imp.cells[c].center(), imp.cells[c].radius())
-                >= screen_threshold;
-        if budget_open && big && n <= left {
-            left -= n;
-            drawn += n;
-            used[c] = TRIANGLES;
-            push_range(&mut ranges, imp.offsets[c], imp.offsets[c + 1]);
-        } else {
-            // A cell too small on screen is an impostor whatever the budget; the first one
-            // that does not fit ends the triangles (the budget is met).
-            if big && n > left {
-                budget_open = false;
-            }
-            used[c] = best_direction(imp, c, camera) as i32;
-        }
-    }
-    ranges.sort_unstable();
+    let Choice {
+        used,
+        ranges,
+        drawn,
+    } = choose(imp, camera, &order, triangle_budget, screen_threshold);
 
     let start = Instant::now();
     let (mut color, mut depth) = match (sorted, ranges.is_empty()) {
@@ -214,6 +139,123 @@ pub fn reconstruct(
             ("total", total.elapsed().as_secs_f64()),
         ]),
     })
+}
+
+/// Refuses a cell table that does not add up, a budget without the scene, a scene other than
+/// the impostors' own, and a negative or non-finite threshold.
+fn check_inputs(
+    imp: &Impostors,
+    sorted: Option<&Scene>,
+    triangle_budget: Option<u64>,
+    screen_threshold: f64,
+) -> Result<()> {
+    if imp.offsets.len() != imp.cells.len() + 1 {
+        return input_err!("the impostors' cell table is inconsistent");
+    }
+    if triangle_budget != Some(0) && sorted.is_none() {
+        return input_err!("a triangle budget needs the scene (scene=...)");
+    }
+    if let Some(s) = sorted {
+        if s.triangle_count() != imp.triangles.len() || s.vertices().len() != imp.normals.len() {
+            return input_err!("the scene is not the one the impostors were made from");
+        }
+    }
+    if !(screen_threshold.is_finite() && screen_threshold >= 0.0) {
+        return input_err!("screen_threshold must be finite and >= 0, got {screen_threshold}");
+    }
+    Ok(())
+}
+
+/// Steps 1 and 2: the cells that reach into the view (the sphere around a cell's box, or
+/// around its own triangles, is not wholly outside a frustum plane), nearest first.
+fn cells_in_view(imp: &Impostors, sorted: Option<&Scene>, camera: &Camera) -> Vec<usize> {
+    let c_count = imp.cells.len();
+    let eye = camera.eye();
+    let planes = camera.frustum_planes(1.0, 0.0, DVec3::ZERO);
+    let tri_spheres: Vec<(DVec3, f64)> = (0..c_count)
+        .map(|c| {
+            let (a, b) = (imp.offsets[c] as usize, imp.offsets[c + 1] as usize);
+            let Some(s) = sorted else {
+                return (imp.cells[c].center(), 0.0);
+            };
+            let mut lo = DVec3::splat(f64::INFINITY);
+            let mut hi = DVec3::splat(f64::NEG_INFINITY);
+            for i in a..b {
+                for p in s.triangle(i) {
+                    lo = lo.min(p);
+                    hi = hi.max(p);
+                }
+            }
+            if a == b {
+                (imp.cells[c].center(), 0.0)
+            } else {
+                ((lo + hi) / 2.0, (hi - lo).length() / 2.0)
+            }
+        })
+        .collect();
+    let outside = |c: DVec3, r: f64| planes.iter().any(|&(n, d)| n.dot(c) + d < -r);
+    let mut order: Vec<usize> = (0..c_count)
+        .filter(|&c| {
+            let cell = &imp.cells[c];
+            let (tc, tr) = tri_spheres[c];
+            !(outside(cell.center(), cell.radius()) && outside(tc, tr))
+        })
+        .collect();
+    order.sort_by(|&a, &b| {
+        let da = (imp.cells[a].center() - eye).length_squared();
+        let db = (imp.cells[b].center() - eye).length_squared();
+        da.total_cmp(&db).then(a.cmp(&b))
+    });
+    order
+}
+
+/// What step 3 decided per cell: `used` is `CULLED`, `TRIANGLES` or the impostor direction;
+/// `ranges` the sorted triangle ranges to draw; `drawn` their triangle count.
+struct Choice {
+    used: Vec<i32>,
+    ranges: Vec<(u32, u32)>,
+    drawn: u64,
+}
+
+/// Step 3: triangles for the nearest cells while the budget lasts (and, with a threshold,
+/// while they look big enough); the rest as impostors.
+fn choose(
+    imp: &Impostors,
+    camera: &Camera,
+    order: &[usize],
+    triangle_budget: Option<u64>,
+    screen_threshold: f64,
+) -> Choice {
+    let mut used = vec![CULLED; imp.cells.len()];
+    let mut left = triangle_budget.unwrap_or(u64::MAX);
+    let mut budget_open = triangle_budget != Some(0);
+    let mut ranges: Vec<(u32, u32)> = Vec::new();
+    let mut drawn = 0u64;
+    for &c in order {
+        let n = (imp.offsets[c + 1] - imp.offsets[c]) as u64;
+        let big = screen_threshold == 0.0
+            || projected_size(camera, imp.cells[c].center(), imp.cells[c].radius())
+                >= screen_threshold;
+        if budget_open && big && n <= left {
+            left -= n;
+            drawn += n;
+            used[c] = TRIANGLES;
+            push_range(&mut ranges, imp.offsets[c], imp.offsets[c + 1]);
+        } else {
+            // A cell too small on screen is an impostor whatever the budget; the first one
+            // that does not fit ends the triangles (the budget is met).
+            if big && n > left {
+                budget_open = false;
+            }
+            used[c] = best_direction(imp, c, camera) as i32;
+        }
+    }
+    ranges.sort_unstable();
+    Choice {
+        used,
+        ranges,
+        drawn,
+    }
 }
 
 /// The on-screen diameter of a sphere in pixels (perspective: at its centre's depth).
