@@ -213,6 +213,18 @@ def evaluate(
         return cells_metric(images, scene, camera)
     if metric == "geometry":
         return _geometry_error(images, scene, cameras, tolerance)
+    return _sampling(images, scene, region, intermediate, redundancy, seed)
+
+
+def _sampling(
+    images: Any,
+    scene: Any,
+    region: Optional[Sequence[Any]],
+    intermediate: int,
+    redundancy: str,
+    seed: int,
+) -> dict[str, Any]:
+    """``evaluate``'s ``"sampling"`` metric (non-redundant-rendering.txt §6.1.2)."""
     if not isinstance(images, DepthImages):
         raise InputError(f"images must be a DepthImages, got {type(images).__name__}")
     if not isinstance(scene, Scene):
