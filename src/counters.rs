@@ -99,6 +99,20 @@ pub fn tally<R>(f: impl FnOnce() -> R) -> (R, Ops) {
     (r, close())
 }
 
+/// Run `f` without counting what it does towards the calls around it (the backend cost model's
+/// probes are not the caller's work).
+pub fn uncounted<R>(f: impl FnOnce() -> R) -> R {
+    OPEN.with(|o| o.borrow_mut().push(Ops::default()));
+    struct Discard;
+    impl Drop for Discard {
+        fn drop(&mut self) {
+            OPEN.with(|o| o.borrow_mut().pop());
+        }
+    }
+    let _discard = Discard;
+    f()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -117,5 +131,7 @@ mod tests {
         let ((), here) = tally(|| add(Op::ShadowViews, 6));
         assert_eq!(other.join().unwrap().splat_passes, 2);
         assert_eq!((here.shadow_views, here.splat_passes), (6, 0));
+        let ((), around) = tally(|| uncounted(|| add(Op::RaysCast, 7)));
+        assert_eq!(around.rays_cast, 0);
     }
 }

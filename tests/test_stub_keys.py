@@ -106,7 +106,7 @@ def test_every_returned_dict_matches_its_stub(recorded, gpu, tmp_path):
     ss.cast_rays(scene, o, d)
     ss.occluded(scene, o, d)
     ss.bvh_stats(scene)
-    ss.device_info()
+    ss.device_info(triangles=1000, pixels=64 * 64)
     typed = {n for n, a in returns.items() if a.startswith("_") or a.startswith("tuple[")}
     missing = typed & {n for n in dir(core) if not n.startswith("_")} - set(seen)
     assert not missing, f"not exercised here: {sorted(missing)}"

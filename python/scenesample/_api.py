@@ -5,7 +5,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any, Literal, Union, overload
+from typing import Any, Literal, Optional, Union, overload
 
 from . import _core
 from ._depth import camera_list, offset_images
@@ -164,9 +164,35 @@ def reconstruct(
 _VIEWS = {"field_view": field_view, "impostor_view": impostor_view}
 
 
-def device_info() -> dict[str, Any]:
+def device_info(
+    *,
+    triangles: Optional[int] = None,
+    pixels: Optional[int] = None,
+    images: int = 1,
+    bvh_built: bool = False,
+    uploaded: bool = True,
+) -> dict[str, Any]:
     """The GPU adapter scenesample uses: ``name``, ``backend``, ``device_type``, ``driver``,
     ``timestamps`` (whether GPU timings are available) and the limits that bound requests.
 
-    Raises :class:`GpuUnavailableError` when there is none."""
-    return _core.device_info()
+    With ``triangles`` and ``pixels`` (per image), also ``auto``: what conventional
+    ``discretize(..., backend="auto")`` would choose for ``images`` images of a scene of that
+    size, given whether its BVH is built (``bvh_built``) and its GPU copy made (``uploaded``):
+    ``backend`` ("gpu" or "cpu"), ``reason``, the predicted ``gpu_seconds`` and
+    ``cpu_seconds``, and ``calibration_seconds`` (the cost model's probes, once per process).
+
+    Raises :class:`GpuUnavailableError` when there is no adapter (``auto`` then always picks
+    the CPU)."""
+    info = _core.device_info()
+    if (triangles is None) != (pixels is None):
+        raise InputError("device_info needs both triangles= and pixels= (or neither)")
+    if triangles is not None and pixels is not None:
+        if triangles < 0 or pixels < 1 or images < 1:
+            raise InputError(
+                f"triangles must be >= 0 and pixels, images >= 1; got {triangles}, {pixels}, "
+                f"{images}"
+            )
+        info["auto"] = _core.choose_backend(
+            int(triangles), int(pixels), int(images), bool(bvh_built), bool(uploaded)
+        )
+    return info

@@ -224,6 +224,18 @@ class _ImagesDict(TypedDict):
     method: str
     timings: dict[str, float]
 
+class _ConventionalDict(TypedDict):
+    depth: np.ndarray
+    triangle: np.ndarray
+    normal: np.ndarray
+    position: np.ndarray
+    color: np.ndarray
+    cameras: list[Camera]
+    method: str
+    timings: dict[str, float]
+    backend: Literal["gpu", "cpu"]
+    backend_reason: str
+
 class _SamplingDict(TypedDict):
     samples: np.ndarray
     redundant: np.ndarray
@@ -366,8 +378,11 @@ class _DeviceInfo(TypedDict):
     max_storage_buffer_binding_size: int
 
 def discretize_conventional(
-    scene: Scene, cameras: list[Camera], cull_backfaces: bool = False
-) -> _ImagesDict: ...
+    scene: Scene,
+    cameras: list[Camera],
+    cull_backfaces: bool = False,
+    backend: Literal["auto", "gpu", "cpu"] = "auto",
+) -> _ConventionalDict: ...
 def discretize_nonredundant(
     scene: Scene,
     cameras: list[Camera],
@@ -542,6 +557,22 @@ def occluded(
 ) -> _OcclusionDict: ...
 def bvh_stats(scene: Scene) -> _BvhStatsDict: ...
 def device_info() -> _DeviceInfo: ...
+
+class _BackendChoiceDict(TypedDict):
+    backend: Literal["gpu", "cpu"]
+    reason: str
+    gpu_seconds: Optional[float]
+    cpu_seconds: float
+    calibration_seconds: float
+    coefficients: dict[str, float]
+
+def choose_backend(
+    triangles: int,
+    pixels: int,
+    images: int = 1,
+    bvh_built: bool = False,
+    uploaded: bool = True,
+) -> _BackendChoiceDict: ...
 def write_exr(
     path: _Path,
     width: int,

@@ -35,11 +35,15 @@ def _images(d: Any, scene: Scene, cams: list[Camera], cull: bool, method: str, r
 
 
 def conventional(
-    scene: Scene, cameras: Union[Camera, Sequence[Camera]], *, cull_backfaces: bool = False
+    scene: Scene,
+    cameras: Union[Camera, Sequence[Camera]],
+    *,
+    cull_backfaces: bool = False,
+    backend: Literal["auto", "gpu", "cpu"] = "auto",
 ) -> DepthImages:
     """One depth image per camera, each sampling every surface it sees
-    (non-redundant-rendering.txt §6.1, the baseline): one GPU raster pass per image, the nearest
-    surface at each pixel centre, no multisampling.
+    (non-redundant-rendering.txt §6.1, the baseline): the nearest surface at each pixel centre,
+    no multisampling, either rasterized on the GPU or ray-cast on the CPU.
 
     Parameters
     ----------
@@ -48,10 +52,21 @@ def conventional(
         Poses and projections may differ; resolutions must match.
     cull_backfaces : bool
         Drop triangles whose counter-clockwise front faces away (off by default).
+    backend : {"auto", "gpu", "cpu"}
+        ``"gpu"``: one raster pass per image (Vulkan; Mesa's software driver without a GPU).
+        ``"cpu"``: the pixel-centre rays cast through the scene's BVH on all cores (built
+        once per scene, then cached), from the near plane on; the same fields, dtypes and
+        conventions, resolved by the same float64 code, so depths agree with the GPU's to
+        float32 rounding and triangle ids differ only at pixel centres on a shared edge.
+        ``"auto"`` (default): the backend a cost model of this machine predicts is faster,
+        given the triangles, pixels, images, whether a GPU adapter exists and whether the BVH
+        and the GPU copy of the scene exist already; the model is measured on first use in a
+        process (about half a second of probes). See :func:`scenesample.device_info`.
 
     Returns
     -------
     DepthImages
+        ``backend`` and ``backend_reason`` say which backend ran and why.
         ``depth`` (n, H, W) float32 camera-space z (+inf empty), ``triangle`` (n, H, W) int32
         (-1 empty), ``normal``/``position``/``color`` (n, H, W, 3) float32, ``cameras``,
         ``method``, ``reference`` (= ``cameras``), ``timings``; n is ``len(cameras)``.
@@ -65,14 +80,15 @@ def conventional(
     Raises
     ------
     GpuUnavailableError
-        No GPU adapter (install ``mesa-vulkan-drivers`` for a software one).
+        ``backend="gpu"`` without a GPU adapter (install ``mesa-vulkan-drivers`` for a
+        software one); ``"auto"`` falls back to the CPU instead.
     GpuLimitError
         The images exceed the device's texture or buffer limits.
     InputError
-        No camera, cameras of different resolutions.
+        No camera, cameras of different resolutions, an unknown backend.
     """
     cams, cull = camera_list(cameras), bool(cull_backfaces)
-    d = _core.discretize_conventional(core_of(scene), cams, cull)
+    d = _core.discretize_conventional(core_of(scene), cams, cull, backend)
     return _images(d, scene, cams, cull, "conventional", "pixel")
 
 

@@ -5,6 +5,7 @@
     python -m scenesample.bench nonredundant  # non-redundant rendering and peeling vs conventional
     python -m scenesample.bench epr           # EPR reflections vs MVR and iVIR
     python -m scenesample.bench field         # visibility-field culling vs drawing everything
+    python -m scenesample.bench backends      # conventional images: GPU vs CPU vs auto
     python -m scenesample.bench all           # every one of them, and a markdown summary table
     python -m scenesample.bench all --quick   # smaller problems, for a smoke test
 
@@ -28,7 +29,7 @@ import numpy as np
 
 import scenesample as ss
 
-from . import _bench_rays
+from . import _bench_backends, _bench_rays
 
 DEPTH_TARGET = 1.5
 
@@ -377,7 +378,7 @@ def main(argv: Optional[list[str]] = None) -> None:
         "which",
         nargs="?",
         default="all",
-        choices=["all", "rays", "peers", "nonredundant", "epr", "field"],
+        choices=["all", "rays", "peers", "nonredundant", "epr", "field", "backends"],
         help="benchmark set",
     )
     p.add_argument(
@@ -397,6 +398,10 @@ def main(argv: Optional[list[str]] = None) -> None:
         only = a.scenes.split(",") if a.scenes else None
         r = _bench_rays.run(a.quick, a.rounds, only)
         _emit(_bench_rays.report(r), a.out or "docs/bench/rays.md", r, a.json)
+        return
+    if a.which == "backends":
+        r = _bench_backends.run(a.quick, min(a.repeats, 3))
+        _emit(_bench_backends.report(r), a.out or "docs/bench/backends.md", r, a.json)
         return
     info = ss.device_info()
     device = f"{info['name']} ({info['backend']})"

@@ -208,6 +208,11 @@ def check_options(
             continue
         takes = [m for m, f in family.items() if name in _names(f)]
         where = f"; it would apply to method={', '.join(map(repr, takes))}" if takes else ""
+        if name == "backend" and takes:
+            where = (
+                f": {method!r} runs on the GPU only; the methods with a CPU backend: "
+                f"{', '.join(map(repr, takes))}"
+            )
         accepted = ", ".join(f"{n}=" for n in names) or "none"
         raise InputError(
             f"{name}= does not apply to method={method!r} (its options: {accepted}){where}"

@@ -42,15 +42,20 @@ class DepthImages:
         :meth:`load_exr` for peeling layers (set it before evaluating).
     cull_backfaces : bool
         Whether back faces were culled (``evaluate`` renders its references the same way).
+    backend : str
+        ``"gpu"`` (raster) or ``"cpu"`` (ray cast); conventional images can come from either.
+    backend_reason : str
+        Why that backend ran: ``"requested"``, or the ``"auto"`` cost model's predictions.
     timings : dict of str to float
-        Seconds per stage: ``device`` (creating the GPU device, first call only), ``upload``
-        (scene to GPU, 0 when cached), ``prepare`` (per-triangle resolve data, 0 when cached on
-        the scene), ``raster`` (CPU time spent
-        submitting and waiting for the GPU), ``raster_gpu`` (GPU timestamps, when the adapter has
-        them), ``readback``, ``resolve`` (depth, position, normal and colour from each pixel's
-        triangle id, by intersecting the pixel-centre ray with that triangle in float64) and
-        ``total``. Images are processed in chunks and one chunk's resolve overlaps the next
-        chunk's raster, so the stages can add up to more than ``total``.
+        Seconds per stage. From the CPU backend: ``bvh`` (building the scene's BVH, 0 when
+        cached), ``trace``, ``resolve`` and ``total``. From the GPU: ``device`` (creating the
+        GPU device, first call only), ``upload`` (scene to GPU, 0 when cached), ``prepare``
+        (per-triangle resolve data, 0 when cached on the scene), ``raster`` (CPU time spent
+        submitting and waiting for the GPU), ``raster_gpu`` (GPU timestamps, when the adapter
+        has them), ``readback``, ``resolve`` (depth, position, normal and colour from each
+        pixel's triangle id, by intersecting the pixel-centre ray with that triangle in
+        float64) and ``total``. Images are processed in chunks and one chunk's resolve overlaps
+        the next chunk's raster, so the stages can add up to more than ``total``.
     """
 
     depth: np.ndarray
@@ -63,6 +68,8 @@ class DepthImages:
     method: str = "conventional"
     reference: list[Any] = field(default_factory=list)
     cull_backfaces: bool = False
+    backend: str = "gpu"
+    backend_reason: str = ""
 
     @classmethod
     def _from_core(cls, d: dict[str, Any], reference: list[Any], cull: bool) -> DepthImages:

@@ -105,6 +105,92 @@ pub fn discretize_ranges(
     })
 }
 
+/// Conventional images without the GPU (the `"cpu"` backend): each camera's pixel-centre rays
+/// cast through the scene's BVH on all cores, from its near plane on, and each pixel's nearest
+/// triangle resolved by the same f64 code as the raster path ([`resolve_ids`]). The images
+/// equal the raster path's in every field and convention; triangle ids differ only where a
+/// pixel centre lies on an edge two triangles share. With `cull_backfaces`, a ray that meets a
+/// back face first resumes just beyond it (past the scene's same-point tolerance).
+pub fn discretize_traced(
+    scene: &Scene,
+    cameras: &[Camera],
+    cull_backfaces: bool,
+) -> Result<DepthImages> {
+    let total = Instant::now();
+    check_cameras(cameras)?;
+    let first = &cameras[0];
+    let npx = first.width as usize * first.height as usize;
+    let mut ids = Vec::new();
+    ids.try_reserve_exact(npx * cameras.len()).map_err(|_| {
+        Error::Input(format!(
+            "{} images of {}x{} do not fit in host memory",
+            cameras.len(),
+            first.width,
+            first.height
+        ))
+    })?;
+    let (mut bvh_seconds, mut trace_seconds) = (0.0, 0.0);
+    for cam in cameras {
+        crate::process::check()?;
+        let (image, built, traced) = traced_ids(scene, cam, cull_backfaces)?;
+        ids.extend_from_slice(&image);
+        bvh_seconds += built;
+        trace_seconds += traced;
+    }
+    let (mut img, resolve_seconds) = resolve_ids(scene, cameras, ids)?;
+    img.timings = Timings::from([
+        ("bvh", bvh_seconds),
+        ("trace", trace_seconds),
+        ("resolve", resolve_seconds),
+        ("total", total.elapsed().as_secs_f64()),
+    ]);
+    Ok(img)
+}
+
+/// The nearest triangle at each pixel centre of `cam` between its near and far planes (−1
+/// where none), and the seconds spent building the BVH (0 when it was built) and casting.
+fn traced_ids(scene: &Scene, cam: &Camera, cull_backfaces: bool) -> Result<(Vec<i32>, f64, f64)> {
+    let (near, far) = cam.clip_range(scene.bounds());
+    let rays = PixelRays::new(cam);
+    let w = cam.width as usize;
+    let npx = w * cam.height as usize;
+    let step = super::redundancy::tolerance(scene);
+    let mut out = vec![-1i32; npx];
+    let (mut built, mut traced) = (0.0, 0.0);
+    // (pixel, depth its ray starts from): the ray's direction has camera z −1, so t is depth.
+    let mut active: Vec<(usize, f64)> = (0..npx).map(|p| (p, near)).collect();
+    while !active.is_empty() {
+        let (origins, dirs): (Vec<[f32; 3]>, Vec<[f32; 3]>) = active
+            .par_iter()
+            .map(|&(p, from)| {
+                let (o, d) = rays.ray(p % w, p / w);
+                ((o + d * from).as_vec3().to_array(), d.as_vec3().to_array())
+            })
+            .unzip();
+        let hits = crate::trace::cast_rays(scene, &origins, &dirs, 0.0, f32::INFINITY)?;
+        built += hits.bvh_build_seconds;
+        traced += hits.trace_seconds;
+        let mut next = Vec::new();
+        for (k, &(p, from)) in active.iter().enumerate() {
+            let Ok(tri) = usize::try_from(hits.triangle[k]) else {
+                continue;
+            };
+            let depth = from + hits.t[k] as f64;
+            if depth > far {
+                continue;
+            }
+            let [a, b, c] = scene.triangle(tri);
+            if cull_backfaces && (b - a).cross(c - a).dot(rays.ray(p % w, p / w).1) >= 0.0 {
+                next.push((p, depth + step + 1e-5 * depth.abs()));
+                continue;
+            }
+            out[p] = tri as i32;
+        }
+        active = next;
+    }
+    Ok((out, built, traced))
+}
+
 /// The body every GPU discretization shares: `raster` renders the cameras' triangle ids and
 /// hands each chunk of images to its callback as it arrives; each chunk is resolved here while
 /// the GPU renders the next. `total` started when the call did.

@@ -5,6 +5,7 @@
 //! (`epr`, eye-based-point-rendering.txt §3) and the `visibility_field` of grid cells first hit
 //! along the lines of a two-plane slab (visibility-field.txt §3).
 
+pub mod backend;
 pub mod conventional;
 pub mod epr;
 pub mod impostors;
@@ -12,6 +13,8 @@ pub mod nonredundant;
 pub mod redundancy;
 pub mod visibility_field;
 
-pub use conventional::{discretize_conventional, discretize_ranges, discretize_sided, push_range};
+pub use conventional::{
+    discretize_conventional, discretize_ranges, discretize_sided, discretize_traced, push_range,
+};
 pub use nonredundant::{centroid_camera, discretize_nonredundant, discretize_peeling};
 pub use redundancy::Redundancy;

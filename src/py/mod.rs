@@ -154,6 +154,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(impostors::render_lit, m)?)?;
     m.add_function(wrap_pyfunction!(impostors::impostor_directions, m)?)?;
     m.add_function(wrap_pyfunction!(render::device_info, m)?)?;
+    m.add_function(wrap_pyfunction!(render::choose_backend, m)?)?;
     m.add_function(wrap_pyfunction!(render::write_exr, m)?)?;
     m.add_function(wrap_pyfunction!(render::read_exr, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

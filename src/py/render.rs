@@ -10,6 +10,7 @@ use super::camera::PyCamera;
 use super::convert::{array, flat_i32, rows_f32, rows_owned};
 use super::errors::input;
 use super::scene::PyScene;
+use crate::discretize::backend::{BackendChoice, CostModel, Workload};
 use crate::types::DepthImages;
 
 pub(super) fn images_dict<'py>(py: Python<'py>, img: DepthImages) -> PyResult<Bound<'py, PyDict>> {
@@ -28,19 +29,72 @@ pub(super) fn images_dict<'py>(py: Python<'py>, img: DepthImages) -> PyResult<Bo
 }
 
 #[pyfunction]
-#[pyo3(signature = (scene, cameras, cull_backfaces=false))]
+#[pyo3(signature = (scene, cameras, cull_backfaces=false, backend="auto"))]
 pub fn discretize_conventional<'py>(
     py: Python<'py>,
     scene: &PyScene,
     cameras: Vec<PyCamera>,
     cull_backfaces: bool,
+    backend: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
+    let choice: BackendChoice = backend
+        .parse()
+        .map_err(|e| super::errors::to_pyerr(py, e))?;
     let cams: Vec<_> = cameras.into_iter().map(|c| c.inner).collect();
     let s = scene.inner.clone();
-    let img = super::run(py, || {
-        crate::discretize::discretize_conventional(&s, &cams, cull_backfaces)
+    let (img, decision) = super::run(py, || {
+        crate::discretize::backend::discretize_with(&s, &cams, cull_backfaces, choice)
     })?;
-    images_dict(py, img)
+    let d = images_dict(py, img)?;
+    d.set_item("backend", decision.backend.name())?;
+    d.set_item("backend_reason", decision.reason)?;
+    Ok(d)
+}
+
+/// What `backend="auto"` would choose for a request of this size (see
+/// `discretize::backend`); calibrates the cost model on first use.
+#[pyfunction]
+#[pyo3(signature = (triangles, pixels, images=1, bvh_built=false, uploaded=true))]
+pub fn choose_backend<'py>(
+    py: Python<'py>,
+    triangles: u64,
+    pixels: u64,
+    images: u64,
+    bvh_built: bool,
+    uploaded: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let w = Workload {
+        triangles,
+        pixels,
+        images,
+        bvh_built,
+        uploaded,
+    };
+    let (decision, model) = super::run(py, || {
+        let model = CostModel::get()?;
+        Ok((model.decide(&w), model))
+    })?;
+    let d = PyDict::new(py);
+    d.set_item("backend", decision.backend.name())?;
+    d.set_item("reason", decision.reason)?;
+    d.set_item("gpu_seconds", decision.gpu_seconds)?;
+    d.set_item("cpu_seconds", decision.cpu_seconds)?;
+    d.set_item("calibration_seconds", model.calibration_seconds)?;
+    let coefficients = PyDict::new(py);
+    let c = &model.cpu;
+    coefficients.set_item("cpu_per_call", c.per_call)?;
+    coefficients.set_item("cpu_per_call_triangle", c.per_call_triangle)?;
+    coefficients.set_item("cpu_per_ray", c.per_ray)?;
+    coefficients.set_item("cpu_per_ray_log2", c.per_ray_log2)?;
+    coefficients.set_item("cpu_build_per_triangle", c.build_per_triangle)?;
+    if let Ok(g) = &model.gpu {
+        coefficients.set_item("gpu_per_call", g.per_call)?;
+        coefficients.set_item("gpu_per_triangle", g.per_triangle)?;
+        coefficients.set_item("gpu_per_pixel", g.per_pixel)?;
+        coefficients.set_item("gpu_upload_per_triangle", g.upload_per_triangle)?;
+    }
+    d.set_item("coefficients", coefficients)?;
+    Ok(d)
 }
 
 #[pyfunction]

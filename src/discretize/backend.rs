@@ -1,0 +1,353 @@
+//! Which backend makes conventional depth images: the GPU raster path or the CPU ray-cast path
+//! ([`super::discretize_traced`]). Neither wins everywhere: a software rasterizer (lavapipe)
+//! pays per triangle per image, the ray caster per pixel and a logarithm of the triangles, plus
+//! a one-time BVH build. `"auto"` predicts both from a cost model measured on this machine.
+//!
+//! The model (seconds, for `n` images of `p` pixels of a scene of `t` triangles):
+//!
+//! - GPU: `g0 + n·(gt·t + gp·p)`, plus `gu·t` when the scene is not on the device yet;
+//! - CPU: `c0 + ct·t + n·p·(ca + cb·log2 t)`, plus `cu·t` when the scene has no BVH yet.
+//!
+//! Its coefficients come from probes on first use in a process (about a second: two
+//! procedural height fields of ~5K and ~130K triangles, rendered and traced at 256² and 512²,
+//! the best of two warm runs each): per scene, the line through its two sizes gives the cost
+//! per pixel and per call; the two scenes give how those grow with the triangles.
+
+use std::sync::{Arc, OnceLock};
+use std::time::Instant;
+
+use glam::DVec3;
+
+use super::conventional::{discretize_conventional, discretize_traced};
+use crate::camera::Camera;
+use crate::error::{Error, Result};
+use crate::gpu;
+use crate::input_err;
+use crate::scene::Scene;
+use crate::trace::Bvh;
+use crate::types::DepthImages;
+
+/// Where conventional images are made.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Backend {
+    Gpu,
+    Cpu,
+}
+
+impl Backend {
+    pub fn name(self) -> &'static str {
+        match self {
+            Backend::Gpu => "gpu",
+            Backend::Cpu => "cpu",
+        }
+    }
+}
+
+/// A request: one backend, or the one the cost model predicts is faster.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BackendChoice {
+    Auto,
+    Fixed(Backend),
+}
+
+impl std::str::FromStr for BackendChoice {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "auto" => Ok(Self::Auto),
+            "gpu" => Ok(Self::Fixed(Backend::Gpu)),
+            "cpu" => Ok(Self::Fixed(Backend::Cpu)),
+            _ => input_err!("backend must be one of 'auto', 'gpu', 'cpu', got {s:?}"),
+        }
+    }
+}
+
+/// The backend `auto` picked, why, and both predictions (seconds; `gpu` is `None` without an
+/// adapter).
+#[derive(Debug, Clone)]
+pub struct Decision {
+    pub backend: Backend,
+    pub reason: String,
+    pub gpu_seconds: Option<f64>,
+    pub cpu_seconds: f64,
+}
+
+/// The size of a request and what is already prepared for it.
+#[derive(Debug, Clone, Copy)]
+pub struct Workload {
+    pub triangles: u64,
+    pub pixels: u64,
+    pub images: u64,
+    pub bvh_built: bool,
+    pub uploaded: bool,
+}
+
+impl Workload {
+    pub fn of(scene: &Scene, cameras: &[Camera]) -> Self {
+        let uploaded = gpu::context()
+            .map(|ctx| gpu::SceneBuffers::cached(&ctx, scene))
+            .unwrap_or(false);
+        Self {
+            triangles: scene.triangle_count() as u64,
+            pixels: cameras
+                .first()
+                .map_or(0, |c| c.width as u64 * c.height as u64),
+            images: cameras.len() as u64,
+            bvh_built: scene.derived_if_built::<Bvh>().is_some(),
+            uploaded,
+        }
+    }
+}
+
+/// The fitted coefficients (see the module's formulas).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct GpuCosts {
+    pub per_call: f64,
+    pub per_triangle: f64,
+    pub per_pixel: f64,
+    pub upload_per_triangle: f64,
+}
+
+#[derive(Debug, Clone, Copy, Default)]
+pub struct CpuCosts {
+    pub per_call: f64,
+    pub per_call_triangle: f64,
+    pub per_ray: f64,
+    pub per_ray_log2: f64,
+    pub build_per_triangle: f64,
+}
+
+#[derive(Debug, Clone)]
+pub struct CostModel {
+    /// `Err(why)` when there is no adapter.
+    pub gpu: std::result::Result<GpuCosts, String>,
+    pub cpu: CpuCosts,
+    /// Seconds the probes took.
+    pub calibration_seconds: f64,
+}
+
+impl CostModel {
+    /// This process's model, measured on first use.
+    pub fn get() -> Result<Arc<CostModel>> {
+        static MODEL: OnceLock<std::result::Result<Arc<CostModel>, String>> = OnceLock::new();
+        MODEL
+            .get_or_init(|| {
+                crate::counters::uncounted(calibrate)
+                    .map(Arc::new)
+                    .map_err(|e| e.to_string())
+            })
+            .clone()
+            .map_err(|e| Error::Gpu(format!("calibrating the backend cost model failed: {e}")))
+    }
+
+    pub fn predict_gpu(&self, w: &Workload) -> Option<f64> {
+        let g = self.gpu.as_ref().ok()?;
+        let (t, p, n) = (w.triangles as f64, w.pixels as f64, w.images as f64);
+        let upload = if w.uploaded {
+            0.0
+        } else {
+            g.upload_per_triangle * t
+        };
+        Some(g.per_call + n * (g.per_triangle * t + g.per_pixel * p) + upload)
+    }
+
+    pub fn predict_cpu(&self, w: &Workload) -> f64 {
+        let c = &self.cpu;
+        let (t, p, n) = (w.triangles.max(2) as f64, w.pixels as f64, w.images as f64);
+        let build = if w.bvh_built {
+            0.0
+        } else {
+            c.build_per_triangle * t
+        };
+        let per_ray = (c.per_ray + c.per_ray_log2 * t.log2()).max(0.0);
+        c.per_call + c.per_call_triangle * t + n * p * per_ray + build
+    }
+
+    /// The faster predicted backend for `w`, and why.
+    pub fn decide(&self, w: &Workload) -> Decision {
+        let cpu = self.predict_cpu(w);
+        let gpu = self.predict_gpu(w);
+        let (backend, reason) = match (&self.gpu, gpu) {
+            (Err(why), _) => (Backend::Cpu, format!("no GPU adapter ({why})")),
+            (Ok(_), _) if w.triangles >= crate::trace::MAX_TRIANGLES as u64 => (
+                Backend::Gpu,
+                format!(
+                    "{} triangles: the ray caster takes fewer than {}",
+                    w.triangles,
+                    crate::trace::MAX_TRIANGLES
+                ),
+            ),
+            (Ok(_), Some(g)) => {
+                let backend = if g <= cpu { Backend::Gpu } else { Backend::Cpu };
+                let bvh = if w.bvh_built { "built" } else { "not built" };
+                let up = if w.uploaded {
+                    "uploaded"
+                } else {
+                    "not uploaded"
+                };
+                (
+                    backend,
+                    format!(
+                        "predicted gpu {:.1} ms vs cpu {:.1} ms ({} triangles, {} x {} pixels; \
+                         BVH {bvh}, scene {up})",
+                        g * 1e3,
+                        cpu * 1e3,
+                        w.triangles,
+                        w.images,
+                        w.pixels
+                    ),
+                )
+            }
+            (Ok(_), None) => unreachable!("a GPU model always predicts"),
+        };
+        Decision {
+            backend,
+            reason,
+            gpu_seconds: gpu,
+            cpu_seconds: cpu,
+        }
+    }
+}
+
+/// Conventional images from the requested backend; the decision travels with the images.
+pub fn discretize_with(
+    scene: &Scene,
+    cameras: &[Camera],
+    cull_backfaces: bool,
+    choice: BackendChoice,
+) -> Result<(DepthImages, Decision)> {
+    let decision = match choice {
+        BackendChoice::Fixed(backend) => Decision {
+            backend,
+            reason: "requested".into(),
+            gpu_seconds: None,
+            cpu_seconds: f64::NAN,
+        },
+        BackendChoice::Auto => {
+            super::conventional::check_cameras(cameras)?;
+            CostModel::get()?.decide(&Workload::of(scene, cameras))
+        }
+    };
+    let images = match decision.backend {
+        Backend::Gpu => discretize_conventional(scene, cameras, cull_backfaces)?,
+        Backend::Cpu => discretize_traced(scene, cameras, cull_backfaces)?,
+    };
+    Ok((images, decision))
+}
+
+/// A height field of `2·k²` triangles over the unit square, bumpy enough that rays and
+/// triangles overlap as in a real scene.
+fn probe_scene(k: u32) -> Result<Scene> {
+    let mut vertices = Vec::with_capacity(((k + 1) * (k + 1)) as usize);
+    for j in 0..=k {
+        for i in 0..=k {
+            let (x, y) = (i as f32 / k as f32, j as f32 / k as f32);
+            let z = 0.05 * ((x * 23.0).sin() * (y * 17.0).cos()) + 0.02 * ((x + y) * 61.0).sin();
+            vertices.push([x - 0.5, y - 0.5, z]);
+        }
+    }
+    let mut faces = Vec::with_capacity((2 * k * k) as usize);
+    let at = |i: u32, j: u32| j * (k + 1) + i;
+    for j in 0..k {
+        for i in 0..k {
+            faces.push([at(i, j), at(i + 1, j), at(i + 1, j + 1)]);
+            faces.push([at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
+        }
+    }
+    Scene::from_arrays(vertices, faces, None, None)
+}
+
+fn probe_camera(side: u32) -> Result<Camera> {
+    Camera::look_at(
+        DVec3::new(0.3, -0.9, 0.8),
+        DVec3::ZERO,
+        DVec3::Z,
+        0.9,
+        side,
+        side,
+        None,
+        None,
+    )
+}
+
+/// The best of two timed runs of `f` (after the first has warmed caches).
+fn best_of_two(mut f: impl FnMut() -> Result<()>) -> Result<f64> {
+    let mut best = f64::INFINITY;
+    for _ in 0..2 {
+        let start = Instant::now();
+        f()?;
+        best = best.min(start.elapsed().as_secs_f64());
+    }
+    Ok(best)
+}
+
+/// Seconds of the best of two warm calls at each of the two probe sizes, on one scene: the
+/// per-pixel slope and the intercept of the line through them.
+fn line(p: [f64; 2], mut call: impl FnMut(usize) -> Result<()>) -> Result<(f64, f64)> {
+    call(0)?; // warm-up
+    let t0 = best_of_two(|| call(0))?;
+    let t1 = best_of_two(|| call(1))?;
+    let slope = (t1 - t0) / (p[1] - p[0]);
+    Ok((slope, t0 - slope * p[0]))
+}
+
+/// `(a, b)` of `y = a + b·x` through two points, `b` at least 0.
+fn through(x: [f64; 2], y: [f64; 2]) -> (f64, f64) {
+    let b = ((y[1] - y[0]) / (x[1] - x[0])).max(0.0);
+    (y[0] - b * x[0], b)
+}
+
+fn calibrate() -> Result<CostModel> {
+    let start = Instant::now();
+    let scenes = [probe_scene(48)?, probe_scene(256)?];
+    let cams = [probe_camera(256)?, probe_camera(512)?];
+    let t = scenes.each_ref().map(|s| s.triangle_count() as f64);
+    let p = [256.0 * 256.0, 512.0 * 512.0];
+    let one = |i: usize| std::slice::from_ref(&cams[i]);
+
+    // CPU: the large probe's BVH build (timed by the ray caster), then warm traces.
+    let built = discretize_traced(&scenes[1], one(0), false)?;
+    let build_per_triangle = built.timings.get("bvh").unwrap_or(0.0) / t[1];
+    let mut fits = Vec::with_capacity(2);
+    for scene in &scenes {
+        fits.push(line(p, |c| {
+            discretize_traced(scene, one(c), false).map(|_| ())
+        })?);
+    }
+    let [(s0, i0), (s1, i1)] = [fits[0], fits[1]];
+    let (per_ray, per_ray_log2) = through(t.map(f64::log2), [s0, s1]);
+    let (per_call, per_call_triangle) = through(t, [i0, i1]);
+    let cpu = CpuCosts {
+        per_call: per_call.max(0.0),
+        per_call_triangle,
+        per_ray,
+        per_ray_log2,
+        build_per_triangle,
+    };
+
+    let gpu = match gpu::context() {
+        Err(e) => Err(e.to_string()),
+        Ok(_) => {
+            let first = discretize_conventional(&scenes[1], one(0), false)?;
+            let upload_per_triangle = first.timings.get("upload").unwrap_or(0.0) / t[1];
+            let mut fits = Vec::with_capacity(2);
+            for scene in &scenes {
+                fits.push(line(p, |c| {
+                    discretize_conventional(scene, one(c), false).map(|_| ())
+                })?);
+            }
+            let (per_call, per_triangle) = through(t, [fits[0].1, fits[1].1]);
+            Ok(GpuCosts {
+                per_call: per_call.max(0.0),
+                per_triangle,
+                per_pixel: ((fits[0].0 + fits[1].0) / 2.0).max(0.0),
+                upload_per_triangle,
+            })
+        }
+    };
+    Ok(CostModel {
+        gpu,
+        cpu,
+        calibration_seconds: start.elapsed().as_secs_f64(),
+    })
+}
