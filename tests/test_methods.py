@@ -22,7 +22,7 @@ def test_every_method_has_keyword_only_options_and_a_docstring():
             if p.name not in ("scene", "cameras", "images", "field_", "imp", "camera"):
                 assert p.kind is p.KEYWORD_ONLY, (fn.__name__, p.name)
     assert ss.methods.peeling is DISCRETIZE["peeling"][0]
-    assert [p.name for p in options_of(ss.methods.conventional)] == ["cull_backfaces"]
+    assert [p.name for p in options_of(ss.methods.conventional)] == ["cull_backfaces", "backend"]
 
 
 @pytest.mark.parametrize(
