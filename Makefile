@@ -2,7 +2,7 @@
 PY ?= python3
 export PYOPENGL_PLATFORM ?= egl
 
-.PHONY: help setup demo test test-rust test-python bench lint fmt
+.PHONY: help setup demo test test-rust test-python test-wheel wheel bench lint fmt
 
 help: ## list the targets
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-12s %s\n", $$1, $$2}'
@@ -13,7 +13,7 @@ setup: ## install system packages (Mesa Vulkan, EGL) and build scenesample with 
 demo: setup ## the main job: discretize a scene, write EXR/PNG to out/, print a timing table
 	$(PY) -m scenesample.demo
 
-test: setup lint test-rust test-python ## every test: lints, cargo (Rust internals, shaders) and pytest
+test: setup lint test-rust test-python test-wheel ## every test: lints, cargo (Rust internals, shaders), pytest, the wheel
 
 test-rust: ## cargo tests of the Rust core: optimized with debug assertions and overflow checks, then in debug
 	cargo test --profile checked
@@ -21,6 +21,13 @@ test-rust: ## cargo tests of the Rust core: optimized with debug assertions and 
 
 test-python: ## pytest: cross-validation against pyrender and Embree, bad input, stubs, notebooks
 	$(PY) -m pytest
+
+test-wheel: ## build the wheel and sdist, install each into a fresh venv, smoke-test them and run the quickstart outside the tree
+	PYTHON=$(PY) bash scripts/wheel_check.sh
+
+wheel: ## the abi3 manylinux wheel (CPython >= 3.9) and the sdist, into dist/
+	$(PY) -m maturin build --release --out dist
+	$(PY) -m maturin sdist --out dist
 
 bench: setup ## side-by-side benchmarks against Embree and pyrender
 	$(PY) -m scenesample.bench

@@ -73,14 +73,17 @@ def main(argv: Optional[list[str]] = None) -> None:
     print(f"scene: {label}\n  {scene.triangle_count:,} triangles, {len(scene.materials)} materials")
 
     cams = orbit(scene, a.views, *a.size)
-    ss.discretize(scene, cams[:1])  # first use: device, pipeline, upload
-    images = ss.discretize(scene, cams)
+    ss.discretize(scene, cams[:1], backend="gpu")  # first use: device, pipeline, upload
+    images = ss.discretize(scene, cams, backend="gpu")
 
     origins, dirs = cams[0].pixel_rays()
     hits = ss.cast_rays(scene, origins.reshape(-1, 3), dirs.reshape(-1, 3))
     gpu_ids = images.triangle[0].ravel()
     covered = (gpu_ids >= 0) | hits.hit
     agree = float((gpu_ids == hits.triangle)[covered].mean())
+    # The same images from the CPU backend (the BVH is built now), and what `auto` picks.
+    cpu_images = ss.discretize(scene, cams, backend="cpu")
+    auto = ss.discretize(scene, cams)
 
     # Lit frames, shaded by the package's one shading model (src/shading.rs), no effects.
     start = time.perf_counter()
@@ -107,11 +110,14 @@ def main(argv: Optional[list[str]] = None) -> None:
     w, h = a.size
     print(f"\n{images.n} views at {w}x{h}: {images.mask.mean():.1%} of pixels see a surface")
     print(f"GPU triangle ids vs CPU ray casts (view 0): {agree:.3%} of covered pixels agree")
+    print(f"backend='auto' chose {auto.backend}: {auto.backend_reason}")
     print("\n| stage | seconds |\n|---|---:|")
     print(f"| load scene | {load_s:.4f} |")
     for stage, secs in images.timings.items():
         print(f"| discretize: {stage} | {secs:.4f} |")
     print(f"| cast_rays: BVH build | {hits.timings['bvh_build']:.4f} |")
+    print(f"| discretize, backend='cpu': total | {cpu_images.timings['total']:.4f} |")
+    print(f"| discretize, backend='auto' ({auto.backend}): total | {auto.timings['total']:.4f} |")
     print(f"| cast_rays: trace {len(hits):,} rays | {hits.timings['trace']:.4f} |")
     print(f"| render {len(frames)} lit frames | {render_s:.4f} |")
     print(f"| write EXR + PNG | {write_s:.4f} |")

@@ -12,8 +12,13 @@
 //! procedural height fields of ~5K and ~130K triangles, rendered and traced at 256² and 512²,
 //! the best of two warm runs each): per scene, the line through its two sizes gives the cost
 //! per pixel and per call; the two scenes give how those grow with the triangles.
+//!
+//! A real scene differs from the probes (rays that miss are cheap; a machine may be busy), so
+//! every call on a scene, whichever backend ran, records its measured / predicted ratio on the
+//! scene ([`Observed`]), and later `auto` calls on that scene scale that backend's prediction
+//! by it.
 
-use std::sync::{Arc, OnceLock};
+use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Instant;
 
 use glam::DVec3;
@@ -126,10 +131,35 @@ pub struct CostModel {
     pub calibration_seconds: f64,
 }
 
+/// This process's cost model, once calibrated.
+static MODEL: OnceLock<std::result::Result<Arc<CostModel>, String>> = OnceLock::new();
+
+/// Per scene, what its own calls measured against the model's prediction (measured /
+/// predicted, the latest call of each backend): a scene whose rays mostly miss, or a machine
+/// busy with other work, moves the predictions for that scene's later calls.
+#[derive(Default)]
+pub struct Observed(Mutex<[Option<f64>; 2]>);
+
+impl Observed {
+    fn scale(&self, b: Backend) -> Option<f64> {
+        self.0.lock().unwrap_or_else(|e| e.into_inner())[b as usize]
+    }
+
+    fn record(&self, b: Backend, ratio: f64) {
+        if ratio.is_finite() && ratio > 0.0 {
+            self.0.lock().unwrap_or_else(|e| e.into_inner())[b as usize] = Some(ratio);
+        }
+    }
+}
+
 impl CostModel {
+    /// The model if it has been calibrated already (nothing is measured here).
+    pub fn if_calibrated() -> Option<Arc<CostModel>> {
+        MODEL.get()?.as_ref().ok().cloned()
+    }
+
     /// This process's model, measured on first use.
     pub fn get() -> Result<Arc<CostModel>> {
-        static MODEL: OnceLock<std::result::Result<Arc<CostModel>, String>> = OnceLock::new();
         MODEL
             .get_or_init(|| {
                 crate::counters::uncounted(calibrate)
@@ -165,8 +195,22 @@ impl CostModel {
 
     /// The faster predicted backend for `w`, and why.
     pub fn decide(&self, w: &Workload) -> Decision {
-        let cpu = self.predict_cpu(w);
-        let gpu = self.predict_gpu(w);
+        self.decide_scaled(w, [None, None])
+    }
+
+    /// As [`decide`](Self::decide), each prediction times the scene's measured / predicted
+    /// ratio of its backend (`[gpu, cpu]`) where there is one.
+    pub fn decide_scaled(&self, w: &Workload, scale: [Option<f64>; 2]) -> Decision {
+        let cpu = self.predict_cpu(w) * scale[Backend::Cpu as usize].unwrap_or(1.0);
+        let gpu = self
+            .predict_gpu(w)
+            .map(|g| g * scale[Backend::Gpu as usize].unwrap_or(1.0));
+        let measured = match scale {
+            [None, None] => "",
+            [Some(_), Some(_)] => "; both scaled by this scene's measured calls",
+            [Some(_), None] => "; gpu scaled by this scene's measured calls",
+            [None, Some(_)] => "; cpu scaled by this scene's measured calls",
+        };
         let (backend, reason) = match (&self.gpu, gpu) {
             (Err(why), _) => (Backend::Cpu, format!("no GPU adapter ({why})")),
             (Ok(_), _) if w.triangles >= crate::trace::MAX_TRIANGLES as u64 => (
@@ -189,7 +233,7 @@ impl CostModel {
                     backend,
                     format!(
                         "predicted gpu {:.1} ms vs cpu {:.1} ms ({} triangles, {} x {} pixels; \
-                         BVH {bvh}, scene {up})",
+                         BVH {bvh}, scene {up}{measured})",
                         g * 1e3,
                         cpu * 1e3,
                         w.triangles,
@@ -216,22 +260,43 @@ pub fn discretize_with(
     cull_backfaces: bool,
     choice: BackendChoice,
 ) -> Result<(DepthImages, Decision)> {
-    let decision = match choice {
-        BackendChoice::Fixed(backend) => Decision {
-            backend,
-            reason: "requested".into(),
-            gpu_seconds: None,
-            cpu_seconds: f64::NAN,
-        },
+    super::conventional::check_cameras(cameras)?;
+    let observed = scene.derived(Observed::default);
+    let (decision, model, work) = match choice {
+        BackendChoice::Fixed(backend) => (
+            Decision {
+                backend,
+                reason: "requested".into(),
+                gpu_seconds: None,
+                cpu_seconds: f64::NAN,
+            },
+            CostModel::if_calibrated(),
+            None,
+        ),
         BackendChoice::Auto => {
-            super::conventional::check_cameras(cameras)?;
-            CostModel::get()?.decide(&Workload::of(scene, cameras))
+            let model = CostModel::get()?;
+            let work = Workload::of(scene, cameras);
+            let scale = [Backend::Gpu, Backend::Cpu].map(|b| observed.scale(b));
+            (model.decide_scaled(&work, scale), Some(model), Some(work))
         }
     };
+    // What the model would have predicted for this call, before it prepares anything.
+    let work = work.or_else(|| model.as_ref().map(|_| Workload::of(scene, cameras)));
+    let start = Instant::now();
     let images = match decision.backend {
         Backend::Gpu => discretize_conventional(scene, cameras, cull_backfaces)?,
         Backend::Cpu => discretize_traced(scene, cameras, cull_backfaces)?,
     };
+    let seconds = start.elapsed().as_secs_f64();
+    if let (Some(model), Some(work)) = (model, work) {
+        let predicted = match decision.backend {
+            Backend::Gpu => model.predict_gpu(&work),
+            Backend::Cpu => Some(model.predict_cpu(&work)),
+        };
+        if let Some(p) = predicted {
+            observed.record(decision.backend, seconds / p);
+        }
+    }
     Ok((images, decision))
 }
 

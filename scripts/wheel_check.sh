@@ -1,0 +1,49 @@
+#!/usr/bin/env bash
+# Prove that `pip install scenesample-*.whl` is all a user needs: build the abi3 wheel, install it
+# into a fresh virtual environment (only numpy comes with it), and from outside the source tree
+# run a smoke test and the quickstart notebook; then build the sdist and install that too (with
+# the Rust toolchain, reusing this checkout's cargo target folder for the dependencies).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+ROOT=$PWD
+PY="${PYTHON:-python3}"
+WORK=$(mktemp -d)
+trap 'rm -rf "$WORK"' EXIT
+pipq() { "$1" -m pip install --quiet --disable-pip-version-check "${@:2}"; }
+
+"$PY" -m maturin build --release --quiet --out "$WORK/dist"
+WHEEL=$(ls "$WORK"/dist/scenesample-*-cp39-abi3-*.whl)
+echo "wheel: $(basename "$WHEEL") ($(du -h "$WHEEL" | cut -f1))"
+
+"$PY" -m venv "$WORK/venv"
+V="$WORK/venv/bin/python"
+pipq "$V" "$WHEEL"
+deps=$("$V" -m pip list --format=freeze --disable-pip-version-check | cut -d= -f1 | sort | tr '\n' ' ')
+echo "installed: $deps"
+case "$deps" in
+    "numpy pip scenesample "|"numpy pip scenesample setuptools ") ;;
+    *) echo "the wheel pulled in more than numpy: $deps" >&2; exit 1 ;;
+esac
+cd "$WORK"
+"$V" "$ROOT/scripts/smoke.py" "$ROOT" "$ROOT/../shared/scenes/stanford_bunny/stanford-bunny.obj"
+
+pipq "$V" matplotlib nbclient nbformat ipykernel
+"$V" - "$ROOT/notebooks/quickstart.ipynb" <<'PYEOF'
+import sys
+import nbclient, nbformat
+nb = nbformat.read(sys.argv[1], as_version=4)
+nbclient.NotebookClient(nb, timeout=600, kernel_name="python3").execute()
+errors = [o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", [])
+          if o.get("output_type") == "error"]
+assert not errors, errors
+print("quickstart notebook ok (from the wheel)")
+PYEOF
+
+cd "$ROOT"
+"$PY" -m maturin sdist --out "$WORK/sdist" >/dev/null
+SDIST=$(ls "$WORK"/sdist/scenesample-*.tar.gz)
+"$PY" -m venv "$WORK/venv-sdist"
+CARGO_TARGET_DIR="$ROOT/target" pipq "$WORK/venv-sdist/bin/python" "$SDIST"
+cd "$WORK"
+"$WORK/venv-sdist/bin/python" "$ROOT/scripts/smoke.py" "$ROOT"
+echo "sdist: $(basename "$SDIST") builds and installs"
