@@ -193,3 +193,14 @@ def test_without_vulkan_the_cpu_paths_work(tmp_path):
         [sys.executable, "-c", NO_VULKAN], capture_output=True, text=True, env=env, timeout=600
     )
     assert r.returncode == 0 and r.stdout.strip().endswith("ok"), r.stdout + r.stderr
+
+
+def test_plan_estimates_use_the_measured_rates(gpu):
+    rates = ss._plan.rates(100_000)
+    assert {"raster_triangles", "pixels", "rays"} <= set(rates["measured"])
+    coefficients = ss.device_info(triangles=100_000, pixels=512 * 512)["auto"]["coefficients"]
+    assert rates["raster_triangles"] == pytest.approx(1 / coefficients["gpu_per_triangle"])
+    light = ss.AreaLight.above(ss.scenes.shapes(seed=0, detail=0), size=0.3, height=0.5)
+    (effect,) = ss.plan(ss.scenes.shapes(seed=0, detail=0), area_lights=[light])
+    assert "raster_triangles" in effect.estimate["measured_rates"]
+    assert "shadow_triangles" not in effect.estimate["measured_rates"]

@@ -18,10 +18,10 @@ from ._omni import omni_shadows
 from ._reflections import reflections
 from ._scene import Scene
 from ._shadows import AreaLight, soft_shadows
-from .errors import InputError
+from .errors import GpuError, InputError
 from .imageio import linear_to_srgb
 
-__all__ = ["Effect", "Frame", "plan", "render", "QUALITY", "THROUGHPUT"]
+__all__ = ["Effect", "Frame", "plan", "render", "rates", "QUALITY", "THROUGHPUT"]
 
 Camera = _core.Camera
 EFFECT_KINDS = ("soft_shadows", "omni_shadows", "spot_shadows", "reflections")
@@ -57,11 +57,13 @@ QUALITY: dict[str, dict[str, Any]] = {
     ),
 }
 
-# Throughputs of this project's machine (2 cores, lavapipe), used by the cost model: triangles
-# rasterized per second per view, pixels resolved per second, shadow-map tests per second,
+# Throughputs of this project's machine (2 cores, lavapipe), used by the cost model: scene
+# triangles rasterized per second per view, reconstruction triangles (about a pixel each) per
+# second into light-sample shadow maps, pixels resolved per second, shadow-map tests per second,
 # (point, view) splat pairs per second, rays per second, shading operations per second.
 THROUGHPUT = {
     "raster_triangles": 6e7,
+    "shadow_triangles": 6e7,
     "pixels": 3e7,
     "shadow_tests": 5e7,
     "splat_pairs": 6e6,
@@ -86,7 +88,9 @@ class Effect:
     estimate : dict
         The cost model's prediction before running: ``work`` (counts of the operations it will
         do: triangles rasterized, pixels, shadow tests, splat pairs, rays, shading operations)
-        and ``seconds`` (the work divided by :data:`THROUGHPUT`). A model, not a promise.
+        and ``seconds`` (the work divided by the rates of :func:`rates`: this machine's
+        measured raster, pixel and ray rates, :data:`THROUGHPUT`'s defaults for the rest, listed
+        under ``measured_rates``). A model, not a promise.
     """
 
     kind: str
@@ -252,9 +256,39 @@ def _pixels(camera: Optional[Camera]) -> int:
     return 512 * 512 if camera is None else camera.width * camera.height
 
 
-def _estimate(work: dict[str, float]) -> dict[str, Any]:
-    seconds = sum(work[k] / THROUGHPUT[k] for k in work)
-    return {"work": {k: float(v) for k, v in work.items()}, "seconds": float(seconds)}
+def rates(triangles: int) -> dict[str, float]:
+    """:data:`THROUGHPUT` with what this machine measured in place of the defaults: raster
+    triangles per view and pixels per second from the GPU cost model that
+    ``discretize(..., backend="auto")`` calibrates (once per process), rays per second from its
+    CPU model at ``triangles`` triangles. The keys it measured are listed under ``measured``."""
+    out: dict[str, Any] = dict(THROUGHPUT)
+    measured = []
+    try:
+        c = _core.choose_backend(max(int(triangles), 2), 512 * 512)["coefficients"]
+    except GpuError:  # the probes failed: the defaults stand
+        c = {}
+    per_ray = c.get("cpu_per_ray", 0.0) + c.get("cpu_per_ray_log2", 0.0) * np.log2(
+        max(int(triangles), 2)
+    )
+    for key, seconds in (
+        ("raster_triangles", c.get("gpu_per_triangle", 0.0)),
+        ("pixels", c.get("gpu_per_pixel", 0.0)),
+        ("rays", per_ray),
+    ):
+        if seconds > 0:
+            out[key] = 1.0 / seconds
+            measured.append(key)
+    out["measured"] = measured
+    return out
+
+
+def _estimate(work: dict[str, float], rate: dict[str, Any]) -> dict[str, Any]:
+    seconds = sum(work[k] / rate[k] for k in work)
+    return {
+        "work": {k: float(v) for k, v in work.items()},
+        "seconds": float(seconds),
+        "measured_rates": [k for k in work if k in rate["measured"]],
+    }
 
 
 def plan(
@@ -291,6 +325,7 @@ def plan(
         raise InputError(f"camera must be a scenesample.Camera, got {type(camera).__name__}")
     q = QUALITY[quality]
     tris = scene.triangle_count
+    rate = rates(tris)
     px = _pixels(camera)
     diag = scene_diagonal(scene)
     out: list[Effect] = []
@@ -305,7 +340,8 @@ def plan(
         # reconstruction (about two triangles per covered pixel of the four images).
         recon = 2 * 4 * res * res * 0.5
         work = {
-            "raster_triangles": 8 * tris + nu * nv * recon,
+            "raster_triangles": 8 * tris,
+            "shadow_triangles": nu * nv * recon,
             "pixels": 8 * res * res + nu * nv * res * res,
             "shadow_tests": nu * nv * px,
         }
@@ -315,7 +351,7 @@ def plan(
                 name,
                 f"{why} {name!r} emits light over an area: its shadows are soft",
                 {"light": light, "samples": (nu, nv), "resolution": res},
-                _estimate(work),
+                _estimate(work, rate),
             )
         )
     for k, light in enumerate(scene.lights):
@@ -348,7 +384,7 @@ def plan(
                     "radius": q["light_radius"] * diag,
                     "method": q["omni_method"],
                 },
-                _estimate(work),
+                _estimate(work, rate),
             )
         )
     try:
@@ -370,7 +406,7 @@ def plan(
                 + ", ".join(r.name for r in refl[:5])
                 + (" ..." if len(refl) > 5 else ""),
                 {"reflectors": refl, "rho_scale": q["rho_scale"], "bounces": q["bounces"]},
-                _estimate(work),
+                _estimate(work, rate),
             )
         )
     return out
