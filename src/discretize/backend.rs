@@ -416,3 +416,76 @@ fn calibrate() -> Result<CostModel> {
         calibration_seconds: start.elapsed().as_secs_f64(),
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn model(gpu: bool) -> CostModel {
+        CostModel {
+            gpu: if gpu {
+                Ok(GpuCosts {
+                    per_call: 1e-3,
+                    per_triangle: 4e-7,
+                    per_pixel: 2e-8,
+                    upload_per_triangle: 2e-8,
+                })
+            } else {
+                Err("no adapter".into())
+            },
+            cpu: CpuCosts {
+                per_call: 1e-3,
+                per_call_triangle: 4e-8,
+                per_ray: 5e-8,
+                per_ray_log2: 7e-9,
+                build_per_triangle: 5e-7,
+            },
+            calibration_seconds: 0.0,
+        }
+    }
+
+    fn work(triangles: u64, bvh_built: bool) -> Workload {
+        Workload {
+            triangles,
+            pixels: 1 << 20,
+            images: 1,
+            bvh_built,
+            uploaded: true,
+        }
+    }
+
+    #[test]
+    fn backends_parse_and_bad_names_are_refused() {
+        assert_eq!(
+            "auto".parse::<BackendChoice>().unwrap(),
+            BackendChoice::Auto
+        );
+        assert_eq!(
+            "cpu".parse::<BackendChoice>().unwrap(),
+            BackendChoice::Fixed(Backend::Cpu)
+        );
+        let e = "metal".parse::<BackendChoice>().unwrap_err().to_string();
+        assert!(e.contains("'auto', 'gpu', 'cpu'"), "{e}");
+    }
+
+    #[test]
+    fn auto_weighs_size_bvh_and_adapter() {
+        let m = model(true);
+        // Small scenes rasterize faster; large ones trace faster once the BVH exists, but not
+        // while it still has to be built.
+        assert_eq!(m.decide(&work(100_000, true)).backend, Backend::Gpu);
+        assert_eq!(m.decide(&work(5_000_000, true)).backend, Backend::Cpu);
+        assert_eq!(m.decide(&work(5_000_000, false)).backend, Backend::Gpu);
+        // Past the ray caster's limit only the raster path can run.
+        let huge = m.decide(&work(crate::trace::MAX_TRIANGLES as u64, true));
+        assert_eq!(huge.backend, Backend::Gpu);
+        // Without an adapter, always the CPU, and the reason says so.
+        let none = model(false).decide(&work(5_000_000, false));
+        assert_eq!(none.backend, Backend::Cpu);
+        assert!(none.reason.contains("no GPU adapter") && none.gpu_seconds.is_none());
+        // A scene whose calls ran 10x slower on the CPU than predicted moves to the GPU.
+        let scaled = m.decide_scaled(&work(5_000_000, true), [None, Some(10.0)]);
+        assert_eq!(scaled.backend, Backend::Gpu);
+        assert!(scaled.reason.contains("measured calls"));
+    }
+}

@@ -529,6 +529,48 @@ mod tests {
         Scene::from_arrays(v, vec![[0, 1, 2], [0, 2, 3]], None, None).unwrap()
     }
 
+    /// The CPU backend needs no GPU: from outside a closed icosahedron it sees the faces the
+    /// pixel rays hit first (culled or not, the same: they face the eye), from inside it sees
+    /// the far side unless back faces are culled, when every ray walks past all of them.
+    #[test]
+    fn traced_images_see_front_faces_and_cull_back_ones() {
+        let (v, f) = crate::scene::shapes::icosahedron();
+        let verts = v.iter().map(|p| p.as_vec3().to_array()).collect();
+        let ico = Scene::from_arrays(verts, f.to_vec(), None, None).unwrap();
+        let at = |eye: DVec3| {
+            Camera::look_at(
+                eye,
+                DVec3::new(0.0, 0.0, 0.1),
+                DVec3::Y,
+                1.2,
+                24,
+                16,
+                None,
+                None,
+            )
+            .unwrap()
+        };
+        let outside = [at(DVec3::new(0.3, 0.2, 4.0))];
+        let plain = discretize_traced(&ico, &outside, false).unwrap();
+        let culled = discretize_traced(&ico, &outside, true).unwrap();
+        assert_eq!(plain.triangle, culled.triangle);
+        let (origins, dirs): (Vec<[f32; 3]>, Vec<[f32; 3]>) = (0..24 * 16)
+            .map(|p| {
+                let (o, d) = PixelRays::new(&outside[0]).ray(p % 24, p / 24);
+                (o.as_vec3().to_array(), d.as_vec3().to_array())
+            })
+            .unzip();
+        let hits = crate::trace::cast_rays(&ico, &origins, &dirs, 0.0, f32::INFINITY).unwrap();
+        assert_eq!(plain.triangle, hits.triangle);
+        assert!(plain.triangle.iter().any(|&t| t >= 0) && plain.triangle.contains(&-1));
+        let inside = [at(DVec3::new(0.0, 0.0, 0.4))];
+        let seen = discretize_traced(&ico, &inside, false).unwrap();
+        assert!(seen.triangle.iter().all(|&t| t >= 0));
+        let none = discretize_traced(&ico, &inside, true).unwrap();
+        assert!(none.triangle.iter().all(|&t| t < 0));
+        assert!(none.depth.iter().all(|d| d.is_infinite()));
+    }
+
     fn gpu_or_skip() -> bool {
         match gpu::context() {
             Ok(_) => true,
