@@ -198,9 +198,11 @@ def test_orthographic_camera(gpu) -> None:
 
 def test_timings_are_reported(gpu) -> None:
     s = ss.scenes.shapes(seed=7, detail=1)
-    img = ss.discretize(s, orbit_cameras(s, 2, 64, 48))
+    img = ss.discretize(s, orbit_cameras(s, 2, 64, 48), backend="gpu")
     for key in ("device", "upload", "prepare", "raster", "readback", "resolve", "total"):
         assert img.timings[key] >= 0
+    cpu = ss.discretize(s, orbit_cameras(s, 2, 64, 48), backend="cpu")
+    assert set(cpu.timings) == {"bvh", "trace", "resolve", "total"}
     assert img.timings["total"] > 0
     if gpu["timestamps"]:
         assert img.timings["raster_gpu"] > 0
@@ -215,6 +217,8 @@ def test_timings_are_reported(gpu) -> None:
         "method",
         "reference",
         "cull_backfaces",
+        "backend",
+        "backend_reason",
     }
 
 

@@ -16,7 +16,8 @@ RES = 192
 def grass_set(gpu):
     scene = ss.scenes.grass()
     cams = ss.scenes.reference_cameras(scene, RES)
-    return scene, cams, ss.discretize(scene, cams), ss.discretize(scene, cams, "nonredundant")
+    conv = ss.discretize(scene, cams, backend="gpu")
+    return scene, cams, conv, ss.discretize(scene, cams, "nonredundant")
 
 
 def project(cam: ss.Camera, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -144,7 +145,7 @@ def test_same_camera_twice_gives_the_second_peeling_layer(gpu):
 def test_nonredundant_captures_every_conventional_triangle(gpu, name):
     scene = ss.scenes.PAPER_SCENES[name]()
     cams = ss.scenes.reference_cameras(scene, 160)
-    conv = ss.discretize(scene, cams)
+    conv = ss.discretize(scene, cams, backend="gpu")
     nr = ss.discretize(scene, cams, "nonredundant")
     got = set(np.unique(nr.triangle)) - {-1}
     want = set(np.unique(conv.triangle)) - {-1}
@@ -156,7 +157,8 @@ def test_visibility_redundancy_agrees_with_embree(gpu):
     scene = ss.scenes.grass()
     cams = ss.scenes.reference_cameras(scene, 128)
     nv = ss.discretize(scene, cams, "nonredundant", redundancy="visibility")
-    np.testing.assert_array_equal(nv.triangle[0], ss.discretize(scene, cams[:1]).triangle[0])
+    conv = ss.discretize(scene, cams[:1], backend="gpu")
+    np.testing.assert_array_equal(nv.triangle[0], conv.triangle[0])
     ref = ss.references.EmbreeReference(scene)
     tol = 1e-5 * float(np.linalg.norm(scene.bounds[1] - scene.bounds[0]))
     agree = total = 0
@@ -185,7 +187,7 @@ def test_peeling_layers_increase_and_layer0_is_conventional(gpu):
     peel = ss.discretize(scene, cams, "peeling", layers=4)
     centre = ss.Camera.blend(cams)
     np.testing.assert_allclose(peel.cameras[0].pose, centre.pose)
-    conv = ss.discretize(scene, [centre])
+    conv = ss.discretize(scene, [centre], backend="gpu")
     np.testing.assert_array_equal(peel.triangle[0], conv.triangle[0])
     for i in range(1, 4):
         both = peel.mask[i]
@@ -253,10 +255,10 @@ def test_four_blocks_only_nonredundant_captures_c(gpu):
     def captured(images):
         return bool(c_tris & set(np.unique(images.triangle).tolist()))
 
-    conv = ss.discretize(scene, cams, cull_backfaces=True)
+    conv = ss.discretize(scene, cams, cull_backfaces=True, backend="gpu")
     nr = ss.discretize(scene, cams, "nonredundant", cull_backfaces=True)
     peel = ss.discretize(scene, cams, "peeling", layers=2, camera=cams[0], cull_backfaces=True)
-    middle = ss.discretize(scene, [ss.Camera.blend(cams)], cull_backfaces=True)
+    middle = ss.discretize(scene, [ss.Camera.blend(cams)], cull_backfaces=True, backend="gpu")
     assert captured(middle), "C should be visible from between the two views"
     assert not captured(conv)
     assert not captured(peel)
@@ -276,7 +278,7 @@ def _two_quads() -> ss.Scene:
 def test_metrics_on_a_case_with_known_answers(gpu):
     scene = _two_quads()
     cam = ss.Camera.look_at((0, 0, 3), (0, 0, 0), (0, 1, 0), yfov=0.5, width=64, height=64)
-    conv = ss.discretize(scene, [cam, cam])
+    conv = ss.discretize(scene, [cam, cam], backend="gpu")
     m = ss.evaluate(conv, scene, intermediate=5)
     # The same camera twice: the second image is entirely redundant; nothing is disoccluded;
     # every frame (the same view) is fully available.

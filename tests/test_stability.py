@@ -48,7 +48,8 @@ def cams(offset=0.0, scale=1.0, size=64) -> list:
     [(2.0**17, 1.0), (2.0**23, 1.0), (0.0, 2.0**-13), (0.0, 2.0**13)],
     ids=["1e5 from origin", "1e7 from origin", "scaled 1e-4", "scaled 1e4"],
 )
-def test_far_and_scaled_scenes_give_the_same_samples(offset, scale):
+@pytest.mark.parametrize("backend", ["gpu", "cpu"])
+def test_far_and_scaled_scenes_give_the_same_samples(offset, scale, backend):
     """Depth images, ray hits, the hybrid reconstruction and the sampling metrics of the moved
     or scaled scene equal the original's, scaled. Depth and ray t within 1e-6 relative (both
     are resolved in float64 relative to the camera and stored as float32: ~1e-7); the same
@@ -56,8 +57,8 @@ def test_far_and_scaled_scenes_give_the_same_samples(offset, scale):
     float32 world coordinates, within one float32 ulp of the offset plus 1e-4 of the scene's
     size; the sampling metrics within 0.5% (the pixels that flip)."""
     base, moved = blocks(), blocks(offset, scale)
-    a = ss.discretize(base, cams())
-    b = ss.discretize(moved, cams(offset, scale))
+    a = ss.discretize(base, cams(), backend=backend)
+    b = ss.discretize(moved, cams(offset, scale), backend=backend)
     assert np.isfinite(b.depth[b.mask]).all()
     same = a.triangle == b.triangle
     assert same.mean() >= 0.995
@@ -187,7 +188,9 @@ def test_one_pixel_and_too_large_images():
     )
     huge = one.with_resolution(100_000, 100_000)
     with pytest.raises(ss.GpuLimitError, match="largest texture"):
-        ss.discretize(scene, huge)
+        ss.discretize(scene, huge, backend="gpu")
+    with pytest.raises(ss.InputError, match="do not fit in host memory"):
+        ss.discretize(scene, huge, backend="cpu")
     # Nothing was left broken: the next call works.
     assert ss.discretize(scene, one).mask.all()
 

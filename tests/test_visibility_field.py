@@ -54,7 +54,7 @@ def test_a_convex_object_loses_about_half_its_cells_and_misses_none():
     assert 0.3 < m["cells_fraction"] < 0.75, m["cells_fraction"]
     assert view.stats["pixels_outside"] < view.stats["pixels"]
     # What the field drew covers every pixel the full rasterization sees.
-    full = ss.discretize(scene, cam)
+    full = ss.discretize(scene, cam, backend="gpu")
     np.testing.assert_array_equal(view.image.triangle, full.triangle)
 
 
@@ -156,7 +156,7 @@ def test_rendering_every_cell_is_rendering_the_scene(turtles):
     d, drawn = ss._core.render_cells(
         field._sorted, order, offsets, np.ones(len(field.cells), dtype=bool), cam
     )
-    full = ss.discretize(scene, cam)
+    full = ss.discretize(scene, cam, backend="gpu")
     assert drawn == scene.triangle_count
     np.testing.assert_array_equal(d["triangle"], full.triangle)
     np.testing.assert_array_equal(d["depth"], full.depth)

@@ -13,6 +13,7 @@ __all__ = [
     "Scene",
     "bvh_stats",
     "cast_rays",
+    "choose_backend",
     "default_slab",
     "device_info",
     "discretize_conventional",

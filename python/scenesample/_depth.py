@@ -204,7 +204,9 @@ def offset_images(images: DepthImages, scene: Optional[Scene] = None) -> DepthIm
         return peeling(scene, corners[:1], layers=images.n, camera=corners[0], cull_backfaces=cull)
     if method == "nonredundant":
         return nonredundant(scene, corners, redundancy=redundancy, cull_backfaces=cull)
-    return conventional(scene, corners, cull_backfaces=cull)
+    # The backend the images came from: the two sets must meet at the same edges.
+    backend = images.backend if images.backend in ("gpu", "cpu") else "auto"
+    return conventional(scene, corners, cull_backfaces=cull, backend=backend)
 
 
 def _check_images(images: Any) -> None:

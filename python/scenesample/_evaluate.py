@@ -297,7 +297,7 @@ def _geometry_error(
     cams = list(cameras)
     truth = conventional(scene, cams)
     if len(mesh.faces):
-        rebuilt = conventional(mesh.to_scene(), cams)
+        rebuilt = conventional(mesh.to_scene(), cams, backend=truth.backend)
         dm = rebuilt.depth.astype(np.float64)
     else:
         dm = np.full(truth.depth.shape, np.inf)

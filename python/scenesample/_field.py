@@ -418,7 +418,8 @@ def cells_metric(view: FieldView, scene: Scene, camera: Optional[Camera] = None)
 
     # 1. Z-buffer of all geometry.
     t = time.perf_counter()
-    truth = conventional(scene, cam)
+    # On the GPU, as the field view is drawn: the two meet at the same pixel edges.
+    truth = conventional(scene, cam, backend="gpu")
     t_all = time.perf_counter() - t
     tri = truth.triangle[0]
     seen = tri >= 0

@@ -98,7 +98,9 @@ impl Workload {
                 .first()
                 .map_or(0, |c| c.width as u64 * c.height as u64),
             images: cameras.len() as u64,
-            bvh_built: scene.derived_if_built::<Bvh>().is_some(),
+            bvh_built: super::conventional::TraceFrame::of(scene)
+                .map(|f| f.scene(scene).derived_if_built::<Bvh>().is_some())
+                .unwrap_or(false),
             uploaded,
         }
     }

@@ -151,6 +151,8 @@ pub fn discretize_traced(
 /// where none), and the seconds spent building the BVH (0 when it was built) and casting.
 fn traced_ids(scene: &Scene, cam: &Camera, cull_backfaces: bool) -> Result<(Vec<i32>, f64, f64)> {
     let (near, far) = cam.clip_range(scene.bounds());
+    let frame = TraceFrame::of(scene)?;
+    let (target, shift) = (frame.scene(scene), frame.shift);
     let rays = PixelRays::new(cam);
     let w = cam.width as usize;
     let npx = w * cam.height as usize;
@@ -164,10 +166,13 @@ fn traced_ids(scene: &Scene, cam: &Camera, cull_backfaces: bool) -> Result<(Vec<
             .par_iter()
             .map(|&(p, from)| {
                 let (o, d) = rays.ray(p % w, p / w);
-                ((o + d * from).as_vec3().to_array(), d.as_vec3().to_array())
+                (
+                    (o + d * from - shift).as_vec3().to_array(),
+                    d.as_vec3().to_array(),
+                )
             })
             .unzip();
-        let hits = crate::trace::cast_rays(scene, &origins, &dirs, 0.0, f32::INFINITY)?;
+        let hits = crate::trace::cast_rays(target, &origins, &dirs, 0.0, f32::INFINITY)?;
         built += hits.bvh_build_seconds;
         traced += hits.trace_seconds;
         let mut next = Vec::new();
@@ -189,6 +194,62 @@ fn traced_ids(scene: &Scene, cam: &Camera, cull_backfaces: bool) -> Result<(Vec<
         active = next;
     }
     Ok((out, built, traced))
+}
+
+/// Where the CPU backend casts its rays. A scene far from the origin (its centre farther than
+/// its diagonal) is traced in a copy centred on the origin, as the GPU path rasterizes it
+/// relative to its centre: float32 ray origins and vertices then keep the precision of the
+/// scene's own extent instead of its distance from the origin. The copy (and its BVH) is made
+/// once and kept on the scene.
+pub(crate) struct TraceFrame {
+    centred: Option<Scene>,
+    pub(crate) shift: DVec3,
+}
+
+impl TraceFrame {
+    pub(crate) fn of(scene: &Scene) -> Result<Arc<TraceFrame>> {
+        let centre = scene.center();
+        if centre.length() <= scene.diagonal() {
+            return Ok(scene.derived(|| TraceFrame {
+                centred: None,
+                shift: DVec3::ZERO,
+            }));
+        }
+        let mut failed = None;
+        let frame = scene.derived(|| {
+            let vertices = scene
+                .vertices()
+                .iter()
+                .map(|v| {
+                    (Vec3::from_array(*v).as_dvec3() - centre)
+                        .as_vec3()
+                        .to_array()
+                })
+                .collect();
+            match Scene::from_arrays(vertices, scene.faces().to_vec(), None, None) {
+                Ok(s) => TraceFrame {
+                    centred: Some(s),
+                    shift: centre,
+                },
+                Err(e) => {
+                    failed = Some(e);
+                    TraceFrame {
+                        centred: None,
+                        shift: DVec3::ZERO,
+                    }
+                }
+            }
+        });
+        match failed {
+            Some(e) => Err(e),
+            None => Ok(frame),
+        }
+    }
+
+    /// The scene the rays are cast in: the centred copy, or `scene` itself.
+    pub(crate) fn scene<'a>(&'a self, scene: &'a Scene) -> &'a Scene {
+        self.centred.as_ref().unwrap_or(scene)
+    }
 }
 
 /// The body every GPU discretization shares: `raster` renders the cameras' triangle ids and
