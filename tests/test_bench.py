@@ -48,3 +48,14 @@ def test_bench_rays_quick_measures_every_shared_scene(tmp_path, capsys):
         assert md.count(name) >= 5, name  # one row per table
     rows = _bench_rays.summary_rows(_bench_rays.run(True, 1, ["shapes"]))
     assert len(rows) == 10 and all(r[2] > 0 for r in rows)
+
+
+def test_bench_backends_quick_compares_gpu_cpu_and_auto(tmp_path, gpu):
+    from scenesample import bench
+
+    out = tmp_path / "backends.md"
+    bench.main(["backends", "--quick", "--repeats", "1", "--out", str(out)])
+    md = out.read_text()
+    assert "| scene | triangles | gpu | cpu | auto |" in md
+    assert md.count("(gpu) |") + md.count("(cpu) |") >= 1
+    assert "Worst scene:" in md and ("met." in md)

@@ -2,11 +2,11 @@
 the CPU ray-cast path and ``backend="auto"``, side by side, on the shared real scenes of at least
 10K triangles and one large scene (four copies of the largest shared scene, over 4M triangles).
 
-Every time is the best of ``repeats`` calls after one warm-up call (so the scene is on the GPU
-and its BVH built, as in a session that makes many images of one scene); ``auto`` then sees
-both prepared, which its cost model accounts for. The target: on every scene ``auto`` is within
-15% of the faster backend. Also printed: ``auto``'s prediction for both backends beside the
-measured times, and where the CPU's triangle ids differ from the GPU's.
+Every time is the best of ``repeats`` interleaved rounds after one warm-up call (so the scene
+is on the GPU and its BVH built, as in a session that makes many images of one scene); ``auto``
+then sees both prepared, which its cost model accounts for. The target: on every scene
+``auto`` is within 15% of the faster backend. Also printed: ``auto``'s prediction for both
+backends beside the measured times, and where the CPU's triangle ids differ from the GPU's.
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ import scenesample as ss
 
 TARGET = 1.15
 MIN_TRIANGLES = 10_000
+BACKENDS = ("gpu", "cpu", "auto")
 
 
 def _scenes(quick: bool) -> list[tuple[str, ss.Scene]]:
@@ -64,27 +65,20 @@ def _camera(scene: ss.Scene, size: int) -> ss.Camera:
     return ss.Camera.look_at(eye, c, up, yfov=0.8, width=size, height=size)
 
 
-def _best(fn: Any, repeats: int) -> tuple[float, Any]:
-    best, out = np.inf, None
-    for _ in range(repeats):
-        t = time.perf_counter()
-        out = fn()
-        best = min(best, time.perf_counter() - t)
-    return best, out
-
-
-def run(quick: bool = False, repeats: int = 3, size: int = 1024) -> dict[str, Any]:
+def run(quick: bool = False, repeats: int = 5, size: int = 1024) -> dict[str, Any]:
     """Measure every scene; returns the rows and the device."""
     size = 256 if quick else size
     rows = []
     for name, scene in _scenes(quick):
         cam = _camera(scene, size)
-        times, images = {}, {}
-        for backend in ("gpu", "cpu", "auto"):
-            ss.discretize(scene, cam, backend=backend)  # warm-up: upload, BVH
-            times[backend], images[backend] = _best(
-                lambda s=scene, c=cam, b=backend: ss.discretize(s, c, backend=b), repeats
-            )
+        images = {b: ss.discretize(scene, cam, backend=b) for b in BACKENDS}  # warm-up
+        rounds: dict[str, list[float]] = {b: [] for b in BACKENDS}
+        for _ in range(repeats):  # interleaved, so that a slow spell hits all three
+            for b in BACKENDS:
+                t = time.perf_counter()
+                images[b] = ss.discretize(scene, cam, backend=b)
+                rounds[b].append(time.perf_counter() - t)
+        times = {b: min(v) for b, v in rounds.items()}
         g, c = images["gpu"], images["cpu"]
         either = (g.triangle >= 0) | (c.triangle >= 0)
         differ = g.triangle != c.triangle
@@ -147,8 +141,8 @@ def report(r: dict[str, Any]) -> str:
         f"# `python -m scenesample.bench backends`, {time.strftime('%Y-%m-%d')}",
         "",
         f"{dev['name']} ({dev['device_type']}); conventional images at {r['size']}², best of "
-        f"{r['repeats']} calls after a warm-up (scene uploaded, BVH built). Times in ms; "
-        "auto / fastest is auto's time over the faster backend's (target <= "
+        f"{r['repeats']} interleaved rounds after a warm-up (scene uploaded, BVH built). Times "
+        "in ms; auto / fastest is auto's time over the faster backend's (target <= "
         f"{TARGET:.2f}x on every scene); predicted: the cost model's gpu / cpu estimate; same "
         "ids: pixels where both name the same triangle (or none), of all pixels and of those "
         "where either sees a surface; at an edge: of the pixels where both see a different "
