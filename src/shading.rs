@@ -24,11 +24,13 @@ pub const AMBIENT: f64 = 0.08;
 pub const DEFAULT_RADIANCE: f64 = 3.0;
 
 /// The default light's direction (unit, from a surface toward the light) where no eye fixes
-/// one: view-independent shading ([`diffuse`], the impostors).
+/// one: view-independent shading ([`diffuse`], the impostors). It is (3, 5, 8) / √98; the
+/// impostors' own constant before the shading model was unified, (3, 5, 8) / (3√11), was 0.995
+/// long and used unnormalized, which lit their images up to 0.5% darker than this.
 pub const DEFAULT_TO_LIGHT: [f64; 3] = [
-    0.301_511_344_577_763_6,
-    0.502_518_907_629_606,
-    0.804_030_252_207_369_7,
+    0.303_045_763_365_663_25,
+    0.505_076_272_276_105_4,
+    0.808_122_035_641_768_5,
 ];
 
 /// What kind of light a [`ShadeLight`] is.
@@ -369,6 +371,29 @@ fn barycentric(v: &[DVec3; 3], p: DVec3) -> [f64; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_default_light_direction_is_unit() {
+        let l = DVec3::from_array(DEFAULT_TO_LIGHT);
+        assert!((l.length() - 1.0).abs() < 1e-15, "{}", l.length());
+        // A white surface facing it is lit to 1 under the pre-lit environment.
+        let env = Prelit {
+            ambient: PRELIT_AMBIENT,
+            lights: vec![{
+                let mut d = ShadeLight::default_toward(l);
+                d.radiance = DVec3::splat((1.0 - PRELIT_AMBIENT) * std::f64::consts::PI);
+                d
+            }],
+        };
+        let facing = Surface {
+            position: DVec3::ZERO,
+            normal: l,
+            albedo: DVec3::ONE,
+            metallic: 0.0,
+            roughness: 1.0,
+        };
+        assert!((diffuse(&facing, &env) - DVec3::ONE).abs().max_element() < 1e-12);
+    }
 
     /// A rough, grey (albedo 0.5) dielectric at the origin facing +z.
     fn grey_facing_z() -> Surface {
