@@ -179,7 +179,9 @@ def device_info(
     ``discretize(..., backend="auto")`` would choose for ``images`` images of a scene of that
     size, given whether its BVH is built (``bvh_built``) and its GPU copy made (``uploaded``):
     ``backend`` ("gpu" or "cpu"), ``reason``, the predicted ``gpu_seconds`` and
-    ``cpu_seconds``, and ``calibration_seconds`` (the cost model's probes, once per process).
+    ``cpu_seconds``, ``calibration_seconds`` (the cost model's probes, once per process) and
+    ``coefficients`` (the fitted seconds per call, triangle, pixel and ray; see
+    ``src/discretize/backend.rs``).
 
     Raises :class:`GpuUnavailableError` when there is no adapter (``auto`` then always picks
     the CPU)."""
