@@ -14,9 +14,9 @@
 //! per pixel and per call; the two scenes give how those grow with the triangles.
 //!
 //! A real scene differs from the probes (rays that miss are cheap; a machine may be busy), so
-//! every call on a scene, whichever backend ran, records its measured / predicted ratio on the
-//! scene ([`Observed`]), and later `auto` calls on that scene scale that backend's prediction
-//! by it.
+//! once the model exists (the process's first `auto` call makes it), every call on a scene,
+//! whichever backend ran, records its measured / predicted ratio on the scene ([`Observed`]),
+//! and later `auto` calls on that scene scale that backend's prediction by it.
 
 use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Instant;
