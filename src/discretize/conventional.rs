@@ -12,6 +12,7 @@ use std::time::Instant;
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
+use super::redundancy::Sample;
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gpu;
@@ -152,16 +153,84 @@ pub fn discretize_traced(
 fn traced_ids(scene: &Scene, cam: &Camera, cull_backfaces: bool) -> Result<(Vec<i32>, f64, f64)> {
     let (near, far) = cam.clip_range(scene.bounds());
     let frame = TraceFrame::of(scene)?;
-    let (target, shift) = (frame.scene(scene), frame.shift);
-    let rays = PixelRays::new(cam);
-    let w = cam.width as usize;
-    let npx = w * cam.height as usize;
-    let step = super::redundancy::tolerance(scene);
+    let npx = cam.width as usize * cam.height as usize;
+    let how = Walk {
+        cull_backfaces,
+        far,
+        frame: Some(&frame),
+    };
+    let none_redundant = |c: &[Sample]| Ok(vec![false; c.len()]);
+    let walked = walk(
+        scene,
+        cam,
+        (0..npx).map(|p| (p, near)).collect(),
+        how,
+        none_redundant,
+    )?;
     let mut out = vec![-1i32; npx];
-    let (mut built, mut traced) = (0.0, 0.0);
-    // (pixel, depth its ray starts from): the ray's direction has camera z −1, so t is depth.
-    let mut active: Vec<(usize, f64)> = (0..npx).map(|p| (p, near)).collect();
+    for (p, t) in walked.found {
+        out[p] = t;
+    }
+    Ok((out, walked.bvh_seconds, walked.trace_seconds))
+}
+
+/// How [`walk`] walks: culling back faces or not, up to which depth, and in which frame.
+pub(crate) struct Walk<'a> {
+    pub cull_backfaces: bool,
+    /// Surfaces beyond this depth end the walk (the pixel stays empty).
+    pub far: f64,
+    /// Cast in this frame (the scene's centred copy far from the origin); `None`: the scene.
+    pub frame: Option<&'a TraceFrame>,
+}
+
+impl Walk<'_> {
+    /// No far plane, in the scene's own frame.
+    pub(crate) fn plain(cull_backfaces: bool) -> Self {
+        Walk {
+            cull_backfaces,
+            far: f64::INFINITY,
+            frame: None,
+        }
+    }
+}
+
+/// What a walk found: `(pixel, triangle)` for the pixels that found a sample, and the seconds
+/// its ray casts spent building the BVH (0 when it was built) and tracing.
+pub(crate) struct Walked {
+    pub found: Vec<(usize, i32)>,
+    pub bvh_seconds: f64,
+    pub trace_seconds: f64,
+}
+
+/// Walk pixel rays of `cam` front to back: each `(pixel, depth)` of `start` casts from that
+/// depth, and every surface it meets is a candidate sample, which `redundant` tests (a batch
+/// at a time); the first candidate not redundant (nor a culled back face) is the pixel's
+/// sample. A walk resumes just beyond each rejected surface, past the tolerance that makes two
+/// surfaces the same point, so it always advances. Conventional images on the CPU are the walk
+/// where nothing is redundant; non-redundant images under visibility redundancy, and the
+/// coincident-triangle fix-up, test each candidate against the earlier images.
+pub(crate) fn walk(
+    scene: &Scene,
+    cam: &Camera,
+    start: Vec<(usize, f64)>,
+    how: Walk,
+    mut redundant: impl FnMut(&[Sample]) -> Result<Vec<bool>>,
+) -> Result<Walked> {
+    let w = cam.width as usize;
+    let rays = PixelRays::new(cam);
+    let tolerance = super::redundancy::tolerance(scene);
+    let (target, shift) = match how.frame {
+        Some(f) => (f.scene(scene), f.shift),
+        None => (scene, DVec3::ZERO),
+    };
+    let mut walked = Walked {
+        found: Vec::new(),
+        bvh_seconds: 0.0,
+        trace_seconds: 0.0,
+    };
+    let mut active = start;
     while !active.is_empty() {
+        // Resume from depth `from`: the ray's direction has camera z −1, so t is depth.
         let (origins, dirs): (Vec<[f32; 3]>, Vec<[f32; 3]>) = active
             .par_iter()
             .map(|&(p, from)| {
@@ -173,27 +242,40 @@ fn traced_ids(scene: &Scene, cam: &Camera, cull_backfaces: bool) -> Result<(Vec<
             })
             .unzip();
         let hits = crate::trace::cast_rays(target, &origins, &dirs, 0.0, f32::INFINITY)?;
-        built += hits.bvh_build_seconds;
-        traced += hits.trace_seconds;
-        let mut next = Vec::new();
+        walked.bvh_seconds += hits.bvh_build_seconds;
+        walked.trace_seconds += hits.trace_seconds;
+        // (pixel, depth of the surface met, candidate index or none for a culled back face)
+        let mut met = Vec::new();
+        let mut candidates = Vec::new();
         for (k, &(p, from)) in active.iter().enumerate() {
-            let Ok(tri) = usize::try_from(hits.triangle[k]) else {
-                continue;
-            };
+            let tri = hits.triangle[k];
             let depth = from + hits.t[k] as f64;
-            if depth > far {
+            if tri < 0 || depth > how.far {
+                continue; // nothing (left) along this ray: the pixel stays empty
+            }
+            let (o, d) = rays.ray(p % w, p / w);
+            let [a, b, c] = scene.triangle(tri as usize);
+            if how.cull_backfaces && (b - a).cross(c - a).dot(d) >= 0.0 {
+                met.push((p, depth, None));
                 continue;
             }
-            let [a, b, c] = scene.triangle(tri);
-            if cull_backfaces && (b - a).cross(c - a).dot(rays.ray(p % w, p / w).1) >= 0.0 {
-                next.push((p, depth + step + 1e-5 * depth.abs()));
-                continue;
+            met.push((p, depth, Some(candidates.len())));
+            candidates.push(Sample {
+                triangle: tri,
+                point: o + d * depth,
+            });
+        }
+        let redundant = redundant(&candidates)?;
+        let mut next = Vec::new();
+        for (p, depth, c) in met {
+            match c {
+                Some(c) if !redundant[c] => walked.found.push((p, candidates[c].triangle)),
+                _ => next.push((p, depth + tolerance + 1e-5 * depth.abs())),
             }
-            out[p] = tri as i32;
         }
         active = next;
     }
-    Ok((out, built, traced))
+    Ok(walked)
 }
 
 /// Where the CPU backend casts its rays. A scene far from the origin (its centre farther than

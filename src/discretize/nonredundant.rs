@@ -23,7 +23,7 @@ use std::time::Instant;
 use glam::DVec3;
 
 use super::conventional::{
-    check_cameras, discretize_conventional, resolve_ids, resolve_streamed, PixelRays,
+    check_cameras, discretize_conventional, resolve_ids, resolve_streamed, walk, PixelRays, Walk,
 };
 use super::redundancy::{self, Redundancy, Sample};
 use crate::camera::Camera;
@@ -31,7 +31,7 @@ use crate::error::Result;
 use crate::gpu::layered;
 use crate::input_err;
 use crate::scene::Scene;
-use crate::trace::{self, SAME_HIT};
+use crate::trace::SAME_HIT;
 use crate::types::{DepthImages, Timings};
 
 /// Non-redundant depth images, one per camera (shared resolution), image i free of samples
@@ -225,7 +225,7 @@ fn coincident_samples(
             image[p] = -1;
         }
         let redundant = |c: &[Sample]| Ok(c.iter().map(|s| held(s.triangle, s.point)).collect());
-        for (p, t) in walk(scene, cam, walks, cull_backfaces, redundant)? {
+        for (p, t) in walk(scene, cam, walks, Walk::plain(cull_backfaces), redundant)?.found {
             image[p] = t;
         }
     }
@@ -302,70 +302,8 @@ fn walk_image(
         }
         Ok(redundant)
     };
-    for (p, t) in walk(scene, cam, start, cull_backfaces, redundant)? {
+    for (p, t) in walk(scene, cam, start, Walk::plain(cull_backfaces), redundant)?.found {
         out[p] = t;
     }
     Ok(out)
-}
-
-/// Walk pixel rays of `cam` front to back: each `(pixel, depth)` of `start` casts from that
-/// depth, and every surface it meets is a candidate sample, which `redundant` tests (a batch
-/// at a time); the first candidate not redundant (nor a culled back face) is the pixel's
-/// sample. Returns `(pixel, triangle)` for the pixels that found one. A walk resumes just
-/// beyond each rejected surface, past the tolerance that makes two surfaces the same point,
-/// so it always advances.
-fn walk(
-    scene: &Scene,
-    cam: &Camera,
-    start: Vec<(usize, f64)>,
-    cull_backfaces: bool,
-    mut redundant: impl FnMut(&[Sample]) -> Result<Vec<bool>>,
-) -> Result<Vec<(usize, i32)>> {
-    let w = cam.width as usize;
-    let rays = PixelRays::new(cam);
-    let tolerance = redundancy::tolerance(scene);
-    let mut found = Vec::new();
-    let mut active = start;
-    while !active.is_empty() {
-        let mut origins = Vec::with_capacity(active.len());
-        let mut dirs = Vec::with_capacity(active.len());
-        for &(p, from) in &active {
-            let (o, d) = rays.ray(p % w, p / w);
-            // Resume from depth `from`: the ray's direction has camera z −1, so t is depth.
-            origins.push((o + d * from).as_vec3().to_array());
-            dirs.push(d.as_vec3().to_array());
-        }
-        let hits = trace::cast_rays(scene, &origins, &dirs, 0.0, f32::INFINITY)?;
-        // (pixel, depth of the surface met, candidate index or none for a culled back face)
-        let mut met = Vec::new();
-        let mut candidates = Vec::new();
-        for (k, &(p, from)) in active.iter().enumerate() {
-            let tri = hits.triangle[k];
-            if tri < 0 {
-                continue; // nothing left along this ray: the pixel stays empty
-            }
-            let (o, d) = rays.ray(p % w, p / w);
-            let depth = from + hits.t[k] as f64;
-            let [a, b, c] = scene.triangle(tri as usize);
-            if cull_backfaces && (b - a).cross(c - a).dot(d) >= 0.0 {
-                met.push((p, depth, None));
-                continue;
-            }
-            met.push((p, depth, Some(candidates.len())));
-            candidates.push(Sample {
-                triangle: tri,
-                point: o + d * depth,
-            });
-        }
-        let redundant = redundant(&candidates)?;
-        let mut next = Vec::new();
-        for (p, depth, c) in met {
-            match c {
-                Some(c) if !redundant[c] => found.push((p, candidates[c].triangle)),
-                _ => next.push((p, depth + tolerance + 1e-5 * depth.abs())),
-            }
-        }
-        active = next;
-    }
-    Ok(found)
 }
