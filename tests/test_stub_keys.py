@@ -17,14 +17,21 @@ def stub_types() -> tuple[dict[str, dict[str, str]], dict[str, str]]:
     tree = ast.parse(STUB.read_text())
     dicts, returns = {}, {}
     for node in tree.body:
-        if isinstance(node, ast.ClassDef) and any(
-            isinstance(b, ast.Name) and b.id == "TypedDict" for b in node.bases
-        ):
-            dicts[node.name] = {
-                s.target.id: ast.unparse(s.annotation)
-                for s in node.body
-                if isinstance(s, ast.AnnAssign)
-            }
+        bases = (
+            [b.id for b in node.bases if isinstance(b, ast.Name)]
+            if isinstance(node, ast.ClassDef)
+            else []
+        )
+        if "TypedDict" in bases or any(b in dicts for b in bases):
+            # A TypedDict subclass has its bases' keys too (bases come first in the stub).
+            dicts[node.name] = {k: v for b in bases if b in dicts for k, v in dicts[b].items()}
+            dicts[node.name].update(
+                {
+                    s.target.id: ast.unparse(s.annotation)
+                    for s in node.body
+                    if isinstance(s, ast.AnnAssign)
+                }
+            )
         elif isinstance(node, ast.FunctionDef) and node.returns is not None:
             returns[node.name] = ast.unparse(node.returns)
     return dicts, returns

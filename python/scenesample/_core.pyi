@@ -225,15 +225,7 @@ class _ImagesDict(TypedDict):
     method: str
     timings: dict[str, float]
 
-class _ConventionalDict(TypedDict):
-    depth: np.ndarray
-    triangle: np.ndarray
-    normal: np.ndarray
-    position: np.ndarray
-    color: np.ndarray
-    cameras: list[Camera]
-    method: str
-    timings: dict[str, float]
+class _ConventionalDict(_ImagesDict):
     backend: Literal["gpu", "cpu"]
     backend_reason: str
 
