@@ -18,7 +18,7 @@
 //! whichever backend ran, records its measured / predicted ratio on the scene ([`Observed`]),
 //! and later `auto` calls on that scene scale that backend's prediction by it.
 
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use glam::DVec3;
@@ -134,7 +134,9 @@ pub struct CostModel {
 }
 
 /// This process's cost model, once calibrated.
-static MODEL: OnceLock<std::result::Result<Arc<CostModel>, String>> = OnceLock::new();
+/// Not a `OnceLock` of the result: a calibration that fails (Ctrl-C during the probes) is not
+/// kept, and the next `auto` call measures again.
+static MODEL: Mutex<Option<Arc<CostModel>>> = Mutex::new(None);
 
 /// Per scene, what its own calls measured against the model's prediction (measured /
 /// predicted, the latest call of each backend): a scene whose rays mostly miss, or a machine
@@ -157,19 +159,19 @@ impl Observed {
 impl CostModel {
     /// The model if it has been calibrated already (nothing is measured here).
     pub fn if_calibrated() -> Option<Arc<CostModel>> {
-        MODEL.get()?.as_ref().ok().cloned()
+        MODEL.lock().unwrap_or_else(|e| e.into_inner()).clone()
     }
 
-    /// This process's model, measured on first use.
+    /// This process's model, measured on first use. Calls run one at a time on the worker
+    /// pool (`process::take_turn`), so holding the lock while the probes run blocks no one.
     pub fn get() -> Result<Arc<CostModel>> {
-        MODEL
-            .get_or_init(|| {
-                crate::counters::uncounted(calibrate)
-                    .map(Arc::new)
-                    .map_err(|e| e.to_string())
-            })
-            .clone()
-            .map_err(|e| Error::Gpu(format!("calibrating the backend cost model failed: {e}")))
+        let mut slot = MODEL.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(model) = slot.as_ref() {
+            return Ok(model.clone());
+        }
+        let model = Arc::new(crate::counters::uncounted(calibrate)?);
+        *slot = Some(model.clone());
+        Ok(model)
     }
 
     pub fn predict_gpu(&self, w: &Workload) -> Option<f64> {
