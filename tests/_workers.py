@@ -20,7 +20,7 @@ def use_everything() -> dict[str, np.ndarray]:
     cam = camera()
     o, d = (a.reshape(-1, 3) for a in cam.pixel_rays())
     hits = ss.cast_rays(scene, o, d)
-    images = ss.discretize(scene, [cam])
+    images = ss.discretize(scene, [cam], backend="gpu")
     tris = np.arange(scene.triangle_count)
     centers = scene.vertices[scene.faces].mean(axis=1).astype(np.float32)
     lengths = np.full(len(tris), 0.05, dtype=np.float32)

@@ -63,7 +63,10 @@ def conventional(
         ``"auto"`` (default): the backend a cost model of this machine predicts is faster,
         given the triangles, pixels, images, whether a GPU adapter exists and whether the BVH
         and the GPU copy of the scene exist already; the model is measured on first use in a
-        process (about half a second of probes). See :func:`scenesample.device_info`.
+        process (about half a second of probes). See :func:`scenesample.device_info`. The
+        choice rests on timings, so two processes may choose differently for the same call
+        and their ids then differ at those edge pixels: pass the backend explicitly where
+        results must match bit for bit across processes or machines.
 
     Returns
     -------
