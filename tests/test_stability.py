@@ -211,18 +211,24 @@ def test_hybrid_corners_at_grazing_angles_stay_near_their_samples():
 
 
 def test_visibility_field_rays_parallel_to_the_slab_planes():
-    """A camera looking along the slab planes: lines parallel to the planes mark nothing
-    (counted outside), the rest resample normally, and nothing is NaN."""
+    """A camera looking along the slab planes: lines parallel to the planes are held by no
+    slab (counted outside: the paper's view marks nothing, the fallback traces them), the
+    rest resample normally, and nothing is NaN."""
     scene = ss.scenes.icosphere(2)
-    field = ss.discretize(scene, method="visibility_field", uv=(6, 6), st=(6, 6))
-    # The default slab is along x; this camera looks along y, in the planes' direction.
+    slab = ss.Slab.around(scene, axis=0)
+    field = ss.discretize(scene, method="visibility_field", slab=slab, uv=(6, 6), st=(6, 6))
+    # The slab is along x; this camera looks along y, in the planes' direction.
     cam = ss.Camera.look_at((0, -5, 0), (0, 0, 0), (0, 0, 1), yfov=0.8, width=24, height=24)
-    view = ss.reconstruct(field, cam, interpolate="uv+st")
-    assert view.stats["pixels_outside"] <= view.stats["pixels"]
-    assert np.isfinite(view.image.depth[view.image.mask]).all()
+    for fallback in (False, True):
+        view = ss.reconstruct(field, cam, interpolate="uv+st", fallback=fallback)
+        assert view.stats["pixels_outside"] <= view.stats["pixels"]
+        assert np.isfinite(view.image.depth[view.image.mask]).all()
     exactly = ss.Camera.look_at((0, -5, 0), (0, 0, 0), (0, 0, 1), yfov=0.01, width=1, height=1)
-    v1 = ss.reconstruct(field, exactly)
+    v1 = ss.reconstruct(field, exactly, fallback=False)
     assert v1.stats["pixels_outside"] == 1 and not v1.marked.any()
+    traced = ss.reconstruct(field, exactly)
+    assert traced.fallback_pixels == 1 and traced.marked.sum() == traced.fallback_cells >= 1
+    assert (traced.image.triangle >= 0).all()
 
 
 def test_impostor_cameras_straight_down_an_octree_axis():

@@ -34,6 +34,7 @@ __all__ = [
     "render_lit",
     "sampling_metrics",
     "shade_frame",
+    "six_slabs",
     "soft_shadows",
     "splat",
     "visibility_field",
@@ -290,12 +291,6 @@ class _ReflectionsDict(TypedDict):
     timings: dict[str, float]
     ops: _Ops
 
-class _SlabFieldDict(TypedDict):
-    ids: np.ndarray
-    slab: np.ndarray
-    rays: int
-    timings: dict[str, float]
-
 class _FieldDict(TypedDict):
     cell_of: np.ndarray
     cells: np.ndarray
@@ -305,14 +300,21 @@ class _FieldDict(TypedDict):
     groups: int
     sorted_scene: Scene
     cell_seconds: float
-    fields: list[_SlabFieldDict]
+    bvh_seconds: float
+    ids: np.ndarray
+    cells_hit: np.ndarray
+    rays: int
+    timings: dict[str, float]
 
 class _FieldViewDict(TypedDict):
     marked: np.ndarray
     pixels: int
     outside: int
+    overflowed: int
+    fallback_cells: int
     triangles_drawn: int
     resample_seconds: float
+    fallback_seconds: float
     render_seconds: float
     image: _ImagesDict
 
@@ -471,12 +473,14 @@ def reflections(
     seed: int,
 ) -> _ReflectionsDict: ...
 def default_slab(scene: Scene, axis: Optional[int], margin: float, widen: float) -> np.ndarray: ...
+def six_slabs(scene: Scene, margin: float) -> np.ndarray: ...
 def visibility_field(
     scene: Scene,
     slabs: Sequence[ArrayLike],
     uv: tuple[int, int],
     st: tuple[int, int],
     grid: tuple[int, int, int],
+    cell_size: Optional[float],
     grouping: _Grouping,
     ids_per_sample: int,
     supersample: int,
@@ -488,10 +492,13 @@ def field_view(
     triangles: np.ndarray,
     offsets: np.ndarray,
     slabs: Sequence[ArrayLike],
-    ids: Sequence[np.ndarray],
+    ids: np.ndarray,
+    cells_hit: np.ndarray,
     camera: Camera,
     interpolate: _Interpolation,
     subsample: int,
+    fallback: bool,
+    trust: int,
 ) -> _FieldViewDict: ...
 def render_cells(
     sorted_scene: Scene,

@@ -13,6 +13,7 @@ import numpy as np
 from . import _core
 from ._api import discretize, reconstruct
 from ._evaluate import evaluate
+from ._field import Slab
 from ._impostors import ImpostorView
 from ._omni import omni_shadows
 from ._plan import emissive_lights
@@ -44,9 +45,7 @@ KNOBS: dict[str, dict[str, list]] = {
         "bounces": [1, 2],
     },
     "visibility_field": {
-        "ids_per_sample": [1, 5],
-        "interpolate": ["none", "uv", "st", "uv+st"],
-        "resolution": [8, 16],
+        "quality": ["fast", "balanced", "exact"],
     },
     "impostors": {
         "octree_depth": [0, 1, 2],
@@ -199,24 +198,33 @@ def _run_reflections(scene: Scene, cam: Camera, light: Any, ref: Any, settings: 
 
 
 def _run_visibility_field(scene: Scene, cam: Camera, light: Any, ref: Any, settings: dict) -> dict:
-    res = int(settings.get("resolution", 16))
+    opts: dict[str, Any] = {"quality": settings.get("quality", "balanced")}
+    if "resolution" in settings:
+        res = int(settings["resolution"])
+        opts["uv"] = opts["st"] = (res, res)
+    if "ids_per_sample" in settings:
+        opts["ids_per_sample"] = int(settings["ids_per_sample"])
+    if settings.get("single_slab"):
+        opts["slab"] = Slab.around(scene)
     start = time.perf_counter()
-    field = discretize(
-        scene,
-        method="visibility_field",
-        uv=(res, res),
-        st=(res, res),
-        ids_per_sample=int(settings.get("ids_per_sample", 1)),
-    )
+    field = discretize(scene, method="visibility_field", **opts)
     build = time.perf_counter() - start
-    view = reconstruct(field, cam, interpolate=settings.get("interpolate", "none"))
+    view = reconstruct(
+        field,
+        cam,
+        interpolate=settings.get("interpolate"),
+        fallback=bool(settings.get("fallback", True)),
+    )
     m = evaluate(view, scene, "cells")
     return {
         "error": float(m["missed_fraction"]),
-        "seconds": view.timings["resample"] + view.timings["render"],
+        "seconds": float(m["time_field"]),
         "memory": int(field.stats["memory_bytes"]),
         "build_seconds": build,
         "time_zbuffer": float(m["time_zbuffer"]),
+        "hole_fraction": float(m["hole_fraction"]),
+        "covered": float(view.covered),
+        "cells_fraction": float(m["cells_fraction"]),
     }
 
 

@@ -125,18 +125,89 @@ impl Slab {
         })
     }
 
+    /// The six slabs that answer every camera outside the scene's bounds (the several slabs of
+    /// visibility-field.txt §6 that "cover visibility from all viewpoints"): both directions
+    /// along each axis, planes `margin` of the extent along it (at least 1e-3 of the diagonal)
+    /// beyond the bounds. A line whose direction is nearest to an axis makes at most 45° with it,
+    /// so it crosses each plane within the axis's extent plus the gaps of the bounds' cross-
+    /// section: the rectangles are widened by that much on every side, and every line through
+    /// the bounds lies in the slab of its dominant axis and direction.
+    pub fn six(scene: &Scene, margin: f64) -> Result<Vec<Self>> {
+        if !(margin.is_finite() && margin >= 0.0) {
+            return input_err!("margin must be finite and >= 0, got {margin}");
+        }
+        let [lo, hi] = scene.bounds().map(|b| DVec3::from_array(b.map(f64::from)));
+        let ext = hi - lo;
+        let floor = 1e-3 * scene.diagonal();
+        let e = |k: usize| DVec3::AXES[k];
+        let mut out = Vec::with_capacity(6);
+        for axis in 0..3 {
+            let (a1, a2) = ((axis + 1) % 3, (axis + 2) % 3);
+            let gap = (margin * ext[axis]).max(floor);
+            let pad = ext[axis] + 2.0 * gap;
+            let rect = |along: f64| {
+                let mut c = lo - (e(a1) + e(a2)) * pad;
+                c[axis] = along;
+                let side = |k: usize| (ext[k] + 2.0 * pad).max(floor);
+                Rect::new(c, e(a1) * side(a1), e(a2) * side(a2))
+            };
+            let (low, high) = (rect(lo[axis] - gap)?, rect(hi[axis] + gap)?);
+            out.push(Self { uv: low, st: high });
+            out.push(Self { uv: high, st: low });
+        }
+        Ok(out)
+    }
+
     /// The line coordinates (u, v, s, t) of the ray `o + λ·d`, when it crosses the uv plane
     /// before the st plane (so that it runs the way the field was sampled) and both inside
     /// their rectangles; `None` otherwise (parallel to a plane, backwards, or outside).
     pub fn line(&self, o: DVec3, d: DVec3) -> Option<[f64; 4]> {
+        self.crossing(o, d).map(|(q, _)| q)
+    }
+
+    /// [`Slab::line`] and where (λ) the ray crosses the uv and st planes.
+    fn crossing(&self, o: DVec3, d: DVec3) -> Option<([f64; 4], [f64; 2])> {
         let (l_uv, uv) = self.uv.cross(o, d)?;
         let (l_st, st) = self.st.cross(o, d)?;
         if l_st <= l_uv {
             return None;
         }
         let q = [uv.x, uv.y, st.x, st.y];
-        q.iter().all(|x| (0.0..1.0).contains(x)).then_some(q)
+        q.iter()
+            .all(|x| (0.0..1.0).contains(x))
+            .then_some((q, [l_uv, l_st]))
     }
+
+    /// The line coordinates of the ray `o + λ·d` when this slab's answer is what the ray sees:
+    /// everything the ray can see lies on `seen` = `[from, to]` (its visible range clipped to
+    /// the scene's bounds) and `box_from` is where the whole line enters the bounds. The field
+    /// stores the first surface between the planes, so the visible range must lie between
+    /// them, and no surface may lie on the line between the uv plane and the near end of the
+    /// visible range (behind the camera, or nearer than its near plane).
+    pub fn answers(&self, o: DVec3, d: DVec3, seen: [f64; 2], box_from: f64) -> Option<[f64; 4]> {
+        let (q, [l_uv, l_st]) = self.crossing(o, d)?;
+        let [from, to] = seen;
+        let nothing_before = l_uv >= from || box_from >= from;
+        (l_uv <= from && to <= l_st && nothing_before).then_some(q)
+    }
+}
+
+/// Where the line `o + λ·d` (every λ) lies inside the box `[lo, hi]`: `(λ in, λ out)`, `None`
+/// when it misses it.
+pub fn clip_line(o: DVec3, d: DVec3, [lo, hi]: [DVec3; 2]) -> Option<(f64, f64)> {
+    let (mut a, mut b) = (f64::NEG_INFINITY, f64::INFINITY);
+    for k in 0..3 {
+        if d[k] == 0.0 {
+            if o[k] < lo[k] || o[k] > hi[k] {
+                return None;
+            }
+            continue;
+        }
+        let (t0, t1) = ((lo[k] - o[k]) / d[k], (hi[k] - o[k]) / d[k]);
+        a = a.max(t0.min(t1));
+        b = b.min(t0.max(t1));
+    }
+    (a <= b).then_some((a, b))
 }
 
 /// How geometry is grouped before the grid divides it.
@@ -206,15 +277,54 @@ fn components(scene: &Scene) -> (Vec<u32>, usize) {
     (groups, count)
 }
 
+/// How many cells divide each group's bounding box.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Grid {
+    /// The same number along x, y and z of every group.
+    Cells([u32; 3]),
+    /// Cells about this wide: `ceil(extent / size)` along each axis of each group (at least
+    /// one, at most `max` per axis).
+    Size { size: f64, max: u32 },
+}
+
+impl Grid {
+    fn check(&self) -> Result<()> {
+        match *self {
+            Grid::Cells(grid) => {
+                if grid.contains(&0) {
+                    return input_err!("grid must be positive along every axis, got {grid:?}");
+                }
+                if grid.iter().map(|&g| g as u64).product::<u64>() > 1 << 24 {
+                    return input_err!("grid {grid:?} has more than 2^24 cells per group");
+                }
+            }
+            Grid::Size { size, max } => {
+                if !(size.is_finite() && size > 0.0) || max == 0 || max > 256 {
+                    return input_err!(
+                        "a cell size must be positive and finite with 1 to 256 cells per axis, \
+                         got {size} and {max}"
+                    );
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The cells along x, y and z of a group whose bounds are `ext` wide.
+    fn dims(&self, ext: DVec3) -> [u32; 3] {
+        match *self {
+            Grid::Cells(grid) => grid,
+            Grid::Size { size, max } => ext
+                .to_array()
+                .map(|e| ((e / size).ceil() as u32).clamp(1, max)),
+        }
+    }
+}
+
 /// Divide the scene's geometry into cells: `grid` cells along x, y and z of each group's
 /// bounding box.
-pub fn cells(scene: &Scene, grid: [u32; 3], grouping: Grouping) -> Result<Cells> {
-    if grid.contains(&0) {
-        return input_err!("grid must be positive along every axis, got {grid:?}");
-    }
-    if grid.iter().map(|&g| g as u64).product::<u64>() > 1 << 24 {
-        return input_err!("grid {grid:?} has more than 2^24 cells per group");
-    }
+pub fn cells(scene: &Scene, grid: Grid, grouping: Grouping) -> Result<Cells> {
+    grid.check()?;
     let n = scene.triangle_count();
     let (group, groups) = match grouping {
         Grouping::Scene => (vec![0u32; n], usize::from(n > 0)),
@@ -243,14 +353,15 @@ pub fn cells(scene: &Scene, grid: [u32; 3], grouping: Grouping) -> Result<Cells>
             hi[g] = hi[g].max(p);
         }
     }
-    let dims = DVec3::new(grid[0] as f64, grid[1] as f64, grid[2] as f64);
+    let dims: Vec<[u32; 3]> = (0..groups).map(|g| grid.dims(hi[g] - lo[g])).collect();
+    let dims_f = |g: usize| DVec3::from_array(dims[g].map(f64::from));
     // (group, z, y, x) key of every triangle's cell.
     let keys: Vec<(u32, [u32; 3])> = (0..n)
         .map(|t| {
             let g = group[t] as usize;
             let size = (hi[g] - lo[g]).max(DVec3::splat(f64::MIN_POSITIVE));
-            let r = ((centroid(t) - lo[g]) / size * dims).floor();
-            let c = |k: usize| (r[k].max(0.0) as u32).min(grid[k] - 1);
+            let r = ((centroid(t) - lo[g]) / size * dims_f(g)).floor();
+            let c = |k: usize| (r[k].max(0.0) as u32).min(dims[g][k] - 1);
             (group[t], [c(0), c(1), c(2)])
         })
         .collect();
@@ -270,7 +381,7 @@ pub fn cells(scene: &Scene, grid: [u32; 3], grouping: Grouping) -> Result<Cells>
         if last != Some(key) {
             last = Some(key);
             let (g, c) = key;
-            let size = (hi[g as usize] - lo[g as usize]) / dims;
+            let size = (hi[g as usize] - lo[g as usize]) / dims_f(g as usize);
             let cell_lo = lo[g as usize] + size * DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64);
             out.table
                 .push([g as i32, c[0] as i32, c[1] as i32, c[2] as i32]);
@@ -296,6 +407,9 @@ pub struct Field {
     pub n: u32,
     /// (U, V, S, T, n) row-major cell ids, −1 empty.
     pub ids: Vec<i32>,
+    /// (U, V, S, T): how many distinct cells each sample's rays hit (at most 65535); more than
+    /// `n` means the sample overflowed.
+    pub hits: Vec<u16>,
     pub rays: u64,
     pub timings: Timings,
 }
@@ -349,8 +463,10 @@ fn beam_rays(
 }
 
 /// Ranks the cells one sample's rays hit (§3.3: the cells seen most often first, ties by
-/// cell index) and writes the first `out.len()` of them.
-fn rank_cells(tris: &[i32], cell_of: &[u32], out: &mut [i32]) {
+/// cell index) and writes the first `out.len()` of them; returns how many distinct cells were
+/// hit (more than `out.len()`: the sample overflowed, a line in its beam may see a cell it
+/// does not list).
+fn rank_cells(tris: &[i32], cell_of: &[u32], out: &mut [i32]) -> u16 {
     let mut hit: Vec<u32> = tris
         .iter()
         .filter(|&&t| t >= 0)
@@ -368,14 +484,50 @@ fn rank_cells(tris: &[i32], cell_of: &[u32], out: &mut [i32]) {
     for (slot, &(_, c)) in out.iter_mut().zip(&counts) {
         *slot = c as i32;
     }
+    counts.len().min(u16::MAX as usize) as u16
 }
 
-/// Sample the field (§3.3): `uv` and `st` samples per plane, `n` ids per sample.
+/// Sample the field of each slab (§3.3): `uv` and `st` samples per plane, `n` ids per sample.
 pub fn sample(
     scene: &Scene,
-    slab: &Slab,
+    slabs: &[Slab],
     uv: [u32; 2],
     st: [u32; 2],
+    cells: &Cells,
+    n: u32,
+    supersample: Supersample,
+) -> Result<Vec<Field>> {
+    let dims = [uv[0], uv[1], st[0], st[1]];
+    let per_axis = supersample.per_axis;
+    if dims.contains(&0) || n == 0 || per_axis == 0 {
+        return input_err!(
+            "uv {uv:?}, st {st:?}, ids_per_sample {n} and supersample {per_axis} must all be \
+             positive"
+        );
+    }
+    if cells.cell_of.len() != scene.triangle_count() {
+        return input_err!("the cells were made for another scene");
+    }
+    let samples: u64 = dims.iter().map(|&d| d as u64).product();
+    let per_sample = (per_axis as u64).pow(4);
+    if samples * n as u64 > 1 << 31 || samples * per_sample > 1 << 36 {
+        return input_err!(
+            "{samples} samples x {n} ids ({per_sample} rays each) is too large a field"
+        );
+    }
+    // Progress in slab samples (iu, iv, is, it) of every slab.
+    crate::process::add_total(samples * slabs.len() as u64);
+    slabs
+        .iter()
+        .map(|slab| sample_slab(scene, slab, dims, cells, n, supersample))
+        .collect()
+}
+
+/// One slab's field (checked by [`sample`]).
+fn sample_slab(
+    scene: &Scene,
+    slab: &Slab,
+    dims: [u32; 4],
     cells: &Cells,
     n: u32,
     supersample: Supersample,
@@ -385,23 +537,8 @@ pub fn sample(
         jitter,
     } = supersample;
     let total = Instant::now();
-    let dims = [uv[0], uv[1], st[0], st[1]];
-    if dims.contains(&0) || n == 0 || supersample == 0 {
-        return input_err!(
-            "uv {uv:?}, st {st:?}, ids_per_sample {n} and supersample {supersample} must all be \
-             positive"
-        );
-    }
-    if cells.cell_of.len() != scene.triangle_count() {
-        return input_err!("the cells were made for another scene");
-    }
     let samples: u64 = dims.iter().map(|&d| d as u64).product();
     let per_sample = (supersample as u64).pow(4);
-    if samples * n as u64 > 1 << 31 || samples * per_sample > 1 << 36 {
-        return input_err!(
-            "{samples} samples x {n} ids ({per_sample} rays each) is too large a field"
-        );
-    }
     let ss = supersample as usize;
     // The offset of sub-position j along one axis of one plane in sample `at`.
     let offset = |at: u64, j: usize| -> f64 {
@@ -416,12 +553,12 @@ pub fn sample(
     };
     let [du, dv, ds, dt] = dims.map(|d| d as usize);
     let mut ids = vec![-1i32; samples as usize * n as usize];
+    let mut hit_counts = vec![0u16; samples as usize];
     let mut cast_seconds = 0.0;
     let mut rank_seconds = 0.0;
     // One uv sample at a time: its (S·T·ss⁴) rays in one batch.
     let st_count = ds * dt;
-    // Progress in slab samples (iu, iv, is, it); one (iu, iv) row of them per step.
-    crate::process::add_total((du * dv * st_count) as u64);
+    // One (iu, iv) row of samples per progress step.
     for iu in 0..du {
         for iv in 0..dv {
             crate::process::check()?;
@@ -432,11 +569,13 @@ pub fn sample(
             cast_seconds += start.elapsed().as_secs_f64();
             let start = Instant::now();
             let per = ss.pow(4);
-            let base = (iu * dv + iv) * st_count * n as usize;
+            let row = (iu * dv + iv) * st_count;
+            let base = row * n as usize;
             ids[base..base + st_count * n as usize]
                 .par_chunks_mut(n as usize)
+                .zip(hit_counts[row..row + st_count].par_iter_mut())
                 .zip(hits.triangle.par_chunks(per))
-                .for_each(|(out, tris)| rank_cells(tris, &cells.cell_of, out));
+                .for_each(|((out, count), tris)| *count = rank_cells(tris, &cells.cell_of, out));
             rank_seconds += start.elapsed().as_secs_f64();
         }
     }
@@ -444,6 +583,7 @@ pub fn sample(
         dims,
         n,
         ids,
+        hits: hit_counts,
         rays: samples * per_sample,
         timings: Timings::from([
             ("rays", cast_seconds),
@@ -503,7 +643,7 @@ mod tests {
             uv: r(0.0),
             st: r(1.0),
         };
-        let c = cells(&scene, [2, 2, 2], Grouping::Objects).unwrap();
+        let c = cells(&scene, Grid::Cells([2, 2, 2]), Grouping::Objects).unwrap();
         assert_eq!(c.groups, 2);
         let hidden: Vec<i32> = (0..c.table.len())
             .filter(|&k| c.table[k][0] == c.table[c.cell_of[2] as usize][0])
@@ -513,12 +653,16 @@ mod tests {
             per_axis: 2,
             jitter: None,
         };
-        let field = sample(&scene, &slab, [4, 4], [4, 4], &c, 3, ss).unwrap();
+        let field = sample(&scene, &[slab], [4, 4], [4, 4], &c, 3, ss)
+            .unwrap()
+            .remove(0);
         let jittered = Supersample {
             jitter: Some(7),
             ..ss
         };
-        let again = sample(&scene, &slab, [4, 4], [4, 4], &c, 3, jittered).unwrap();
+        let again = sample(&scene, &[slab], [4, 4], [4, 4], &c, 3, jittered)
+            .unwrap()
+            .remove(0);
         assert!(again.ids.iter().all(|id| !hidden.contains(id)));
         assert!(field.ids.iter().all(|id| !hidden.contains(id)));
         assert!(field.ids.iter().any(|&id| id >= 0));
@@ -526,10 +670,44 @@ mod tests {
     }
 
     #[test]
+    fn six_slabs_hold_every_line_through_the_bounds() {
+        let (mut v, mut f) = quad(0.0, 1.0);
+        let (v2, f2) = quad(0.5, 0.3);
+        f.extend(f2.iter().map(|t| t.map(|i| i + v.len() as u32)));
+        v.extend(v2);
+        let scene = Scene::from_arrays(v, f, None, None).unwrap();
+        let slabs = Slab::six(&scene, 0.05).unwrap();
+        assert_eq!(slabs.len(), 6);
+        let [lo, hi] = scene.bounds().map(|b| DVec3::from_array(b.map(f64::from)));
+        let mut seed = 1u64;
+        let mut rand = || {
+            seed = super::super::epr::mix64(seed);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for _ in 0..2000 {
+            // A point in the bounds, a direction, and an origin outside the bounds behind it.
+            let p = lo + (hi - lo) * DVec3::new(rand(), rand(), rand());
+            let d = DVec3::new(rand() - 0.5, rand() - 0.5, rand() - 0.5).normalize();
+            let o = p - d * 10.0;
+            let (a, b) = clip_line(o, d, [lo, hi]).unwrap();
+            let held = slabs
+                .iter()
+                .filter(|s| s.answers(o, d, [a, b], a).is_some());
+            assert!(held.count() >= 1, "{o} {d}");
+        }
+        // From inside the bounds nothing behind the camera may be answered.
+        let o = (lo + hi) / 2.0;
+        let d = DVec3::new(0.1, 0.2, 1.0);
+        let (a, b) = clip_line(o, d, [lo, hi]).unwrap();
+        assert!(slabs.iter().all(|s| s.answers(o, d, [0.0, b], a).is_none()));
+        assert!(clip_line(DVec3::new(5.0, 5.0, 5.0), DVec3::X, [lo, hi]).is_none());
+    }
+
+    #[test]
     fn cells_partition_the_triangles() {
         let (v, f) = quad(0.0, 1.0);
         let scene = Scene::from_arrays(v, f, None, None).unwrap();
-        let c = cells(&scene, [4, 4, 1], Grouping::Scene).unwrap();
+        let c = cells(&scene, Grid::Cells([4, 4, 1]), Grouping::Scene).unwrap();
         assert_eq!(c.offsets.last(), Some(&2));
         let mut all = c.triangles.clone();
         all.sort();

@@ -48,9 +48,26 @@ pub fn default_slab<'py>(
     slab_array(py, &s)
 }
 
+/// The six slabs around a scene (both directions along each axis), as a (6, 2, 3, 3) array.
+#[pyfunction]
+#[pyo3(signature = (scene, margin))]
+pub fn six_slabs<'py>(
+    py: Python<'py>,
+    scene: &PyScene,
+    margin: f64,
+) -> PyResult<Bound<'py, PyAny>> {
+    let slabs = Slab::six(&scene.inner, margin).py_err(py)?;
+    let rows: Vec<f64> = slabs
+        .iter()
+        .flat_map(|s| [s.uv.origin, s.uv.u, s.uv.v, s.st.origin, s.st.u, s.st.v])
+        .flat_map(|p| p.to_array())
+        .collect();
+    array(py, rows, &[slabs.len(), 2, 3, 3])
+}
+
 /// Cells and one sampled field per slab.
 #[pyfunction]
-#[pyo3(signature = (scene, slabs, uv, st, grid, grouping, ids_per_sample, supersample, jitter, progress=None))]
+#[pyo3(signature = (scene, slabs, uv, st, grid, cell_size, grouping, ids_per_sample, supersample, jitter, progress=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn visibility_field<'py>(
     py: Python<'py>,
@@ -59,6 +76,7 @@ pub fn visibility_field<'py>(
     uv: (u32, u32),
     st: (u32, u32),
     grid: (u32, u32, u32),
+    cell_size: Option<f64>,
     grouping: &str,
     ids_per_sample: u32,
     supersample: u32,
@@ -87,27 +105,39 @@ pub fn visibility_field<'py>(
         return Err(input(py, "at least one slab is needed".to_string()));
     }
     let s = scene.inner.clone();
-    let (cells, fields, sorted, cell_seconds) =
+    let (cells, fields, sorted, cell_seconds, bvh_seconds) =
         super::run_with(py, progress, || -> crate::error::Result<_> {
             let start = std::time::Instant::now();
-            let cells = vf::cells(&s, [grid.0, grid.1, grid.2], grouping)?;
+            let grid = match cell_size {
+                // `grid` bounds the cells per axis when they are sized.
+                Some(size) => vf::Grid::Size {
+                    size,
+                    max: grid.0.max(grid.1).max(grid.2),
+                },
+                None => vf::Grid::Cells([grid.0, grid.1, grid.2]),
+            };
+            let cells = vf::cells(&s, grid, grouping)?;
             let sorted = s.permuted(&cells.triangles)?;
             let cell_seconds = start.elapsed().as_secs_f64();
-            let fields = slabs
-                .iter()
-                .map(|sl| {
-                    vf::sample(
-                        &s,
-                        sl,
-                        [uv.0, uv.1],
-                        [st.0, st.1],
-                        &cells,
-                        ids_per_sample,
-                        supersample,
-                    )
-                })
-                .collect::<crate::error::Result<Vec<_>>>()?;
-            Ok((cells, fields, sorted, cell_seconds))
+            let fields = vf::sample(
+                &s,
+                &slabs,
+                [uv.0, uv.1],
+                [st.0, st.1],
+                &cells,
+                ids_per_sample,
+                supersample,
+            )?;
+            // The fallback traces the cell-sorted scene: its BVH is part of the precomputation.
+            let start = std::time::Instant::now();
+            rf::prepare_fallback(&sorted)?;
+            Ok((
+                cells,
+                fields,
+                sorted,
+                cell_seconds,
+                start.elapsed().as_secs_f64(),
+            ))
         })?;
     let d = PyDict::new(py);
     let c = cells.table.len();
@@ -126,29 +156,31 @@ pub fn visibility_field<'py>(
         },
     )?;
     d.set_item("cell_seconds", cell_seconds)?;
-    let mut out = Vec::new();
-    for (f, sl) in fields.into_iter().zip(&slabs) {
-        let fd = PyDict::new(py);
-        let shape = [
-            f.dims[0] as usize,
-            f.dims[1] as usize,
-            f.dims[2] as usize,
-            f.dims[3] as usize,
-            f.n as usize,
-        ];
-        fd.set_item("ids", array(py, f.ids, &shape)?)?;
-        fd.set_item("slab", slab_array(py, sl)?)?;
-        fd.set_item("rays", f.rays)?;
-        fd.set_item("timings", super::convert::timings(py, &f.timings)?)?;
-        out.push(fd);
+    d.set_item("bvh_seconds", bvh_seconds)?;
+    // All slabs share their dimensions: one (K, U, V, S, T, n) array of ids, one (K, U, V, S,
+    // T) of the cells each sample's rays hit.
+    let k = fields.len();
+    let dims = [uv.0, uv.1, st.0, st.1].map(|x| x as usize);
+    let rays: u64 = fields.iter().map(|f| f.rays).sum();
+    let mut timings = crate::types::Timings::new();
+    for f in &fields {
+        timings.merge(&f.timings);
     }
-    d.set_item("fields", out)?;
+    let (ids, hits): (Vec<Vec<i32>>, Vec<Vec<u16>>) =
+        fields.into_iter().map(|f| (f.ids, f.hits)).unzip();
+    let n = ids_per_sample as usize;
+    let shape = [k, dims[0], dims[1], dims[2], dims[3], n];
+    d.set_item("ids", array(py, ids.concat(), &shape)?)?;
+    d.set_item("cells_hit", array(py, hits.concat(), &shape[..5])?)?;
+    d.set_item("rays", rays)?;
+    d.set_item("timings", super::convert::timings(py, &timings)?)?;
     Ok(d)
 }
 
-/// Resample the fields from a camera and render the marked cells.
+/// Resample the fields from a camera, trace the pixels they cannot answer (with `fallback`),
+/// and render the marked cells.
 #[pyfunction]
-#[pyo3(signature = (sorted_scene, triangles, offsets, slabs, ids, camera, interpolate, subsample))]
+#[pyo3(signature = (sorted_scene, triangles, offsets, slabs, ids, cells_hit, camera, interpolate, subsample, fallback, trust))]
 #[allow(clippy::too_many_arguments)]
 pub fn field_view<'py>(
     py: Python<'py>,
@@ -156,10 +188,13 @@ pub fn field_view<'py>(
     triangles: PyReadonlyArray1<'py, u32>,
     offsets: PyReadonlyArray1<'py, u32>,
     slabs: Vec<Bound<'py, PyAny>>,
-    ids: Vec<PyReadonlyArrayDyn<'py, i32>>,
+    ids: PyReadonlyArrayDyn<'py, i32>,
+    cells_hit: PyReadonlyArrayDyn<'py, u16>,
     camera: &PyCamera,
     interpolate: &str,
     subsample: u32,
+    fallback: bool,
+    trust: u32,
 ) -> PyResult<Bound<'py, PyDict>> {
     let Some(interp) = Interpolate::parse(interpolate) else {
         return Err(input(
@@ -167,58 +202,93 @@ pub fn field_view<'py>(
             format!("interpolate must be 'none', 'uv', 'st' or 'uv+st', got {interpolate:?}"),
         ));
     };
-    if slabs.len() != ids.len() {
-        return Err(input(py, "one id array per slab".to_string()));
-    }
-    let mut fields = Vec::new();
-    for (s, a) in slabs.iter().zip(&ids) {
-        let shape = a.shape();
-        if shape.len() != 5 {
-            return Err(input(
-                py,
-                format!("field ids must be (U, V, S, T, n), got shape {shape:?}"),
-            ));
-        }
-        let f = Field {
-            dims: [shape[0], shape[1], shape[2], shape[3]].map(|d| d as u32),
-            n: shape[4] as u32,
-            ids: a.as_array().iter().copied().collect(),
-            rays: 0,
-            timings: crate::types::Timings::new(),
-        };
-        fields.push((slab(py, s)?, f));
-    }
+    let fields = fields(py, &slabs, &ids, &cells_hit)?;
     let triangles = triangles.as_array().to_vec();
     let offsets = offsets.as_array().to_vec();
     let cell_count = offsets.len().saturating_sub(1);
     let scene = sorted_scene.inner.clone();
     let cam = camera.inner.clone();
-    let (marks, img, drawn, resample_seconds, render_seconds) =
-        super::run(py, || -> crate::error::Result<_> {
-            let start = std::time::Instant::now();
-            let refs: Vec<(Slab, &Field)> = fields.iter().map(|(s, f)| (*s, f)).collect();
-            let marks = rf::resample(&refs, cell_count, &cam, interp, subsample)?;
-            let resample_seconds = start.elapsed().as_secs_f64();
-            let start = std::time::Instant::now();
-            let (img, drawn) =
-                rf::render_marked(&scene, &triangles, &offsets, &marks.marked, &cam)?;
-            Ok((
-                marks,
-                img,
-                drawn,
-                resample_seconds,
-                start.elapsed().as_secs_f64(),
-            ))
-        })?;
+    let how = rf::Resampling {
+        interpolate: interp,
+        subsample,
+        conservative: fallback.then(|| rf::scene_box(&scene)),
+        trust,
+    };
+    let (marks, added, img, drawn, seconds) = super::run(py, || -> crate::error::Result<_> {
+        let start = std::time::Instant::now();
+        let refs: Vec<(Slab, &Field)> = fields.iter().map(|(s, f)| (*s, f)).collect();
+        let mut marks = rf::resample(&refs, cell_count, &cam, how)?;
+        let resample_seconds = start.elapsed().as_secs_f64();
+        let start = std::time::Instant::now();
+        let pixels = std::mem::take(&mut marks.fallback);
+        let added = rf::trace_fallback(&scene, &offsets, &cam, pixels, &mut marks.marked)?;
+        let fallback_seconds = start.elapsed().as_secs_f64();
+        let start = std::time::Instant::now();
+        let (img, drawn) = rf::render_marked(&scene, &triangles, &offsets, &marks.marked, &cam)?;
+        let seconds = [
+            resample_seconds,
+            fallback_seconds,
+            start.elapsed().as_secs_f64(),
+        ];
+        Ok((marks, added, img, drawn, seconds))
+    })?;
     let d = PyDict::new(py);
     d.set_item("marked", array(py, marks.marked, &[cell_count])?)?;
     d.set_item("pixels", marks.pixels)?;
     d.set_item("outside", marks.outside)?;
+    d.set_item("overflowed", marks.overflowed)?;
+    d.set_item("fallback_cells", added)?;
     d.set_item("triangles_drawn", drawn)?;
-    d.set_item("resample_seconds", resample_seconds)?;
-    d.set_item("render_seconds", render_seconds)?;
+    d.set_item("resample_seconds", seconds[0])?;
+    d.set_item("fallback_seconds", seconds[1])?;
+    d.set_item("render_seconds", seconds[2])?;
     d.set_item("image", super::render::images_dict(py, img)?)?;
     Ok(d)
+}
+
+/// The fields of a (K, U, V, S, T, n) id array and its (K, U, V, S, T) counts of cells hit,
+/// one per slab.
+fn fields(
+    py: Python<'_>,
+    slabs: &[Bound<'_, PyAny>],
+    ids: &PyReadonlyArrayDyn<'_, i32>,
+    hits: &PyReadonlyArrayDyn<'_, u16>,
+) -> PyResult<Vec<(Slab, Field)>> {
+    let shape = ids.shape().to_vec();
+    if shape.len() != 6 || shape[0] != slabs.len() || hits.shape() != &shape[..5] {
+        return Err(input(
+            py,
+            format!(
+                "field ids must be (K, U, V, S, T, n) and cells_hit (K, U, V, S, T) for K = {} \
+                 slabs, got {shape:?} and {:?}",
+                slabs.len(),
+                hits.shape()
+            ),
+        ));
+    }
+    let ids = ids.as_array();
+    let hits = hits.as_array();
+    let mut out = Vec::with_capacity(slabs.len());
+    for (k, s) in slabs.iter().enumerate() {
+        let f = Field {
+            dims: [shape[1], shape[2], shape[3], shape[4]].map(|d| d as u32),
+            n: shape[5] as u32,
+            ids: ids
+                .index_axis(numpy::ndarray::Axis(0), k)
+                .iter()
+                .copied()
+                .collect(),
+            hits: hits
+                .index_axis(numpy::ndarray::Axis(0), k)
+                .iter()
+                .copied()
+                .collect(),
+            rays: 0,
+            timings: crate::types::Timings::new(),
+        };
+        out.push((slab(py, s)?, f));
+    }
+    Ok(out)
 }
 
 /// Render only the marked cells (of the cell-sorted scene) from a camera: the depth image's

@@ -146,6 +146,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(effects::reflections, m)?)?;
     m.add_function(wrap_pyfunction!(field::default_slab, m)?)?;
     m.add_function(wrap_pyfunction!(field::visibility_field, m)?)?;
+    m.add_function(wrap_pyfunction!(field::six_slabs, m)?)?;
     m.add_function(wrap_pyfunction!(field::field_view, m)?)?;
     m.add_function(wrap_pyfunction!(field::render_cells, m)?)?;
     m.add_class::<impostors::PyImpostors>()?;
