@@ -122,3 +122,26 @@ def test_bad_input_is_refused(ball):
         ss.tradeoff(ball, "impostors", knobs={"octree_depth": []})
     with pytest.raises(ss.InputError, match="executor"):
         ss.tradeoff(ball, "impostors", knobs=KNOBS, camera=CAM, executor=object(), progress=False)
+
+
+def test_the_visibility_field_sweeps_quality_with_missed_cells_as_the_error():
+    """The default sweep is the quality knob; each row carries its missed cells (the error),
+    holes, coverage and build time, and the paper's resampling (fallback off, one slab) misses
+    at least as much as the conservative default."""
+    ball = ss.scenes.icosphere(3)
+    cam = ss.Camera.look_at((-4.0, 0.3, 0.2), (0, 0, 0), (0, 0, 1), yfov=0.7, width=48, height=48)
+    assert list(ss._tradeoff.KNOBS["visibility_field"]) == ["quality"]
+    knobs = {"quality": ["fast", "exact"], "resolution": [6]}
+    t = ss.tradeoff(
+        ball, "visibility_field", knobs=knobs, camera=cam, progress=False, as_frame=False
+    )
+    assert list(t["quality"]) == ["fast", "exact"]
+    assert ((t["error"] >= 0) & (t["error"] <= 1)).all()
+    assert (t["covered"] > 0).all() and t["hole_fraction"][1] <= 0.01
+    assert t["error"][1] <= t["error"][0]  # exact traces every mixed sample's lines
+    assert (t["build_seconds"] > 0).all()
+    paper = {"resolution": [6], "fallback": [False], "single_slab": [True], "ids_per_sample": [1]}
+    p = ss.tradeoff(
+        ball, "visibility_field", knobs=paper, camera=cam, progress=False, as_frame=False
+    )
+    assert p["error"][0] >= t["error"].max()

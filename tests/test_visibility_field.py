@@ -262,15 +262,19 @@ def test_the_experiment_writes_tables_and_figures(tmp_path):
 
     experiment.main(
         ["--scenes", "sphere", "--resolutions", "6", "--ids", "1", "2", "--subsamples", "1", "2"]
-        + ["--frames", "2", "--size", "32", "--out", str(tmp_path)]
+        + ["--frames", "2", "--size", "32", "--qualities", "fast", "--out", str(tmp_path)]
     )
     md = (tmp_path / "visibility_field.md").read_text()
-    assert "| sphere | 6^4 | 2 | uv+st | 1 |" in md and "| sphere | 6^4 | 1 | none | 2 |" in md
+    assert "| sphere (paper, 1 slab) | 6^4 | 2 | uv+st | 1 |" in md
+    assert "| sphere (paper, 1 slab) | 6^4 | 1 | none | 2 |" in md
+    assert "| sphere | fast | 6 x 16^4 | 8 |" in md
+    # One row per view of the default field.
+    assert len((tmp_path / "visibility_field_defaults.csv").read_text().splitlines()) == 1 + 6
     # 2 frames x (2 ids x 4 interpolations + 1 subsampled setting).
     assert len((tmp_path / "visibility_field.csv").read_text().splitlines()) == 1 + 2 * 9
     for fig in ("fig8_sphere.png", "fig9_sphere.png"):
         assert (tmp_path / fig).stat().st_size > 10_000
-    # Three 32 x 32 tiles: full rendering, field defaults, field 2 ids uv+st.
+    # Four 32 x 32 tiles: full rendering, paper field 1 id, 2 ids uv+st, the default field.
     assert (tmp_path / "fig13_sphere.png").stat().st_size > 300
 
 

@@ -293,7 +293,11 @@ def tradeoff(
         "impostors"}
     knobs : dict of str to list, optional
         The values to sweep per knob (every combination runs); by default :data:`KNOBS`.
-        Knobs not named keep their defaults.
+        Knobs not named keep their defaults. The visibility field's: ``quality`` (the
+        default sweep: fast, balanced, exact), ``resolution`` (samples per plane axis),
+        ``ids_per_sample``, ``interpolate``, ``fallback`` (False: the paper's resampling) and
+        ``single_slab`` (True: the paper's one slab instead of six); its rows add
+        ``hole_fraction``, ``covered`` and ``cells_fraction``.
     reference : optional
         What the error is measured against (see :data:`ERRORS`); computed by default: shadows
         by ray casting, reflections by MVR at 4x, impostors by the triangles. The visibility
