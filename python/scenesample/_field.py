@@ -268,8 +268,8 @@ def default_settings(scene: Scene, slabs: Sequence[Slab], quality: str = "balanc
     ============  ====  ===  ====  ======================
     quality        N     r    n     t
     ============  ====  ===  ====  ======================
-    ``fast``       16    2    8    n (only overflow)
-    ``balanced``   20    3    12   1 (only pure samples)
+    ``fast``       16    2    8    n (no sample read overflowed)
+    ``balanced``   20    3    12   1 (every sample read saw one cell)
     ``exact``      24    3    16   1
     ============  ====  ===  ====  ======================
 
@@ -565,9 +565,11 @@ def field_view(
     scene's bounds) lies between the two with nothing on the line between the uv plane and
     the near end. The cells stored at the sample holding (u, v, s, t) are marked
     (``interpolate="uv"``: also the 2 x 2 samples around (u, v); ``"st"``: around (s, t);
-    ``"uv+st"``: the 16 around both, §4.1); several slabs' answers are merged. A pixel no slab
-    holds, or only through samples that overflowed, is traced instead (``fallback``): its ray
-    is cast through the scene and the cell it hits is marked. Then only the marked cells'
+    ``"uv+st"``: the 16 around both, §4.1); several slabs' answers are merged. A slab answers
+    only when every sample it reads for the line hit at most ``trust`` cells. A pixel no slab
+    answers is traced instead (``fallback``): its ray is cast through the scene and the cell
+    it hits is marked (and, when it lies on a triangle's edge, the cells of four rays a 32nd
+    of a pixel around it, as the raster may pick the neighbour). Then only the marked cells'
     triangles are rasterized on the GPU (faces are kept sorted by cell: one draw per run of
     marked cells).
 
@@ -589,10 +591,11 @@ def field_view(
         every slab the line crosses the right way answers it, overflowed samples included,
         and a line no slab crosses marks nothing (holes may appear).
     trust : int, optional
-        A sample answers a line only when its rays hit at most this many cells (with
-        ``fallback``). Default: the field's ``settings["trust"]``, else its ids per sample
-        (the sample did not overflow). 1 (``quality="exact"``): only samples that saw one
-        cell answer, every line at a cell's border is traced.
+        A slab answers a line only when every sample it reads (the one holding the line and
+        its interpolation neighbours) hit at most this many cells (with ``fallback``).
+        Default: the field's ``settings["trust"]``, else its ids per sample (no sample read
+        overflowed). 1 (``quality="balanced"`` and ``"exact"``): only where every sample read
+        saw a single cell; lines near a cell border are traced.
 
     Returns
     -------

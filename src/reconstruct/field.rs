@@ -7,10 +7,17 @@
 //! (`Slab::line`). Without interpolation the sample holding that point is read; with it, its
 //! neighbours too (§4.1): the 2 × 2 samples around (u, v) for `Uv`, around (s, t) for `St`, the
 //! 16 around both for `UvSt` (always including the nearest). Every id stored there is marked.
-//! A pixel whose line runs from the st plane toward the uv plane, runs parallel to either, or
-//! misses either rectangle marks nothing; several slabs add their marks. The paper rasterizes
-//! the two projected planes in hardware to get (u, v, s, t) per pixel; here the same linear
-//! intersection runs on the CPU.
+//! In the paper's rule a pixel whose line runs from the st plane toward the uv plane, runs
+//! parallel to either, or misses either rectangle marks nothing; several slabs add their marks.
+//! The paper rasterizes the two projected planes in hardware to get (u, v, s, t) per pixel;
+//! here the same linear intersection runs on the CPU.
+//!
+//! Conservative resampling (this package's, not the paper's): a slab answers a pixel only when
+//! everything the pixel can see lies between its planes with no surface between the uv plane
+//! and the near end ([`Slab::answers`]), and only when every sample read saw at most `trust`
+//! cells; the other pixels are traced through the cell-sorted scene ([`trace_fallback`]) and
+//! the cells they hit are marked, so a camera no slab serves, or a sample that could not list
+//! every cell its beam saw, never leaves a hole.
 //!
 //! Rendering: the scene's faces are kept sorted by cell (`Cells::triangles`), so the marked
 //! cells are ranges of faces, drawn as one draw call per run of consecutive marked cells.
@@ -56,9 +63,10 @@ pub struct Resampling {
     /// Side of the pixel blocks that share one line (>= 1).
     pub subsample: u32,
     /// The scene's bounds: answer a pixel only from a slab whose answer is what the pixel sees
-    /// ([`Slab::answers`]) and from a sample whose rays hit at most `trust` cells (`n`: the
-    /// sample did not overflow), and list the other pixels for the fallback. `None`: the
-    /// paper's rule, every slab the line crosses the right way.
+    /// ([`Slab::answers`]) and when every sample it reads (the one holding the line and its
+    /// interpolation neighbours) hit at most `trust` cells (`n`: none overflowed; 1: all saw
+    /// one cell each), and list the other pixels for the fallback. `None`: the paper's rule,
+    /// every slab the line crosses the right way.
     pub conservative: Option<[DVec3; 2]>,
     pub trust: u32,
 }
@@ -82,9 +90,9 @@ pub struct Marks {
 /// How the field answered one pixel's line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Answer {
-    /// From a slab whose nearest sample did not overflow (or the line sees nothing).
+    /// From a slab whose samples are trusted (or the line sees nothing).
     Field,
-    /// Slabs hold the line, but every one's nearest sample hit more cells than trusted.
+    /// Slabs hold the line, but each reads a sample that hit more cells than trusted.
     Overflowed,
     /// No slab holds the line.
     Outside,
@@ -115,9 +123,9 @@ fn sample_index([_, dv, ds, dt]: [u32; 4], [iu, iv, is, it]: [u32; 4]) -> usize 
     ((d(iu) * d(dv) + d(iv)) * d(ds) + d(is)) * d(dt) + d(it)
 }
 
-/// The cells stored at the samples around the line `q` (with its neighbours, per
-/// `interpolate`), appended to `hit`; returns how many cells the rays of the sample holding
-/// `q` hit.
+/// The cells stored at the samples around the line `q` (the one holding it and, per
+/// `interpolate`, its neighbours), appended to `hit`; returns the most cells any of those
+/// samples' rays hit.
 fn read_samples(f: &Field, q: [f64; 4], (do_uv, do_st): (bool, bool), hit: &mut Vec<u32>) -> u16 {
     let [du, dv, ds, dt] = f.dims;
     let (us, nu) = around(q[0], du, do_uv);
@@ -125,28 +133,20 @@ fn read_samples(f: &Field, q: [f64; 4], (do_uv, do_st): (bool, bool), hit: &mut 
     let (ss, ns) = around(q[2], ds, do_st);
     let (ts, nt) = around(q[3], dt, do_st);
     let n = f.n as usize;
+    let mut most = 0u16;
     for &iu in &us[..nu] {
         for &iv in &vs[..nv] {
             for &is in &ss[..ns] {
                 for &it in &ts[..nt] {
                     let s = sample_index(f.dims, [iu, iv, is, it]);
+                    most = most.max(f.hits.get(s).copied().unwrap_or(u16::MAX));
                     let ids = &f.ids[s * n..(s + 1) * n];
                     hit.extend(ids.iter().filter(|&&id| id >= 0).map(|&id| id as u32));
                 }
             }
         }
     }
-    let nearest = |x: f64, n: u32| around(x, n, false).0[0];
-    let s = sample_index(
-        f.dims,
-        [
-            nearest(q[0], du),
-            nearest(q[1], dv),
-            nearest(q[2], ds),
-            nearest(q[3], dt),
-        ],
-    );
-    f.hits.get(s).copied().unwrap_or(u16::MAX)
+    most
 }
 
 /// Answer the line `o + λ·d` from the fields, appending the cells read to `hit`.
