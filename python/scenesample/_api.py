@@ -38,7 +38,7 @@ def discretize(
 @overload
 def discretize(
     scene: Scene, cameras: None = ..., *, method: Literal["visibility_field"], **options: Any
-) -> Union[VisibilityField, list[VisibilityField]]: ...
+) -> VisibilityField: ...
 @overload
 def discretize(
     scene: Scene, cameras: None = ..., *, method: Literal["impostors"], **options: Any
@@ -48,7 +48,7 @@ def discretize(
     cameras: Cameras = None,
     method: str = "conventional",
     **options: Any,
-) -> Union[DepthImages, Points, VisibilityField, list[VisibilityField], Impostors]:
+) -> Union[DepthImages, Points, VisibilityField, Impostors]:
     """Sample a scene: with depth images (non-redundant-rendering.txt §3, §6.1), with points
     for many off-screen views (eye-based-point-rendering.txt §3), with a visibility field
     (visibility-field.txt §3) or with impostors (multi-cell-orthographic-impostors.txt §3.1).
@@ -70,16 +70,16 @@ def discretize(
         (:func:`~scenesample.methods.epr`: ``eye`` (required), ``reflectors``, ``light``,
         ``light_samples``, ``rho_scale`` (epr only), ``seed``, ``resolution``, ``progress``),
         ``"visibility_field"`` (:func:`~scenesample.methods.visibility_field`: ``slab``,
-        ``uv``, ``st``, ``grid``, ``ids_per_sample``, ``supersample``, ``jitter``, ``seed``,
-        ``progress``), ``"impostors"`` (:func:`~scenesample.methods.impostors`:
-        ``octree_depth``, ``subdivisions``, ``resolution``, ``projection``, ``fov``, ``grow``,
-        ``progress``).
+        ``quality``, ``uv``, ``st``, ``grid``, ``ids_per_sample``, ``supersample``,
+        ``jitter``, ``seed``, ``memory_limit``, ``progress``), ``"impostors"``
+        (:func:`~scenesample.methods.impostors`: ``octree_depth``, ``subdivisions``,
+        ``resolution``, ``projection``, ``fov``, ``grow``, ``progress``).
     **options
         The method's keyword options.
 
     Returns
     -------
-    DepthImages, Points, VisibilityField (a list for several slabs) or Impostors
+    DepthImages, Points, VisibilityField (all its slabs in one) or Impostors
 
     Raises
     ------
@@ -112,12 +112,12 @@ def reconstruct(
 ) -> Mesh: ...
 @overload
 def reconstruct(
-    source: Union[VisibilityField, Sequence[VisibilityField]], method: Camera, **options: Any
+    source: VisibilityField, method: Camera, **options: Any
 ) -> FieldView: ...
 @overload
 def reconstruct(source: Impostors, method: Camera, **options: Any) -> ImpostorView: ...
 def reconstruct(
-    source: Union[DepthImages, VisibilityField, Sequence[VisibilityField], Impostors],
+    source: Union[DepthImages, VisibilityField, Impostors],
     method: Union[str, Camera] = "hybrid",
     **options: Any,
 ) -> Union[Mesh, FieldView, ImpostorView]:
@@ -128,9 +128,9 @@ def reconstruct(
     - ``reconstruct(images, "mesh" | "hybrid" | "points", **options)``: see
       :func:`~scenesample.methods.mesh`, :func:`~scenesample.methods.hybrid` (``scene``,
       ``offset``) and :func:`~scenesample.methods.points`. Returns a :class:`Mesh`.
-    - ``reconstruct(field, camera, **options)`` with a :class:`VisibilityField` (or the list
-      one ``discretize`` call made): see :func:`~scenesample.methods.field_view`
-      (``interpolate``, ``subsample``). Returns a :class:`FieldView`.
+    - ``reconstruct(field, camera, **options)`` with a :class:`VisibilityField`: see
+      :func:`~scenesample.methods.field_view` (``interpolate``, ``subsample``, ``fallback``,
+      ``trust``). Returns a :class:`FieldView`.
     - ``reconstruct(impostors, camera, **options)``: see
       :func:`~scenesample.methods.impostor_view` (``triangle_budget``, ``scene``,
       ``screen_threshold``). Returns an :class:`ImpostorView`.

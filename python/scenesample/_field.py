@@ -71,7 +71,7 @@ class Slab:
     def around(
         cls, scene: Scene, axis: Optional[int] = None, margin: float = 0.05, widen: float = 0.25
     ) -> Slab:
-        """The default slab: planes perpendicular to ``axis`` (default: the bounds' longest
+        """The paper's single slab: planes perpendicular to ``axis`` (default: the bounds' longest
         axis), uv ``margin`` of the scene's extent along it before the bounds' low side, st as
         far beyond the high side, both covering the bounds' cross-section widened on every side
         by ``widen`` times the bounds' longest extent. Cameras on the low side looking along
@@ -190,9 +190,10 @@ class FieldView:
         ids are the scene's).
     camera : Camera
     covered : float
-        The fraction of resampled pixels the field answered (lines that see nothing count as
-        answered); the others were traced (``fallback``) or, with ``fallback=False``, left to
-        chance.
+        The fraction of resampled pixels the field answered; the others were traced
+        (``fallback``) or, with ``fallback=False``, marked nothing. With the fallback a line
+        that sees nothing (misses the scene's bounds) counts as answered; without it, only
+        lines some slab crosses the right way do.
     fallback_pixels : int
         Resampled pixels traced because no slab holds their line (outside every slab, or the
         camera inside the scene's bounds) or every sample holding it overflowed.

@@ -34,7 +34,7 @@ fn slab_array<'py>(py: Python<'py>, s: &Slab) -> PyResult<Bound<'py, PyAny>> {
     array(py, rows, &[2, 3, 3])
 }
 
-/// The default slab around a scene, as a (2, 3, 3) array.
+/// The paper's single slab around a scene (`Slab::around`), as a (2, 3, 3) array.
 #[pyfunction]
 #[pyo3(signature = (scene, axis, margin, widen))]
 pub fn default_slab<'py>(
