@@ -23,7 +23,8 @@ def test_bench_all_quick_writes_a_summary(tmp_path, capsys):
         "non-redundant / conventional time",
         "EPR speedup over MVR",
         "iVIR / EPR points",
-        "field (1 id) speedup over drawing everything",
+        "field speedup over drawing everything, default (balanced) (turtles",
+        "field speedup over drawing everything, paper, 1 slab, 1 id (turtles",
     ):
         assert row in md, row
     assert md.count("| met |") + md.count("| NOT met |") >= 14

@@ -240,29 +240,32 @@ def _field_configs(scene: ss.Scene) -> dict[str, tuple[Any, dict]]:
 
     return {
         "paper, 1 slab, 1 id": (
-            paper_field(scene, 16, 1),
+            paper_field(scene, 16, 1, progress=False),
             {"interpolate": "none", "fallback": False},
         ),
         "paper, 1 slab, 5 ids, uv+st": (
-            paper_field(scene, 16, 5),
+            paper_field(scene, 16, 5, progress=False),
             {"interpolate": "uv+st", "fallback": False},
         ),
-        "default (balanced)": (ss.discretize(scene, method="visibility_field"), {}),
+        "default (balanced)": (
+            ss.discretize(scene, method="visibility_field", progress=False),
+            {},
+        ),
     }
 
 
-def bench_field(size: int, repeats: int) -> dict[str, Any]:
+def bench_field(size: int, repeats: int, real: bool = True) -> dict[str, Any]:
     """Culling with the visibility field against drawing everything (the same GPU depth-image
     pipeline) and against visibility tracing, per configuration and view set, in interleaved
     rounds: best seconds per view, median per-round speedups, and beside each speedup the
     worst view's missed cells (fraction of the visible ones) and hole pixels (fraction of the
     pixels that see the scene). Scenes: ``scenes.turtles()`` and, when ``../shared/scenes``
-    is here, ``stanford_bunny`` (a real scan) from six directions."""
+    is here and ``real``, ``stanford_bunny`` (a real scan) from six directions."""
     import warnings
 
     scenes = [("turtles", ss.scenes.turtles())]
     bunny = ss.scenes.shared_scene_files().get("stanford_bunny")
-    if bunny is not None:
+    if bunny is not None and real:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ss.SceneWarning)
             scenes.append(("stanford_bunny", ss.Scene.load(bunny)))
@@ -492,7 +495,7 @@ def main(argv: Optional[list[str]] = None) -> None:
         print(report_nonredundant(results["nonredundant"], device), flush=True)
         results["epr"] = bench_epr(128 if a.quick else 512, 10 if a.quick else a.spheres, 1)
         print(report_epr(results["epr"], device), flush=True)
-        results["field"] = bench_field(128 if a.quick else 256, a.repeats)
+        results["field"] = bench_field(128 if a.quick else 256, a.repeats, real=not a.quick)
         print(report_field(results["field"], device), flush=True)
         _emit(summary(results, device), a.out or "out/bench/all.md", results, a.json)
         return

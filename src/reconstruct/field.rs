@@ -16,8 +16,9 @@
 //! everything the pixel can see lies between its planes with no surface between the uv plane
 //! and the near end ([`Slab::answers`]), and only when every sample read saw at most `trust`
 //! cells; the other pixels are traced through the cell-sorted scene ([`trace_fallback`]) and
-//! the cells they hit are marked, so a camera no slab serves, or a sample that could not list
-//! every cell its beam saw, never leaves a hole.
+//! the cells they hit are marked: a camera no slab serves, or a sample that saw several cells,
+//! leaves no hole; holes remain only where a cell smaller than a sample's beam slipped between
+//! the rays of every sample read.
 //!
 //! Rendering: the scene's faces are kept sorted by cell (`Cells::triangles`), so the marked
 //! cells are ranges of faces, drawn as one draw call per run of consecutive marked cells.

@@ -89,9 +89,9 @@ def path(scene: ss.Scene, frames: int, size: int) -> list[Any]:
     return cams
 
 
-def paper_field(scene: ss.Scene, res: int, ids: int) -> ss.VisibilityField:
+def paper_field(scene: ss.Scene, res: int, ids: int, **options: Any) -> ss.VisibilityField:
     """The paper's setup: one slab along the longest axis, 16^3 cells per object, 81 rays per
-    sample, ``res``^4 samples and ``ids`` ids per sample."""
+    sample, ``res``^4 samples and ``ids`` ids per sample (``options``: e.g. ``progress``)."""
     return ss.discretize(
         scene,
         method="visibility_field",
@@ -101,6 +101,7 @@ def paper_field(scene: ss.Scene, res: int, ids: int) -> ss.VisibilityField:
         grid=(16, 16, 16),
         supersample=3,
         ids_per_sample=ids,
+        **options,
     )
 
 
