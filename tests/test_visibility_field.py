@@ -14,6 +14,7 @@ import warnings
 import numpy as np
 import pytest
 import scenesample as ss
+from scenesample.experiments.visibility_field import six_directions
 
 #: The paper's settings before the scene-derived defaults: 16^4 samples, 16^3 cells per
 #: object, 1 id, 81 rays per sample.
@@ -350,26 +351,6 @@ def test_overflowed_samples_are_traced(turtles):
     assert safe["hole_pixels"] < paper["hole_pixels"]
 
 
-def six_directions(scene: ss.Scene, size: int = 128) -> list:
-    """Cameras outside the bounds, one diagonal from the centre, around all six sides."""
-    lo, hi = scene.bounds.astype(np.float64)
-    c, diag = (lo + hi) / 2, np.linalg.norm(hi - lo)
-    out = []
-    for d in [
-        (1, 0.25, 0.15),
-        (-1, -0.2, 0.1),
-        (0.2, 1, 0.3),
-        (-0.15, -1, 0.2),
-        (0.1, 0.3, 1),
-        (0.3, -0.2, -1),
-    ]:
-        d = np.array(d) / np.linalg.norm(d)
-        up = (0, 0, 1) if abs(d[2]) < 0.9 else (0, 1, 0)
-        eye = tuple(c + d * diag)
-        out.append(ss.Camera.look_at(eye, tuple(c), up, yfov=0.8, width=size, height=size))
-    return out
-
-
 @pytest.mark.parametrize("name", ["stanford_bunny", "intel_sponza_ivy"])
 def test_the_default_field_leaves_no_holes_from_six_directions(name):
     """Out of the box (six slabs, scene-derived settings, fallback): at most 1% of the pixels
@@ -383,7 +364,7 @@ def test_the_default_field_leaves_no_holes_from_six_directions(name):
         scene = ss.Scene.load(path)
     field = ss.discretize(scene, method="visibility_field")
     assert len(field.slabs) == 6 and field.settings["quality"] == "balanced"
-    for cam in six_directions(scene):
+    for cam in six_directions(scene, 128):
         view = ss.reconstruct(field, cam)
         m = ss.evaluate(view, scene, "cells")
         assert m["hole_fraction"] <= 0.01, (name, m["hole_fraction"])

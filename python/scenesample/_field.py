@@ -442,22 +442,10 @@ def visibility_field(
         if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < 1:
             raise InputError(f"{name} must be a positive integer, got {val!r}")
         settings[name] = int(val)
-    if any(x is not None for x in (uv, st, grid, ids_per_sample, supersample)):
-        settings["rule"] += (
-            " (overridden: "
-            + ", ".join(
-                n
-                for n, x in (
-                    ("uv", uv),
-                    ("st", st),
-                    ("grid", grid),
-                    ("ids_per_sample", ids_per_sample),
-                    ("supersample", supersample),
-                )
-                if x is not None
-            )
-            + ")"
-        )
+    options = dict(uv=uv, st=st, grid=grid, ids_per_sample=ids_per_sample, supersample=supersample)
+    given = [name for name, value in options.items() if value is not None]
+    if given:
+        settings["rule"] += f" (overridden: {', '.join(given)})"
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise InputError(f"seed must be a non-negative integer, got {seed!r}")
     if not isinstance(jitter, (bool, np.bool_)):

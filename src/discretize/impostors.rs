@@ -226,7 +226,7 @@ struct Leaves {
 
 /// The non-empty leaves at `depth` of the octree over the scene's cubic bounds.
 fn octree(scene: &Scene, depth: u32) -> Leaves {
-    let [lo, hi] = scene.bounds().map(|b| DVec3::from_array(b.map(f64::from)));
+    let [lo, hi] = scene.bounds_f64();
     let size = (hi - lo).max_element().max(scene.diagonal() * 1e-9);
     let centre = (lo + hi) / 2.0;
     let root = centre - DVec3::splat(size / 2.0);

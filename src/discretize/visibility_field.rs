@@ -89,7 +89,7 @@ impl Slab {
     /// longest extent, so that oblique and perspective rays that cross the scene (even a flat
     /// one) still cross both planes.
     pub fn around(scene: &Scene, axis: Option<usize>, margin: f64, widen: f64) -> Result<Self> {
-        let [lo, hi] = scene.bounds().map(|b| DVec3::from_array(b.map(f64::from)));
+        let [lo, hi] = scene.bounds_f64();
         let ext = hi - lo;
         let axis = match axis {
             Some(a) if a < 3 => a,
@@ -136,7 +136,7 @@ impl Slab {
         if !(margin.is_finite() && margin >= 0.0) {
             return input_err!("margin must be finite and >= 0, got {margin}");
         }
-        let [lo, hi] = scene.bounds().map(|b| DVec3::from_array(b.map(f64::from)));
+        let [lo, hi] = scene.bounds_f64();
         let ext = hi - lo;
         let floor = 1e-3 * scene.diagonal();
         let e = |k: usize| DVec3::AXES[k];
@@ -609,6 +609,15 @@ mod tests {
         )
     }
 
+    /// Two square quads parallel to z = 0, each given as (z, half side), in one scene.
+    fn two_quads(a: [f32; 2], b: [f32; 2]) -> Scene {
+        let (mut v, mut f) = quad(a[0], a[1]);
+        let (v2, f2) = quad(b[0], b[1]);
+        f.extend(f2.iter().map(|t| t.map(|i| i + v.len() as u32)));
+        v.extend(v2);
+        Scene::from_arrays(v, f, None, None).unwrap()
+    }
+
     #[test]
     fn lines_cross_the_slab_one_way() {
         let r = |z| Rect::new(DVec3::new(-1.0, -1.0, z), DVec3::X * 2.0, DVec3::Y * 2.0).unwrap();
@@ -633,11 +642,7 @@ mod tests {
 
     #[test]
     fn a_wall_hides_what_is_behind_it_from_every_line() {
-        let (mut v, mut f) = quad(0.3, 10.0);
-        let (v2, f2) = quad(0.6, 0.2);
-        f.extend(f2.iter().map(|t| t.map(|i| i + v.len() as u32)));
-        v.extend(v2);
-        let scene = Scene::from_arrays(v, f, None, None).unwrap();
+        let scene = two_quads([0.3, 10.0], [0.6, 0.2]);
         let r = |z| Rect::new(DVec3::new(-1.0, -1.0, z), DVec3::X * 2.0, DVec3::Y * 2.0).unwrap();
         let slab = Slab {
             uv: r(0.0),
@@ -671,14 +676,10 @@ mod tests {
 
     #[test]
     fn six_slabs_hold_every_line_through_the_bounds() {
-        let (mut v, mut f) = quad(0.0, 1.0);
-        let (v2, f2) = quad(0.5, 0.3);
-        f.extend(f2.iter().map(|t| t.map(|i| i + v.len() as u32)));
-        v.extend(v2);
-        let scene = Scene::from_arrays(v, f, None, None).unwrap();
+        let scene = two_quads([0.0, 1.0], [0.5, 0.3]);
         let slabs = Slab::six(&scene, 0.05).unwrap();
         assert_eq!(slabs.len(), 6);
-        let [lo, hi] = scene.bounds().map(|b| DVec3::from_array(b.map(f64::from)));
+        let [lo, hi] = scene.bounds_f64();
         let mut seed = 1u64;
         let mut rand = || {
             seed = super::super::epr::mix64(seed);

@@ -275,7 +275,7 @@ pub fn resample(
 /// The scene's bounds, widened by a millionth of its diagonal (and at least 1e-30) so that
 /// surfaces on the bounds stay inside: the box conservative resampling clips lines to.
 pub fn scene_box(scene: &Scene) -> [DVec3; 2] {
-    let [lo, hi] = scene.bounds().map(|b| DVec3::from_array(b.map(f64::from)));
+    let [lo, hi] = scene.bounds_f64();
     let eps = (1e-6 * scene.diagonal()).max(1e-30);
     [lo - eps, hi + eps]
 }

@@ -272,18 +272,21 @@ impl Scene {
         self.degenerate[i]
     }
 
+    /// [`Scene::bounds`] in f64: `[min, max]`.
+    pub fn bounds_f64(&self) -> [DVec3; 2] {
+        self.bounds.map(|b| Vec3::from(b).as_dvec3())
+    }
+
     /// Centre of the bounds in f64: the origin of the camera-relative frame used on the GPU.
     pub fn center(&self) -> DVec3 {
-        let [lo, hi] = self.bounds;
-        (Vec3::from(lo).as_dvec3() + Vec3::from(hi).as_dvec3()) * 0.5
+        let [lo, hi] = self.bounds_f64();
+        (lo + hi) * 0.5
     }
 
     /// Length of the bounds' diagonal (at least the smallest positive normal f32, never 0).
     pub fn diagonal(&self) -> f64 {
-        let [lo, hi] = self.bounds;
-        (Vec3::from(hi).as_dvec3() - Vec3::from(lo).as_dvec3())
-            .length()
-            .max(f32::MIN_POSITIVE as f64)
+        let [lo, hi] = self.bounds_f64();
+        (hi - lo).length().max(f32::MIN_POSITIVE as f64)
     }
 
     /// Unit geometric normal of triangle `i` from its winding (counter-clockwise front), in f64;
