@@ -32,10 +32,9 @@ auto = ss.discretize(scene, cam)
 cpu = ss.discretize(scene, cam, backend="cpu")
 assert (cpu.triangle[0].ravel() == hits.triangle).mean() > 0.999
 print(f"scenesample {here.parent}: {scene.triangle_count} triangles, auto chose {auto.backend}")
-try:
-    info = ss.device_info()
-except ss.GpuUnavailableError:
-    print("no GPU adapter: GPU-only methods skipped")
+info = ss.device_info()
+if not info["available"]:
+    print(f"no GPU adapter: GPU-only methods skipped ({info['error']})")
 else:
     nr = ss.discretize(scene, [cam, cam.with_resolution(96, 64)], "nonredundant")
     print(f"GPU: {info['name']}; nonredundant images {nr.depth.shape}")

@@ -15,10 +15,10 @@ SHARED = ss.scenes.shared_scene_files()
 
 @pytest.fixture(scope="session")
 def gpu() -> dict:
-    try:
-        return ss.device_info()
-    except ss.GpuUnavailableError as e:
-        pytest.skip(f"no GPU adapter: {e}")
+    info = ss.device_info()
+    if not info["available"]:
+        pytest.skip(f"no GPU adapter: {info['error']}")
+    return info
 
 
 def load_quiet(path: Path) -> ss.Scene:

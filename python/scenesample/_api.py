@@ -13,7 +13,7 @@ from ._epr import Points
 from ._field import FieldView, VisibilityField
 from ._impostors import Impostors, ImpostorView
 from ._scene import Scene
-from .errors import InputError
+from .errors import GpuUnavailableError, InputError
 from .methods import DISCRETIZE, RECONSTRUCT, check_options, field_view, impostor_view
 from .results import DepthImages, Mesh
 
@@ -170,20 +170,39 @@ def device_info(
     bvh_built: bool = False,
     uploaded: bool = True,
 ) -> dict[str, Any]:
-    """The GPU adapter scenesample uses: ``name``, ``backend``, ``device_type``, ``driver``,
-    ``timestamps`` (whether GPU timings are available) and the limits that bound requests.
+    """The GPU adapter scenesample uses: ``available`` (True), ``name``, ``backend``,
+    ``device_type``, ``driver``, ``timestamps`` (whether GPU timings are available) and the
+    limits that bound requests (``max_texture_dimension_2d``,
+    ``max_storage_buffer_binding_size``).
+
+    Without an adapter (no Vulkan driver) it does not raise: ``available`` is False, ``error``
+    says why and how to install one, ``name``/``backend``/``device_type``/``driver`` are None,
+    ``timestamps`` False and the limits 0. The CPU paths (``cast_rays``, ``occluded``,
+    conventional ``discretize``) then still work; the GPU-only methods raise
+    :class:`GpuUnavailableError`.
 
     With ``triangles`` and ``pixels`` (per image), also ``auto``: what conventional
     ``discretize(..., backend="auto")`` would choose for ``images`` images of a scene of that
     size, given whether its BVH is built (``bvh_built``) and its GPU copy made (``uploaded``):
-    ``backend`` ("gpu" or "cpu"), ``reason``, the predicted ``gpu_seconds`` and
-    ``cpu_seconds``, ``calibration_seconds`` (the cost model's probes, once per process) and
-    ``coefficients`` (the fitted seconds per call, triangle, pixel and ray; see
-    ``src/discretize/backend.rs``).
-
-    Raises :class:`GpuUnavailableError` when there is no adapter (``auto`` then always picks
-    the CPU)."""
-    info = _core.device_info()
+    ``backend`` ("gpu" or "cpu"; always "cpu" without an adapter), ``reason``, the predicted
+    ``gpu_seconds`` (None without an adapter) and ``cpu_seconds``, ``calibration_seconds``
+    (the cost model's probes; 0 when it came from the calibration cache), ``calibration``
+    ("probes" or the cache file's path) and ``coefficients`` (the fitted seconds per call,
+    triangle, pixel and ray; see ``src/discretize/backend.rs``)."""
+    try:
+        info: dict[str, Any] = {"available": True, **_core.device_info()}
+    except GpuUnavailableError as e:
+        info = {
+            "available": False,
+            "error": str(e),
+            "name": None,
+            "backend": None,
+            "device_type": None,
+            "driver": None,
+            "timestamps": False,
+            "max_texture_dimension_2d": 0,
+            "max_storage_buffer_binding_size": 0,
+        }
     if (triangles is None) != (pixels is None):
         raise InputError("device_info needs both triangles= and pixels= (or neither)")
     if triangles is not None and pixels is not None:
