@@ -4,6 +4,7 @@ GPU-only methods say what to install."""
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -173,7 +174,6 @@ NO_VULKAN = textwrap.dedent(
         lambda: ss.discretize(scene, cam, backend="gpu"),
         lambda: ss.discretize(scene, cam, "nonredundant"),
         lambda: ss.splat(points, resolution=16),
-        lambda: ss.device_info(),
     ):
         try:
             call()
@@ -181,6 +181,11 @@ NO_VULKAN = textwrap.dedent(
             assert "mesa-vulkan-drivers" in str(e), e
         else:
             raise AssertionError("no GpuUnavailableError")
+    info = ss.device_info(triangles=5_000_000, pixels=1 << 20)
+    assert not info["available"] and info["name"] is None, info
+    assert "mesa-vulkan-drivers" in info["error"], info
+    assert info["auto"]["backend"] == "cpu" and info["auto"]["gpu_seconds"] is None, info
+    assert "no GPU adapter" in info["auto"]["reason"], info
     print("ok")
     """
 )
@@ -204,3 +209,43 @@ def test_plan_estimates_use_the_measured_rates(gpu):
     (effect,) = ss.plan(ss.scenes.shapes(seed=0, detail=0), area_lights=[light])
     assert "raster_triangles" in effect.estimate["measured_rates"]
     assert "shadow_triangles" not in effect.estimate["measured_rates"]
+
+
+CALIBRATE = (
+    "import json, scenesample as ss\n"
+    "a = ss.device_info(triangles=100_000, pixels=512 * 512)['auto']\n"
+    "print(json.dumps([a['calibration'], a['calibration_seconds'], a['coefficients']]))\n"
+)
+
+
+def test_the_cost_model_is_measured_once_per_machine(tmp_path):
+    """The first process runs the probes and writes the calibration file; the next reads it
+    (no probes, the same coefficients); a run with Vulkan hidden (another machine key) adds its
+    own model beside it; a file that does not parse is measured anew."""
+    env = dict(os.environ, SCENESAMPLE_CACHE_DIR=str(tmp_path))
+
+    def run(**extra: str) -> list:
+        r = subprocess.run(
+            [sys.executable, "-c", CALIBRATE],
+            capture_output=True,
+            text=True,
+            env=dict(env, **extra),
+            timeout=300,
+        )
+        assert r.returncode == 0, r.stderr
+        return json.loads(r.stdout.strip().splitlines()[-1])
+
+    source, seconds, first = run()
+    assert source == "probes" and seconds > 0
+    path = tmp_path / "cost-model.json"
+    assert all(k.startswith("scenesample ") for k in json.loads(path.read_text())["models"])
+    source, seconds, again = run()
+    assert source == str(path) and seconds == 0 and again == first
+    hidden = str(tmp_path / "none.json")
+    source, _, cpu_only = run(VK_ICD_FILENAMES=hidden, VK_DRIVER_FILES=hidden)
+    assert source == "probes" and not any(k.startswith("gpu_") for k in cpu_only)
+    assert len(json.loads(path.read_text())["models"]) == 2
+    assert run()[:2] == [str(path), 0]
+    path.write_text("{not json")
+    source, seconds, _ = run()
+    assert source == "probes" and seconds > 0 and len(json.loads(path.read_text())["models"]) == 1

@@ -564,6 +564,7 @@ class _BackendChoiceDict(TypedDict):
     gpu_seconds: Optional[float]
     cpu_seconds: float
     calibration_seconds: float
+    calibration: str
     coefficients: dict[str, float]
 
 def choose_backend(

@@ -62,8 +62,11 @@ def conventional(
         depth (99.92-99.99% of the pixels agree on the shared scenes).
         ``"auto"`` (default): the backend a cost model of this machine predicts is faster,
         given the triangles, pixels, images, whether a GPU adapter exists and whether the BVH
-        and the GPU copy of the scene exist already; the model is measured on first use in a
-        process (about half a second of probes). See :func:`scenesample.device_info`. The
+        and the GPU copy of the scene exist already. The model is measured once per machine
+        (about half a second of probes on first use) and kept in a calibration file,
+        ``$SCENESAMPLE_CACHE_DIR`` or ``~/.cache/scenesample/cost-model.json`` (set
+        ``SCENESAMPLE_CACHE_DIR=""`` to measure in every process instead); later processes
+        read it. See :func:`scenesample.device_info`. The
         choice rests on timings, so two processes may choose differently for the same call
         and their ids then differ at those edge pixels: pass the backend explicitly where
         results must match bit for bit across processes or machines.

@@ -259,7 +259,7 @@ def _pixels(camera: Optional[Camera]) -> int:
 def rates(triangles: int) -> dict[str, float]:
     """:data:`THROUGHPUT` with what this machine measured in place of the defaults: raster
     triangles per view and pixels per second from the GPU cost model that
-    ``discretize(..., backend="auto")`` calibrates (once per process), rays per second from its
+    ``discretize(..., backend="auto")`` calibrates (once per machine), rays per second from its
     CPU model at ``triangles`` triangles. The keys it measured are listed under ``measured``."""
     out: dict[str, Any] = dict(THROUGHPUT)
     measured = []

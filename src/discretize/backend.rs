@@ -8,10 +8,12 @@
 //! - GPU: `g0 + n·(gt·t + gp·p)`, plus `gu·t` when the scene is not on the device yet;
 //! - CPU: `c0 + ct·t + n·p·(ca + cb·log2 t)`, plus `cu·t` when the scene has no BVH yet.
 //!
-//! Its coefficients come from probes on first use in a process (about a second: two
-//! procedural height fields of ~5K and ~130K triangles, rendered and traced at 256² and 512²,
-//! the best of two warm runs each): per scene, the line through its two sizes gives the cost
-//! per pixel and per call; the two scenes give how those grow with the triangles.
+//! Its coefficients come from probes (about a second: two procedural height fields of ~5K and
+//! ~130K triangles, rendered and traced at 256² and 512², the best of two warm runs each): per
+//! scene, the line through its two sizes gives the cost per pixel and per call; the two scenes
+//! give how those grow with the triangles. The probes run once per machine: their result is
+//! kept in a small calibration file ([`cache`]), keyed by the package version, the CPU, the
+//! worker threads and the adapter, and later processes read it (a millisecond) instead.
 //!
 //! A real scene differs from the probes (rays that miss are cheap; a machine may be busy), so
 //! once the model exists (the process's first `auto` call makes it), every call on a scene,
@@ -129,8 +131,10 @@ pub struct CostModel {
     /// `Err(why)` when there is no adapter.
     pub gpu: std::result::Result<GpuCosts, String>,
     pub cpu: CpuCosts,
-    /// Seconds the probes took.
+    /// Seconds the probes took in this process (0 when the model came from the cache file).
     pub calibration_seconds: f64,
+    /// Where the coefficients came from: `"probes"`, or the calibration file's path.
+    pub source: String,
 }
 
 /// This process's cost model, once calibrated.
@@ -162,14 +166,42 @@ impl CostModel {
         MODEL.lock().unwrap_or_else(|e| e.into_inner()).clone()
     }
 
-    /// This process's model, measured on first use. Calls run one at a time on the worker
-    /// pool (`process::take_turn`), so holding the lock while the probes run blocks no one.
+    /// This process's model: read from this machine's calibration file, or measured by the
+    /// probes (and the file written) on first use. Calls run one at a time on the worker pool
+    /// (`process::take_turn`), so holding the lock while the probes run blocks no one.
     pub fn get() -> Result<Arc<CostModel>> {
         let mut slot = MODEL.lock().unwrap_or_else(|e| e.into_inner());
         if let Some(model) = slot.as_ref() {
             return Ok(model.clone());
         }
-        let model = Arc::new(crate::counters::uncounted(calibrate)?);
+        let adapter = gpu::context().map_err(|e| e.to_string());
+        let machine = cache::machine(adapter.as_ref().ok().map(|c| &c.info));
+        let path = cache::path();
+        let cached = path.as_deref().and_then(|p| cache::read(p, &machine));
+        let model = match (cached, adapter) {
+            (Some((cpu, Some(gpu))), Ok(_)) => CostModel {
+                gpu: Ok(gpu),
+                cpu,
+                calibration_seconds: 0.0,
+                source: path.as_deref().map_or_else(String::new, cache::display),
+            },
+            (Some((cpu, None)), Err(why)) => CostModel {
+                gpu: Err(why),
+                cpu,
+                calibration_seconds: 0.0,
+                source: path.as_deref().map_or_else(String::new, cache::display),
+            },
+            _ => {
+                let model = crate::counters::uncounted(calibrate)?;
+                if let Some(p) = &path {
+                    // A cache that cannot be written (read-only home) only costs the next
+                    // process the probes again.
+                    let _ = cache::write(p, &machine, &model);
+                }
+                model
+            }
+        };
+        let model = Arc::new(model);
         *slot = Some(model.clone());
         Ok(model)
     }
@@ -418,7 +450,153 @@ fn calibrate() -> Result<CostModel> {
         gpu,
         cpu,
         calibration_seconds: start.elapsed().as_secs_f64(),
+        source: "probes".into(),
     })
+}
+
+/// The calibration file: the model of each machine key, in `$SCENESAMPLE_CACHE_DIR` (set it
+/// empty to switch the file off), else `$XDG_CACHE_HOME/scenesample`, else
+/// `~/.cache/scenesample`. A machine key the file does not hold (another package version, CPU,
+/// thread count or adapter), or a file that does not parse, is measured anew and added.
+pub mod cache {
+    use std::path::{Path, PathBuf};
+
+    use serde_json::{json, Value};
+
+    use super::{CostModel, CpuCosts, GpuCosts};
+
+    const FILE: &str = "cost-model.json";
+    /// Machine keys one file keeps.
+    const KEEP: usize = 8;
+    /// Bumped when the model's formulas or probes change, so that older files are not used.
+    const FORMAT: u32 = 1;
+
+    pub fn path() -> Option<PathBuf> {
+        let dir = match std::env::var_os("SCENESAMPLE_CACHE_DIR") {
+            Some(d) if d.is_empty() => return None,
+            Some(d) => PathBuf::from(d),
+            None => match std::env::var_os("XDG_CACHE_HOME").filter(|d| !d.is_empty()) {
+                Some(d) => PathBuf::from(d).join("scenesample"),
+                None => PathBuf::from(std::env::var_os("HOME")?).join(".cache/scenesample"),
+            },
+        };
+        Some(dir.join(FILE))
+    }
+
+    pub fn display(p: &Path) -> String {
+        p.display().to_string()
+    }
+
+    /// What the coefficients depend on: the package, the CPU model, the worker threads, and
+    /// the adapter (its name and driver; "none" without one).
+    pub fn machine(adapter: Option<&wgpu::AdapterInfo>) -> String {
+        let cpu = std::fs::read_to_string("/proc/cpuinfo")
+            .ok()
+            .and_then(|s| {
+                s.lines()
+                    .find(|l| l.starts_with("model name"))
+                    .and_then(|l| l.split(':').nth(1))
+                    .map(|m| m.trim().to_string())
+            })
+            .unwrap_or_else(|| std::env::consts::ARCH.to_string());
+        let gpu = adapter.map_or_else(
+            || "none".to_string(),
+            |a| format!("{} ({} {})", a.name, a.driver, a.driver_info),
+        );
+        format!(
+            "scenesample {} format {FORMAT}; cpu {cpu}; {} threads; gpu {gpu}",
+            env!("CARGO_PKG_VERSION"),
+            rayon::current_num_threads()
+        )
+    }
+
+    pub fn to_json(model: &CostModel, machine: &str) -> Value {
+        let c = &model.cpu;
+        let gpu = model.gpu.as_ref().ok().map(|g| {
+            json!({
+                "per_call": g.per_call,
+                "per_triangle": g.per_triangle,
+                "per_pixel": g.per_pixel,
+                "upload_per_triangle": g.upload_per_triangle,
+            })
+        });
+        json!({
+            "machine": machine,
+            "probe_seconds": model.calibration_seconds,
+            "cpu": {
+                "per_call": c.per_call,
+                "per_call_triangle": c.per_call_triangle,
+                "per_ray": c.per_ray,
+                "per_ray_log2": c.per_ray_log2,
+                "build_per_triangle": c.build_per_triangle,
+            },
+            "gpu": gpu,
+        })
+    }
+
+    /// The CPU and (with an adapter) GPU coefficients of `v`, if it was made for `machine` and
+    /// every coefficient is a finite number.
+    pub fn from_json(v: &Value, machine: &str) -> Option<(CpuCosts, Option<GpuCosts>)> {
+        if v.get("machine")?.as_str()? != machine {
+            return None;
+        }
+        let num = |o: &Value, k: &str| o.get(k)?.as_f64().filter(|x| x.is_finite());
+        let c = v.get("cpu")?;
+        let cpu = CpuCosts {
+            per_call: num(c, "per_call")?,
+            per_call_triangle: num(c, "per_call_triangle")?,
+            per_ray: num(c, "per_ray")?,
+            per_ray_log2: num(c, "per_ray_log2")?,
+            build_per_triangle: num(c, "build_per_triangle")?,
+        };
+        let gpu = match v.get("gpu")? {
+            Value::Null => None,
+            g => Some(GpuCosts {
+                per_call: num(g, "per_call")?,
+                per_triangle: num(g, "per_triangle")?,
+                per_pixel: num(g, "per_pixel")?,
+                upload_per_triangle: num(g, "upload_per_triangle")?,
+            }),
+        };
+        Some((cpu, gpu))
+    }
+
+    /// The models in the file, by machine key (a file that does not parse holds none).
+    fn models(path: &Path) -> serde_json::Map<String, Value> {
+        std::fs::read_to_string(path)
+            .ok()
+            .and_then(|t| serde_json::from_str::<Value>(&t).ok())
+            .and_then(|v| v.get("models")?.as_object().cloned())
+            .unwrap_or_default()
+    }
+
+    pub fn read(path: &Path, machine: &str) -> Option<(CpuCosts, Option<GpuCosts>)> {
+        from_json(models(path).get(machine)?, machine)
+    }
+
+    /// Add (or replace) `machine`'s model in the file, keeping the other machines' (a home
+    /// shared by several hosts, or runs with Vulkan hidden), at most [`KEEP`] of them. Written
+    /// through a temporary file renamed into place, so that a process reading it meanwhile sees
+    /// the old file or the new one, never half of one.
+    pub fn write(path: &Path, machine: &str, model: &CostModel) -> std::io::Result<()> {
+        if let Some(dir) = path.parent() {
+            std::fs::create_dir_all(dir)?;
+        }
+        let mut all = models(path);
+        all.remove(machine);
+        while all.len() >= KEEP {
+            let Some(first) = all.keys().next().cloned() else {
+                break;
+            };
+            all.remove(&first);
+        }
+        all.insert(machine.to_string(), to_json(model, machine));
+        let tmp = path.with_extension(format!("json.{}", std::process::id()));
+        std::fs::write(&tmp, json!({ "models": all }).to_string())?;
+        std::fs::rename(&tmp, path).inspect_err(|_| {
+            let _ = std::fs::remove_file(&tmp);
+        })
+    }
 }
 
 #[cfg(test)]
@@ -445,6 +623,7 @@ mod tests {
                 build_per_triangle: 5e-7,
             },
             calibration_seconds: 0.0,
+            source: "probes".into(),
         }
     }
 
@@ -491,5 +670,43 @@ mod tests {
         let scaled = m.decide_scaled(&work(5_000_000, true), [None, Some(10.0)]);
         assert_eq!(scaled.backend, Backend::Gpu);
         assert!(scaled.reason.contains("measured calls"));
+    }
+
+    #[test]
+    fn the_calibration_file_round_trips_for_its_machine_only() {
+        for gpu in [true, false] {
+            let m = model(gpu);
+            let v = cache::to_json(&m, "this machine");
+            let (cpu, g) = cache::from_json(&v, "this machine").expect("its own machine");
+            assert_eq!(cpu.per_ray_log2, m.cpu.per_ray_log2);
+            assert_eq!(g.is_some(), gpu);
+            if let (Some(g), Ok(mg)) = (g, &m.gpu) {
+                assert_eq!(g.per_pixel, mg.per_pixel);
+            }
+            assert!(cache::from_json(&v, "another machine").is_none());
+        }
+        // A missing or non-numeric coefficient is not a model.
+        let mut v = cache::to_json(&model(true), "m");
+        v["cpu"]["per_ray"] = serde_json::Value::String("fast".into());
+        assert!(cache::from_json(&v, "m").is_none());
+        let key = cache::machine(None);
+        assert!(key.contains(env!("CARGO_PKG_VERSION")) && key.ends_with("gpu none"));
+    }
+
+    #[test]
+    fn the_calibration_file_keeps_each_machine() {
+        let dir = std::env::temp_dir().join(format!("scenesample-cache-{}", std::process::id()));
+        let path = dir.join("cost-model.json");
+        let (a, b) = (model(true), model(false));
+        cache::write(&path, "a", &a).unwrap();
+        cache::write(&path, "b", &b).unwrap();
+        assert!(cache::read(&path, "a").unwrap().1.is_some());
+        assert!(cache::read(&path, "b").unwrap().1.is_none());
+        assert!(cache::read(&path, "c").is_none());
+        std::fs::write(&path, "{half a file").unwrap();
+        assert!(cache::read(&path, "a").is_none());
+        cache::write(&path, "a", &a).unwrap();
+        assert!(cache::read(&path, "a").is_some());
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -80,6 +80,7 @@ pub fn choose_backend<'py>(
     d.set_item("gpu_seconds", decision.gpu_seconds)?;
     d.set_item("cpu_seconds", decision.cpu_seconds)?;
     d.set_item("calibration_seconds", model.calibration_seconds)?;
+    d.set_item("calibration", &model.source)?;
     let coefficients = PyDict::new(py);
     let c = &model.cpu;
     coefficients.set_item("cpu_per_call", c.per_call)?;
