@@ -172,7 +172,10 @@ def test_coincident_viewpoints_in_nonredundant_rendering():
     for i in (1, 2):
         both = nr.mask[i] & nr.mask[i - 1]
         assert (nr.depth[i][both] > nr.depth[i - 1][both]).all()
-    agree = (nr.triangle == peel.triangle).mean()
+    # The same triangle, or the other triangle of a coincident pair at the same depth (which
+    # of the two a backend names is its tie-break: peeling may run on the CPU).
+    tie = np.isclose(nr.depth, peel.depth, rtol=1e-5) | (nr.mask == peel.mask) & ~nr.mask
+    agree = ((nr.triangle == peel.triangle) | tie).mean()
     assert agree >= 0.99, agree
 
 

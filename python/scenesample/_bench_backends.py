@@ -1,6 +1,8 @@
 """``python -m scenesample.bench backends``: conventional depth images from the GPU raster path,
 the CPU ray-cast path and ``backend="auto"``, side by side, on the shared real scenes of at least
-10K triangles and one large scene (four copies of the largest shared scene, over 4M triangles).
+10K triangles and one large scene (four copies of the largest shared scene, over 4M triangles);
+then depth peeling (4 layers) the same way on the smallest and largest real scene and the large
+one.
 
 Every time is the best of ``repeats`` interleaved rounds after one warm-up call (so the scene
 is on the GPU and its BVH built, as in a session that makes many images of one scene); ``auto``
@@ -20,6 +22,7 @@ import numpy as np
 import scenesample as ss
 
 TARGET = 1.15
+PEEL_LAYERS = 4
 MIN_TRIANGLES = 10_000
 BACKENDS = ("gpu", "cpu", "auto")
 
@@ -68,17 +71,11 @@ def _camera(scene: ss.Scene, size: int) -> ss.Camera:
 def run(quick: bool = False, repeats: int = 5, size: int = 1024) -> dict[str, Any]:
     """Measure every scene; returns the rows and the device."""
     size = 256 if quick else size
-    rows = []
-    for name, scene in _scenes(quick):
+    rows, peel_rows = [], []
+    scenes = _scenes(quick)
+    for name, scene in scenes:
         cam = _camera(scene, size)
-        images = {b: ss.discretize(scene, cam, backend=b) for b in BACKENDS}  # warm-up
-        rounds: dict[str, list[float]] = {b: [] for b in BACKENDS}
-        for _ in range(repeats):  # interleaved, so that a slow spell hits all three
-            for b in BACKENDS:
-                t = time.perf_counter()
-                images[b] = ss.discretize(scene, cam, backend=b)
-                rounds[b].append(time.perf_counter() - t)
-        times = {b: min(v) for b, v in rounds.items()}
+        times, images = _timed(scene, cam, repeats)
         g, c = images["gpu"], images["cpu"]
         either = (g.triangle >= 0) | (c.triangle >= 0)
         differ = g.triangle != c.triangle
@@ -106,8 +103,54 @@ def run(quick: bool = False, repeats: int = 5, size: int = 1024) -> dict[str, An
             }
         )
         print(_row(rows[-1]), flush=True)
+    # Peeling: the smallest and largest real scene (by triangles) and the tiling.
+    by_size = sorted(scenes, key=lambda x: x[1].triangle_count)
+    chosen = by_size if quick else [by_size[0], *by_size[-2:]]
+    for name, scene in chosen:
+        cam = _camera(scene, size)
+        times, images = _timed(scene, cam, repeats, "peeling", layers=PEEL_LAYERS)
+        g, c = images["gpu"], images["cpu"]
+        differ = g.triangle != c.triangle
+        first = differ & (np.cumsum(differ, axis=0) - differ == 0)
+        tie = np.isclose(g.depth, c.depth, rtol=1e-5)
+        peel_rows.append(
+            {
+                "scene": name,
+                "triangles": scene.triangle_count,
+                **{b: times[b] for b in ("gpu", "cpu", "auto")},
+                "auto_backend": images["auto"].backend,
+                "same_pixels": float(1.0 - differ.any(axis=0).mean()),
+                "first_differ_not_tie": float((first & ~tie).any(axis=0).mean()),
+            }
+        )
+        print(_peel_row(peel_rows[-1]), flush=True)
     info = ss.device_info()
-    return {"rows": rows, "size": size, "repeats": repeats, "device": info}
+    return {
+        "rows": rows,
+        "peeling": peel_rows,
+        "size": size,
+        "repeats": repeats,
+        "device": info,
+    }
+
+
+def _timed(
+    scene: ss.Scene, cam: ss.Camera, repeats: int, method: str = "conventional", **options: Any
+) -> tuple[dict[str, float], dict[str, Any]]:
+    """Best of ``repeats`` interleaved rounds of ``discretize(scene, cam, method, **options,
+    backend=b)`` per backend, after a warm-up call of each; the times and each last result."""
+
+    def call(b: str) -> Any:
+        return ss.discretize(scene, cam, method, backend=b, **options)
+
+    results = {b: call(b) for b in BACKENDS}  # warm-up
+    rounds: dict[str, list[float]] = {b: [] for b in BACKENDS}
+    for _ in range(repeats):  # interleaved, so that a slow spell hits all three
+        for b in BACKENDS:
+            t = time.perf_counter()
+            results[b] = call(b)
+            rounds[b].append(time.perf_counter() - t)
+    return {b: min(v) for b, v in rounds.items()}, results
 
 
 def _adjacent(scene: ss.Scene, a: np.ndarray, b: np.ndarray) -> float:
@@ -129,6 +172,15 @@ def _row(r: dict[str, Any]) -> str:
         f"{r['predicted_gpu'] * 1e3:.0f} / {r['predicted_cpu'] * 1e3:.0f} | "
         f"{r['same_ids'] * 100:.3f}% | {r['same_ids_covered'] * 100:.3f}% | "
         f"{r['differ_adjacent'] * 100:.1f}% | {r['depth_rel_p999']:.1e} |"
+    )
+
+
+def _peel_row(r: dict[str, Any]) -> str:
+    ratio = r["auto"] / min(r["gpu"], r["cpu"])
+    return (
+        f"| {r['scene']} | {r['triangles']:,} | {r['gpu'] * 1e3:.0f} | {r['cpu'] * 1e3:.0f} | "
+        f"{r['auto'] * 1e3:.0f} ({r['auto_backend']}) | {ratio:.2f}x | "
+        f"{r['same_pixels'] * 100:.3f}% | {r['first_differ_not_tie'] * 100:.3f}% |"
     )
 
 
@@ -160,4 +212,18 @@ def report(r: dict[str, Any]) -> str:
         f"Worst scene: {rows[worst]['scene']}, auto {ratios[worst]:.2f}x the faster backend "
         f"(target <= {TARGET:.2f}x): {verdict}.",
     ]
+    peel = r.get("peeling", [])
+    if peel:
+        lines += [
+            "",
+            f"Depth peeling, {PEEL_LAYERS} layers at {r['size']}², timed the same way; same "
+            "pixels: pixels whose layers all name the same triangles on both backends; first "
+            "difference not a tie: pixels whose first differing layer shows the two at "
+            "different depths (an edge; the deeper layers of such a pixel follow from it).",
+            "",
+            "| scene | triangles | gpu | cpu | auto | auto / fastest | same pixels | "
+            "first difference not a tie |",
+            "|---|---:|---:|---:|---:|---:|---:|---:|",
+            *[_peel_row(x) for x in peel],
+        ]
     return "\n".join(lines) + "\n"

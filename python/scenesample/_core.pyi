@@ -226,7 +226,7 @@ class _ImagesDict(TypedDict):
     method: str
     timings: dict[str, float]
 
-class _ConventionalDict(_ImagesDict):
+class _BackendImagesDict(_ImagesDict):
     backend: Literal["gpu", "cpu"]
     backend_reason: str
 
@@ -377,7 +377,7 @@ def discretize_conventional(
     cameras: list[Camera],
     cull_backfaces: bool = False,
     backend: Literal["auto", "gpu", "cpu"] = "auto",
-) -> _ConventionalDict: ...
+) -> _BackendImagesDict: ...
 def discretize_nonredundant(
     scene: Scene,
     cameras: list[Camera],
@@ -385,8 +385,12 @@ def discretize_nonredundant(
     cull_backfaces: bool = False,
 ) -> _ImagesDict: ...
 def discretize_peeling(
-    scene: Scene, camera: Camera, layers: int, cull_backfaces: bool = False
-) -> _ImagesDict: ...
+    scene: Scene,
+    camera: Camera,
+    layers: int,
+    cull_backfaces: bool = False,
+    backend: Literal["auto", "gpu", "cpu"] = "auto",
+) -> _BackendImagesDict: ...
 def sampling_metrics(
     scene: Scene,
     triangle: ArrayLike,

@@ -143,20 +143,35 @@ pub struct CostModel {
 static MODEL: Mutex<Option<Arc<CostModel>>> = Mutex::new(None);
 
 /// Per scene, what its own calls measured against the model's prediction (measured /
-/// predicted, the latest call of each backend): a scene whose rays mostly miss, or a machine
-/// busy with other work, moves the predictions for that scene's later calls.
+/// predicted, the latest call of each backend and [`Kind`]): a scene whose rays mostly miss,
+/// or a machine busy with other work, moves the predictions for that scene's later calls.
 #[derive(Default)]
-pub struct Observed(Mutex<[Option<f64>; 2]>);
+pub struct Observed(Mutex<[Option<f64>; 4]>);
 
 impl Observed {
-    fn scale(&self, b: Backend) -> Option<f64> {
-        self.0.lock().unwrap_or_else(|e| e.into_inner())[b as usize]
+    fn scale(&self, kind: Kind, b: Backend) -> Option<f64> {
+        self.0.lock().unwrap_or_else(|e| e.into_inner())[kind.slot(b)]
     }
 
-    fn record(&self, b: Backend, ratio: f64) {
+    fn record(&self, kind: Kind, b: Backend, ratio: f64) {
         if ratio.is_finite() && ratio > 0.0 {
-            self.0.lock().unwrap_or_else(|e| e.into_inner())[b as usize] = Some(ratio);
+            self.0.lock().unwrap_or_else(|e| e.into_inner())[kind.slot(b)] = Some(ratio);
         }
+    }
+}
+
+/// What a backend makes: conventional images, or depth-peeling layers (the GPU draws one pass
+/// per layer; the CPU gathers every layer of a pixel in one k-nearest traversal). Both are
+/// predicted as `images` images of the model; each kind keeps its own measured scale.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Kind {
+    Conventional,
+    Peeling,
+}
+
+impl Kind {
+    fn slot(self, b: Backend) -> usize {
+        2 * (self as usize) + b as usize
     }
 }
 
@@ -192,8 +207,15 @@ impl CostModel {
                 source: path.as_deref().map_or_else(String::new, cache::display),
             },
             _ => {
-                let model = crate::counters::uncounted(calibrate)?;
-                if let Some(p) = &path {
+                // Timing noise (another process on the machine) can flatten a slope to 0; such
+                // a model is measured once more, and only a plausible one is kept in the file.
+                let mut model = crate::counters::uncounted(calibrate)?;
+                if !model.plausible() {
+                    let first = model.calibration_seconds;
+                    model = crate::counters::uncounted(calibrate)?;
+                    model.calibration_seconds += first;
+                }
+                if let (Some(p), true) = (&path, model.plausible()) {
                     // A cache that cannot be written (read-only home) only costs the next
                     // process the probes again.
                     let _ = cache::write(p, &machine, &model);
@@ -204,6 +226,29 @@ impl CostModel {
         let model = Arc::new(model);
         *slot = Some(model.clone());
         Ok(model)
+    }
+
+    /// Whether every cost grows with the work it stands for: each backend's per-pixel (per-ray)
+    /// cost at 100K triangles, the raster's per-triangle cost and the BVH build are positive.
+    pub fn plausible(&self) -> bool {
+        let probe = Workload {
+            triangles: 100_000,
+            pixels: 1 << 20,
+            images: 1,
+            bvh_built: true,
+            uploaded: true,
+        };
+        let c = &self.cpu;
+        let cpu = c.build_per_triangle > 0.0
+            && self.predict_cpu(&Workload {
+                pixels: 1 << 21,
+                ..probe
+            }) > self.predict_cpu(&probe);
+        let gpu = self
+            .gpu
+            .as_ref()
+            .map_or(true, |g| g.per_pixel > 0.0 && g.per_triangle > 0.0);
+        cpu && gpu
     }
 
     pub fn predict_gpu(&self, w: &Workload) -> Option<f64> {
@@ -297,6 +342,42 @@ pub fn discretize_with(
     choice: BackendChoice,
 ) -> Result<(DepthImages, Decision)> {
     super::conventional::check_cameras(cameras)?;
+    run_on(scene, cameras, Kind::Conventional, choice, |b| match b {
+        Backend::Gpu => discretize_conventional(scene, cameras, cull_backfaces),
+        Backend::Cpu => discretize_traced(scene, cameras, cull_backfaces),
+    })
+}
+
+/// `layers` depth-peeling layers from `camera` on the requested backend.
+pub fn peeling_with(
+    scene: &Scene,
+    camera: &Camera,
+    layers: usize,
+    cull_backfaces: bool,
+    choice: BackendChoice,
+) -> Result<(DepthImages, Decision)> {
+    if layers == 0 {
+        return input_err!("peeling needs at least one layer, got layers=0");
+    }
+    let cams = vec![camera.clone(); layers];
+    super::conventional::check_cameras(&cams)?;
+    run_on(scene, &cams, Kind::Peeling, choice, |b| match b {
+        Backend::Gpu => super::discretize_peeling(scene, camera, layers, cull_backfaces),
+        Backend::Cpu => {
+            super::nonredundant::discretize_peeling_traced(scene, camera, layers, cull_backfaces)
+        }
+    })
+}
+
+/// Decide the backend for a request of `cameras` (as the model counts them), run `make` on
+/// it, and record the call's measured / predicted ratio on the scene.
+fn run_on(
+    scene: &Scene,
+    cameras: &[Camera],
+    kind: Kind,
+    choice: BackendChoice,
+    make: impl FnOnce(Backend) -> Result<DepthImages>,
+) -> Result<(DepthImages, Decision)> {
     let observed = scene.derived(Observed::default);
     let (decision, model, work) = match choice {
         BackendChoice::Fixed(backend) => (
@@ -312,17 +393,14 @@ pub fn discretize_with(
         BackendChoice::Auto => {
             let model = CostModel::get()?;
             let work = Workload::of(scene, cameras);
-            let scale = [Backend::Gpu, Backend::Cpu].map(|b| observed.scale(b));
+            let scale = [Backend::Gpu, Backend::Cpu].map(|b| observed.scale(kind, b));
             (model.decide_scaled(&work, scale), Some(model), Some(work))
         }
     };
     // What the model would have predicted for this call, before it prepares anything.
     let work = work.or_else(|| model.as_ref().map(|_| Workload::of(scene, cameras)));
     let start = Instant::now();
-    let images = match decision.backend {
-        Backend::Gpu => discretize_conventional(scene, cameras, cull_backfaces)?,
-        Backend::Cpu => discretize_traced(scene, cameras, cull_backfaces)?,
-    };
+    let images = make(decision.backend)?;
     let seconds = start.elapsed().as_secs_f64();
     if let (Some(model), Some(work)) = (model, work) {
         let predicted = match decision.backend {
@@ -330,7 +408,7 @@ pub fn discretize_with(
             Backend::Cpu => Some(model.predict_cpu(&work)),
         };
         if let Some(p) = predicted {
-            observed.record(decision.backend, seconds / p);
+            observed.record(kind, decision.backend, seconds / p);
         }
     }
     Ok((images, decision))
@@ -468,8 +546,9 @@ pub mod cache {
     const FILE: &str = "cost-model.json";
     /// Machine keys one file keeps.
     const KEEP: usize = 8;
-    /// Bumped when the model's formulas or probes change, so that older files are not used.
-    const FORMAT: u32 = 1;
+    /// Bumped when the model's formulas or probes change, or a backend's speed does (2: the
+    /// CPU backend settles edge pixels by the raster's rule), so that older files are not used.
+    const FORMAT: u32 = 2;
 
     pub fn path() -> Option<PathBuf> {
         let dir = match std::env::var_os("SCENESAMPLE_CACHE_DIR") {
@@ -689,6 +768,12 @@ mod tests {
         let mut v = cache::to_json(&model(true), "m");
         v["cpu"]["per_ray"] = serde_json::Value::String("fast".into());
         assert!(cache::from_json(&v, "m").is_none());
+        assert!(model(true).plausible() && model(false).plausible());
+        let mut flat = model(true);
+        if let Ok(g) = flat.gpu.as_mut() {
+            g.per_pixel = 0.0;
+        }
+        assert!(!flat.plausible());
         let key = cache::machine(None);
         assert!(key.contains(env!("CARGO_PKG_VERSION")) && key.ends_with("gpu none"));
     }

@@ -109,9 +109,11 @@ pub fn discretize_ranges(
 /// Conventional images without the GPU (the `"cpu"` backend): each camera's pixel-centre rays
 /// cast through the scene's BVH on all cores, from its near plane on, and each pixel's nearest
 /// triangle resolved by the same f64 code as the raster path ([`resolve_ids`]). The images
-/// equal the raster path's in every field and convention; triangle ids differ only where a
-/// pixel centre lies on an edge two triangles share. With `cull_backfaces`, a ray that meets a
-/// back face first resumes just beyond it (past the scene's same-point tolerance).
+/// equal the raster path's in every field and convention. Pixel centres on an edge are then
+/// decided by the rasteriser's rule (`raster_rule`: snapped vertices, top-left fill), so
+/// triangle ids differ from the raster path's only where its own f32 transform rounds a vertex
+/// differently, or at depth ties. With `cull_backfaces`, a ray that meets a back face first
+/// resumes just beyond it (past the scene's same-point tolerance).
 pub fn discretize_traced(
     scene: &Scene,
     cameras: &[Camera],
@@ -171,7 +173,16 @@ fn traced_ids(scene: &Scene, cam: &Camera, cull_backfaces: bool) -> Result<(Vec<
     for (p, t) in walked.found {
         out[p] = t;
     }
-    Ok((out, walked.bvh_seconds, walked.trace_seconds))
+    let (changes, settle_seconds) =
+        super::raster_rule::settle_edges(scene, cam, cull_backfaces, &frame, &out)?;
+    for (p, t) in changes {
+        out[p] = t;
+    }
+    Ok((
+        out,
+        walked.bvh_seconds,
+        walked.trace_seconds + settle_seconds,
+    ))
 }
 
 /// How [`walk`] walks: culling back faces or not, up to which depth, and in which frame.
@@ -482,7 +493,13 @@ impl PixelRays {
     }
 
     pub(crate) fn ray(&self, x: usize, y: usize) -> (DVec3, DVec3) {
-        let p = self.corner + self.dx * (x as f64 + 0.5) + self.dy * (y as f64 + 0.5);
+        self.ray_at(x as f64 + 0.5, y as f64 + 0.5)
+    }
+
+    /// The ray through image point `(x, y)` in pixels from the top-left corner (pixel centres
+    /// at half-integers).
+    pub(crate) fn ray_at(&self, x: f64, y: f64) -> (DVec3, DVec3) {
+        let p = self.corner + self.dx * x + self.dy * y;
         if self.orthographic {
             (p, self.forward)
         } else {

@@ -22,8 +22,11 @@ use std::time::Instant;
 
 use glam::DVec3;
 
+use rayon::prelude::*;
+
 use super::conventional::{
-    check_cameras, discretize_conventional, resolve_ids, resolve_streamed, walk, PixelRays, Walk,
+    check_cameras, discretize_conventional, resolve_ids, resolve_streamed, walk, PixelRays,
+    TraceFrame, Walk,
 };
 use super::redundancy::{self, Redundancy, Sample};
 use crate::camera::Camera;
@@ -31,7 +34,7 @@ use crate::error::Result;
 use crate::gpu::layered;
 use crate::input_err;
 use crate::scene::Scene;
-use crate::trace::SAME_HIT;
+use crate::trace::{nearest_hits_facing, Query, SAME_HIT};
 use crate::types::{DepthImages, Timings};
 
 /// Non-redundant depth images, one per camera (shared resolution), image i free of samples
@@ -75,6 +78,110 @@ pub fn discretize_peeling(
     )?;
     merge_same_surfaces(&mut img);
     Ok(img)
+}
+
+/// Depth peeling without the GPU (the `"cpu"` backend): each pixel-centre ray of `camera`
+/// gathers its `layers` nearest distinct surfaces between the near and far planes in one BVH
+/// traversal (`trace::nearest_hits_facing`, the `cast_rays(max_hits=k)` query: hits within a
+/// relative [`SAME_HIT`] of each other are one surface; with `cull_backfaces` back faces are
+/// passed through), cast in the scene's trace frame from the camera itself so that `t` is the
+/// depth. The ids are resolved as every image's are and the same tie rule as the GPU path's is
+/// applied to the f64 depths, so the layers agree with the GPU's except where a pixel centre
+/// lies on an edge.
+pub fn discretize_peeling_traced(
+    scene: &Scene,
+    camera: &Camera,
+    layers: usize,
+    cull_backfaces: bool,
+) -> Result<DepthImages> {
+    let total = Instant::now();
+    if layers == 0 {
+        return input_err!("peeling needs at least one layer, got layers=0");
+    }
+    let cams = vec![camera.clone(); layers];
+    check_cameras(&cams)?;
+    let npx = camera.width as usize * camera.height as usize;
+    if npx
+        .checked_mul(layers)
+        .is_none_or(|n| n > i32::MAX as usize)
+    {
+        return input_err!(
+            "{layers} layers of {}x{} pixels are too many",
+            camera.width,
+            camera.height
+        );
+    }
+    let (near, far) = camera.clip_range(scene.bounds());
+    let frame = TraceFrame::of(scene)?;
+    let target = frame.scene(scene);
+    let w = camera.width as usize;
+    let rays = PixelRays::new(camera);
+    let (origins, dirs): (Vec<[f32; 3]>, Vec<[f32; 3]>) = (0..npx)
+        .into_par_iter()
+        .map(|p| {
+            let (o, d) = rays.ray(p % w, p / w);
+            (
+                (o - frame.shift).as_vec3().to_array(),
+                d.as_vec3().to_array(),
+            )
+        })
+        .unzip();
+    let range = Query::new(near as f32, (far as f32).max(near as f32));
+    let hits = nearest_hits_facing(target, &origins, &dirs, layers, &range, cull_backfaces)?;
+    let mut rows = hits.triangle;
+    // Layer 0 is a conventional image: its edge pixels follow the raster's rule as the CPU
+    // backend's conventional images do, and the layers behind follow the new first surface.
+    let first: Vec<i32> = rows.iter().step_by(layers).copied().collect();
+    let (changes, settle_seconds) =
+        super::raster_rule::settle_edges(scene, camera, cull_backfaces, &frame, &first)?;
+    for (p, t) in changes {
+        let (o, d) = rays.ray(p % w, p / w);
+        restart_layers(scene, &mut rows[p * layers..(p + 1) * layers], t, o, d);
+    }
+    // Ray-major hits to layer-major images.
+    let mut ids = vec![-1i32; npx * layers];
+    for (p, row) in rows.chunks_exact(layers).enumerate() {
+        for (l, &t) in row.iter().enumerate() {
+            ids[l * npx + p] = t;
+        }
+    }
+    let (mut img, resolve_seconds) = resolve_ids(scene, &cams, ids)?;
+    img.method = "peeling".into();
+    img.timings = Timings::from([
+        ("bvh", hits.bvh_build_seconds),
+        ("trace", hits.trace_seconds + settle_seconds),
+        ("resolve", resolve_seconds),
+    ]);
+    merge_same_surfaces(&mut img);
+    // The tie pass counted its own seconds into "total"; the rest of the call joins them.
+    let ties = img.timings.get("total").unwrap_or(0.0);
+    img.timings
+        .add("total", total.elapsed().as_secs_f64() - ties);
+    Ok(img)
+}
+
+/// A pixel's layers (`row`, nearest first, −1 padded) once the raster's rule has made `first`
+/// its first surface: nothing (−1) empties the pixel; a surface among the layers starts them
+/// there; one in front of the old first surface goes before it; any other (the neighbour across
+/// a shared edge, at the same depth) takes the first layer's place.
+fn restart_layers(scene: &Scene, row: &mut [i32], first: i32, o: DVec3, d: DVec3) {
+    let depth = |t: i32| {
+        let [a, b, c] = scene.triangle(t as usize);
+        let n = (b - a).cross(c - a);
+        n.dot(a - o) / n.dot(d)
+    };
+    if first < 0 {
+        row.fill(-1);
+    } else if let Some(k) = row.iter().position(|&t| t == first) {
+        row.copy_within(k.., 0);
+        let n = row.len();
+        row[n - k..].fill(-1);
+    } else if row[0] < 0 || depth(first) < depth(row[0]) * (1.0 - SAME_HIT as f64) {
+        row.copy_within(..row.len() - 1, 1);
+        row[0] = first;
+    } else {
+        row[0] = first;
+    }
 }
 
 /// Ties, decided exactly: a layer whose f64 depth at the pixel centre lies within a relative

@@ -117,19 +117,26 @@ pub fn discretize_nonredundant<'py>(
 }
 
 #[pyfunction]
-#[pyo3(signature = (scene, camera, layers, cull_backfaces=false))]
+#[pyo3(signature = (scene, camera, layers, cull_backfaces=false, backend="auto"))]
 pub fn discretize_peeling<'py>(
     py: Python<'py>,
     scene: &PyScene,
     camera: PyCamera,
     layers: usize,
     cull_backfaces: bool,
+    backend: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
+    let choice: BackendChoice = backend
+        .parse()
+        .map_err(|e| super::errors::to_pyerr(py, e))?;
     let s = scene.inner.clone();
-    let img = super::run(py, || {
-        crate::discretize::discretize_peeling(&s, &camera.inner, layers, cull_backfaces)
+    let (img, decision) = super::run(py, || {
+        crate::discretize::backend::peeling_with(&s, &camera.inner, layers, cull_backfaces, choice)
     })?;
-    images_dict(py, img)
+    let d = images_dict(py, img)?;
+    d.set_item("backend", decision.backend.name())?;
+    d.set_item("backend_reason", decision.reason)?;
+    Ok(d)
 }
 
 #[pyfunction]

@@ -209,11 +209,25 @@ pub fn nearest_hits(
     k: usize,
     q: &Query,
 ) -> Result<RayHits> {
+    nearest_hits_facing(scene, origins, directions, k, q, false)
+}
+
+/// [`nearest_hits`], optionally counting only the triangles whose counter-clockwise front
+/// faces the ray (`front_only`: a back face is passed through, as a culling rasterizer skips
+/// it; a back face coincident with a front one then cannot take its place as the surface).
+pub fn nearest_hits_facing(
+    scene: &Scene,
+    origins: &[[f32; 3]],
+    directions: &[[f32; 3]],
+    k: usize,
+    q: &Query,
+    front_only: bool,
+) -> Result<RayHits> {
     if k == 0 {
         return input_err!("max_hits must be at least 1, got 0");
     }
     on_threads(q.threads, || {
-        nearest_hits_here(scene, origins, directions, k, q)
+        nearest_hits_here(scene, origins, directions, k, q, front_only)
     })?
 }
 
@@ -223,6 +237,7 @@ fn nearest_hits_here(
     directions: &[[f32; 3]],
     k: usize,
     q: &Query,
+    front_only: bool,
 ) -> Result<RayHits> {
     let (bvh, built) = prepare(scene, origins, directions, q)?;
     let start = Instant::now();
@@ -235,13 +250,13 @@ fn nearest_hits_here(
     let mut barycentric = vec![[0.0f32; 2]; len];
     let job = Rays::new(&bvh.tree, origins, directions, q);
     let out: HitSlices = (&mut t, &mut triangle, &mut barycentric);
-    if k == 1 {
+    if k == 1 && !front_only {
         run(q.threads, out, 1, |base, out| {
             dispatch(&ClosestJob(&job), base, out)
         })?;
     } else {
         run(q.threads, out, k, |base, out| {
-            dispatch(&NearestJob(&job, k), base, out)
+            dispatch(&NearestJob(&job, k, front_only), base, out)
         })?;
     }
     Ok(RayHits {
@@ -604,7 +619,8 @@ impl Job for AnyJob<'_> {
 
 pub use crate::types::SAME_HIT;
 
-struct NearestJob<'a>(&'a Rays<'a>, usize);
+/// The rays, the hits wanted per ray, and whether back faces are skipped.
+struct NearestJob<'a>(&'a Rays<'a>, usize, bool);
 
 impl Job for NearestJob<'_> {
     type Out<'o> = HitSlices<'o>;
@@ -623,6 +639,7 @@ impl Job for NearestJob<'_> {
                 want,
                 found: &mut found,
                 t_far: r.t_far,
+                front_only: self.2,
             };
             traverse(k, self.0.bvh, &r.ray, &mut sink, &mut stack);
             for (m, h) in found.iter().enumerate() {
@@ -644,6 +661,8 @@ struct Nearest<'a> {
     /// Traversal bound: `t_max` until `want` hits are in hand, then the last one's `t` widened
     /// by the same-hit tolerance.
     t_far: f32,
+    /// Skip triangles whose front (counter-clockwise) faces away from the ray.
+    front_only: bool,
 }
 
 impl Nearest<'_> {
@@ -678,6 +697,12 @@ impl Sink for Nearest<'_> {
         while m != 0 {
             let lane = m.trailing_zeros() as usize;
             m &= m - 1;
+            if self.front_only {
+                let [a, b, c] = self.rays.bvh.blocks[block].corners(lane).map(Vec3::from);
+                if (b - a).cross(c - a).dot(Vec3::from(self.r.d)) >= 0.0 {
+                    continue;
+                }
+            }
             let hit = self
                 .rays
                 .report(self.r, &BlockHit::of(self.rays.bvh, block, lane, h));

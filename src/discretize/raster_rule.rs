@@ -1,0 +1,317 @@
+//! The raster's answer at pixel centres that lie on an edge, for the CPU backend of conventional
+//! images. A ray through a pixel centre hits the triangle that contains the centre exactly; the
+//! GPU rasteriser instead snaps each vertex's window position to a fixed-point grid (1/256
+//! pixel, the sub-pixel precision of Mesa's llvmpipe/lavapipe and of most GPUs) and applies
+//! the top-left fill rule, so where a centre lies within that snapping of an edge the two can
+//! name different triangles. This module re-decides such pixels the way the rasteriser does:
+//!
+//! 1. suspects: pixels whose traced triangle has an edge within [`NEAR_EDGE`] pixels of the
+//!    centre, empty pixels beside a covered one, and pixels beside a nearer surface (a
+//!    silhouette in front, whose snapped edge may cover the centre);
+//! 2. candidates: the traced triangle and the first front surfaces hit by four rays a
+//!    [`NEAR_EDGE`] of a pixel around the centre;
+//! 3. each candidate's vertices go through the raster path's f32 transform (positions relative
+//!    to the scene centre, the same clip matrix, perspective divide, viewport), are snapped to
+//!    1/256 pixel, and the centre is tested with exact integer edge functions and the top-left
+//!    rule; of the candidates that cover it, the nearest along the pixel ray wins.
+//!
+//! The emulation is not bit-exact (the GPU's own f32 arithmetic may round a vertex to the
+//! neighbouring grid point), so a few edge pixels still differ; it leaves a pixel as traced when
+//! a candidate crosses the near plane.
+
+use glam::{DVec3, Vec4};
+use rayon::prelude::*;
+
+use super::conventional::{PixelRays, TraceFrame};
+use crate::camera::Camera;
+use crate::error::Result;
+use crate::scene::Scene;
+use crate::trace::{nearest_hits_facing, Query};
+
+/// Sub-pixel steps of the rasteriser's fixed-point vertex positions.
+const SUBPIXEL: f32 = 256.0;
+
+/// How close to an edge (pixels) a centre must lie for the raster to be asked, and how far from
+/// the centre the four candidate rays pass. Snapping moves an edge by at most about 1/512 px.
+pub(crate) const NEAR_EDGE: f64 = 1.0 / 64.0;
+
+/// A camera's raster view of the scene: every vertex's snapped window position, transformed as
+/// the GPU path does (`gpu::depth`: positions relative to the scene centre rounded to f32, the
+/// f32 clip matrix, the perspective divide, the viewport with window y down), minus the half
+/// pixel that puts pixel centres on integers, in fixed point ([`SUBPIXEL`] steps). A vertex
+/// behind the eye (clipped by the near plane: the emulation does not clip) or too far off the
+/// image for 32 bits is [`Snap::OFF`].
+struct Snap {
+    window: Vec<[i32; 2]>,
+}
+
+/// A triangle's snapped window positions.
+type Fixed = [[i64; 2]; 3];
+
+impl Snap {
+    const OFF: [i32; 2] = [i32::MIN, i32::MIN];
+
+    fn new(scene: &Scene, cam: &Camera) -> Self {
+        let (near, far) = cam.clip_range(scene.bounds());
+        let centre = scene.center();
+        let clip = (cam.projection_matrix(near, far) * cam.view_matrix_relative(centre)).as_mat4();
+        let half = [cam.width as f32 / 2.0, cam.height as f32 / 2.0];
+        let limit = (i32::MAX / 2) as f32;
+        let window = scene
+            .vertices()
+            .par_iter()
+            .map(|v| {
+                let p = (glam::Vec3::from_array(*v).as_dvec3() - centre).as_vec3();
+                let c = clip * Vec4::new(p.x, p.y, p.z, 1.0);
+                if c.w.is_nan() || c.w <= 0.0 {
+                    return Self::OFF;
+                }
+                let inv = 1.0 / c.w;
+                let x = c.x * inv * half[0] + half[0];
+                let y = c.y * inv * -half[1] + half[1];
+                let fixed = [(x - 0.5) * SUBPIXEL, (y - 0.5) * SUBPIXEL].map(f32::round);
+                if fixed.iter().all(|f| f.abs() < limit) {
+                    fixed.map(|f| f as i32)
+                } else {
+                    Self::OFF
+                }
+            })
+            .collect();
+        Self { window }
+    }
+
+    /// Triangle `t`'s snapped corners, or `None` when one is [`Snap::OFF`].
+    fn fixed(&self, scene: &Scene, t: usize) -> Option<Fixed> {
+        let face = scene.faces()[t];
+        let mut out = [[0i64; 2]; 3];
+        for (k, &i) in face.iter().enumerate() {
+            let v = self.window[i as usize];
+            if v == Self::OFF {
+                return None;
+            }
+            out[k] = v.map(i64::from);
+        }
+        Some(out)
+    }
+}
+
+/// Whether the raster covers pixel `(x, y)`'s centre with the snapped triangle `v`: every edge
+/// function non-negative, zero only on a top or left edge (window y points down).
+fn covers(v: Fixed, x: usize, y: usize) -> bool {
+    let p = [x as i64 * SUBPIXEL as i64, y as i64 * SUBPIXEL as i64];
+    let area =
+        (v[1][0] - v[0][0]) * (v[2][1] - v[0][1]) - (v[2][0] - v[0][0]) * (v[1][1] - v[0][1]);
+    if area == 0 {
+        return false;
+    }
+    // Order the corners so that the inside is where every edge function is positive.
+    let v = if area > 0 { v } else { [v[0], v[2], v[1]] };
+    (0..3).all(|i| {
+        let (a, b) = (v[i], v[(i + 1) % 3]);
+        let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+        let e = dx * (p[1] - a[1]) - dy * (p[0] - a[0]);
+        e > 0 || (e == 0 && (dy < 0 || (dy == 0 && dx > 0)))
+    })
+}
+
+/// Depth along `(o, d)` (camera z of `d` is −1, so t is the depth) of triangle `t`'s plane.
+fn plane_depth(scene: &Scene, t: usize, o: DVec3, d: DVec3) -> f64 {
+    let [a, b, c] = scene.triangle(t);
+    let n = (b - a).cross(c - a);
+    n.dot(a - o) / n.dot(d)
+}
+
+/// The outward unit normal (pixels) and the distance (pixels, positive inside) of the pixel
+/// centre from each edge of the snapped triangle `v`.
+fn edges(v: Fixed, x: usize, y: usize) -> [([f64; 2], f64); 3] {
+    let p = [x as f64 * SUBPIXEL as f64, y as f64 * SUBPIXEL as f64];
+    let area =
+        (v[1][0] - v[0][0]) * (v[2][1] - v[0][1]) - (v[2][0] - v[0][0]) * (v[1][1] - v[0][1]);
+    let v = if area >= 0 { v } else { [v[0], v[2], v[1]] };
+    std::array::from_fn(|i| {
+        let (a, b) = (v[i].map(|c| c as f64), v[(i + 1) % 3].map(|c| c as f64));
+        let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+        let len = dx.hypot(dy);
+        if len == 0.0 {
+            return ([0.0, 0.0], f64::INFINITY);
+        }
+        // Inside is where dx (p.y - a.y) - dy (p.x - a.x) > 0, i.e. along (-dy, dx).
+        let inside = (dx * (p[1] - a[1]) - dy * (p[0] - a[0])) / len / SUBPIXEL as f64;
+        ([dy / len, -dx / len], inside)
+    })
+}
+
+/// One pixel to re-decide: its index, and the range of its candidate rays.
+struct Suspect {
+    pixel: usize,
+    rays: std::ops::Range<usize>,
+}
+
+/// Re-decide the pixels of one traced image (`ids`, row-major, −1 empty) whose centres lie on an
+/// edge, as the rasteriser would: returns the pixels that change, with their new triangle, and
+/// the seconds spent tracing the candidate rays (`ids` itself is left as it is).
+///
+/// A covered pixel can only lie within [`NEAR_EDGE`] of its triangle's edge if a 4-neighbour
+/// names another triangle (the neighbour most across that edge lies beyond the edge's line,
+/// outside the convex triangle), so the snapped transform is computed only for those pixels;
+/// each edge that near gets one ray just across it. An empty pixel is re-decided when the
+/// snapped triangle of a covered neighbour passes within [`NEAR_EDGE`] of its centre.
+pub(crate) fn settle_edges(
+    scene: &Scene,
+    cam: &Camera,
+    cull_backfaces: bool,
+    frame: &TraceFrame,
+    ids: &[i32],
+) -> Result<(Vec<(usize, i32)>, f64)> {
+    let (w, h) = (cam.width as usize, cam.height as usize);
+    let snap = Snap::new(scene, cam);
+    let (near, far) = cam.clip_range(scene.bounds());
+    let rays = PixelRays::new(cam);
+    let ids_ro = ids;
+    let neighbours = |p: usize| {
+        let (x, y) = (p % w, p / w);
+        [
+            (x > 0).then(|| p - 1),
+            (x + 1 < w).then(|| p + 1),
+            (y > 0).then(|| p - w),
+            (y + 1 < h).then(|| p + w),
+        ]
+    };
+    // Per pixel: the offsets (pixels) of the rays that look across its near edges; empty for
+    // an empty pixel that a neighbour's triangle nearly covers (its candidates are those).
+    let found: Vec<(usize, Vec<[f64; 2]>)> = (0..w * h)
+        .into_par_iter()
+        .filter_map(|p| {
+            let (x, y) = (p % w, p / w);
+            let t = ids_ro[p];
+            let around = neighbours(p).into_iter().flatten().map(|q| ids_ro[q]);
+            if t < 0 {
+                let near_one = around.filter(|&q| q >= 0).any(|q| {
+                    snap.fixed(scene, q as usize)
+                        .is_some_and(|v| edges(v, x, y).iter().all(|e| e.1 > -NEAR_EDGE))
+                });
+                return near_one.then(|| (p, Vec::new()));
+            }
+            if around.clone().all(|q| q == t) {
+                return None;
+            }
+            let v = snap.fixed(scene, t as usize)?;
+            let across: Vec<[f64; 2]> = edges(v, x, y)
+                .iter()
+                .filter(|(_, d)| d.abs() < NEAR_EDGE)
+                .map(|(n, d)| {
+                    let step = d + NEAR_EDGE / 2.0;
+                    [n[0] * step, n[1] * step]
+                })
+                .collect();
+            (!across.is_empty()).then_some((p, across))
+        })
+        .collect();
+    if found.is_empty() {
+        return Ok((Vec::new(), 0.0));
+    }
+    let mut suspects = Vec::with_capacity(found.len());
+    let mut offsets = Vec::new();
+    for (pixel, across) in found {
+        let at = offsets.len();
+        offsets.extend(across.into_iter().map(|o| (pixel, o)));
+        suspects.push(Suspect {
+            pixel,
+            rays: at..offsets.len(),
+        });
+    }
+    let target = frame.scene(scene);
+    let (origins, dirs): (Vec<[f32; 3]>, Vec<[f32; 3]>) = offsets
+        .par_iter()
+        .map(|&(p, [dx, dy])| {
+            let (x, y) = ((p % w) as f64 + 0.5, (p / w) as f64 + 0.5);
+            let (o, d) = rays.ray_at(x + dx, y + dy);
+            (
+                (o - frame.shift).as_vec3().to_array(),
+                d.as_vec3().to_array(),
+            )
+        })
+        .unzip();
+    let range = Query::new(near as f32, (far as f32).max(near as f32));
+    let hits = nearest_hits_facing(target, &origins, &dirs, 1, &range, cull_backfaces)?;
+    let decided: Vec<Option<i32>> = suspects
+        .par_iter()
+        .map(|s| {
+            let p = s.pixel;
+            let (x, y) = (p % w, p / w);
+            let across = &hits.triangle[s.rays.clone()];
+            let mut candidates: Vec<i32> = across.to_vec();
+            if ids_ro[p] >= 0 {
+                candidates.push(ids_ro[p]);
+            } else {
+                candidates.extend(neighbours(p).into_iter().flatten().map(|q| ids_ro[q]));
+            }
+            candidates.retain(|&t| t >= 0);
+            candidates.sort_unstable();
+            candidates.dedup();
+            let (o, d) = rays.ray(x, y);
+            let mut best: Option<(f64, i32)> = None;
+            for &t in &candidates {
+                let v = snap.fixed(scene, t as usize)?; // crosses the near plane: as traced
+                if !covers(v, x, y) {
+                    continue;
+                }
+                let z = plane_depth(scene, t as usize, o, d);
+                if !(near..=far).contains(&z) {
+                    continue;
+                }
+                if best.is_none_or(|(bz, bt)| (z, t) < (bz, bt)) {
+                    best = Some((z, t));
+                }
+            }
+            match best {
+                Some((_, t)) => Some(t),
+                // The traced triangle does not cover the centre, nor does what lies across its
+                // near edges: background, when a ray across found nothing (a silhouette).
+                None if ids_ro[p] >= 0 && across.contains(&-1) => Some(-1),
+                None => None,
+            }
+        })
+        .collect();
+    let changes = suspects
+        .iter()
+        .zip(decided)
+        .filter_map(|(s, t)| t.filter(|&t| t != ids[s.pixel]).map(|t| (s.pixel, t)))
+        .collect();
+    Ok((changes, hits.trace_seconds + hits.bvh_build_seconds))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_top_left_rule_gives_a_shared_edge_to_one_triangle() {
+        // A square split along its diagonal, corners on pixel centres (0,0)..(2,2): the centre
+        // (1,1) lies on the diagonal, (0,1) and (1,0) on the outer edges.
+        let s = SUBPIXEL as i64;
+        let (a, b, c, d) = ([0, 0], [2 * s, 0], [2 * s, 2 * s], [0, 2 * s]);
+        let (upper, lower) = ([a, b, c], [a, c, d]);
+        for (x, y) in [(1, 1), (0, 1), (1, 0), (2, 1), (1, 2), (0, 0)] {
+            let n = covers(upper, x, y) as u32 + covers(lower, x, y) as u32;
+            let inside_square = x < 2 && y < 2; // the top-left rule keeps left and top edges
+            assert_eq!(n, inside_square as u32, "pixel ({x}, {y})");
+        }
+        // Either winding covers the same pixels.
+        assert_eq!(covers([a, c, b], 1, 0), covers(upper, 1, 0));
+        assert!(
+            !covers([a, a, c], 1, 1),
+            "a degenerate triangle covers nothing"
+        );
+        // The centre (1, 1) lies on the diagonal and one pixel inside the upper triangle's other
+        // two edges; the diagonal's outward normal points left and down (window y is down).
+        let e = edges(upper, 1, 1);
+        let diagonal = e
+            .iter()
+            .find(|e| e.1.abs() < 1e-12)
+            .expect("on the diagonal");
+        let h = std::f64::consts::FRAC_1_SQRT_2;
+        assert!((diagonal.0[0] + h).abs() < 1e-12 && (diagonal.0[1] - h).abs() < 1e-12);
+        assert!(e.iter().filter(|e| (e.1 - 1.0).abs() < 1e-12).count() == 2);
+    }
+}
