@@ -101,7 +101,7 @@ def test_cpu_images_equal_the_gpus_on_a_procedural_scene(gpu, cull):
     c_ = ss.discretize(scene, cams, cull_backfaces=cull, backend="cpu")
     assert (g.backend, c_.backend) == ("gpu", "cpu")
     assert c_.backend_reason == "requested"
-    assert {"bvh", "trace", "resolve", "total"} <= set(c_.timings)
+    assert {"bvh", "trace", "edges", "resolve", "total"} <= set(c_.timings)
     _agree(g, c_, scene)
 
 
@@ -115,7 +115,7 @@ def test_cpu_peeling_equals_the_gpus(gpu, cull):
     g = ss.discretize(scene, cam, "peeling", layers=4, cull_backfaces=cull, backend="gpu")
     c = ss.discretize(scene, cam, "peeling", layers=4, cull_backfaces=cull, backend="cpu")
     assert (g.backend, c.backend, c.method) == ("gpu", "cpu", "peeling")
-    assert {"bvh", "trace", "resolve", "ties", "total"} <= set(c.timings)
+    assert {"bvh", "trace", "edges", "resolve", "ties", "total"} <= set(c.timings)
     for f in FIELDS:
         assert (
             getattr(g, f).dtype == getattr(c, f).dtype

@@ -202,7 +202,7 @@ def test_timings_are_reported(gpu) -> None:
     for key in ("device", "upload", "prepare", "raster", "readback", "resolve", "total"):
         assert img.timings[key] >= 0
     cpu = ss.discretize(s, orbit_cameras(s, 2, 64, 48), backend="cpu")
-    assert set(cpu.timings) == {"bvh", "trace", "resolve", "total"}
+    assert set(cpu.timings) == {"bvh", "trace", "edges", "resolve", "total"}
     assert img.timings["total"] > 0
     if gpu["timestamps"]:
         assert img.timings["raster_gpu"] > 0

@@ -49,16 +49,16 @@ class DepthImages:
         Why that backend ran: ``"requested"``, or the ``"auto"`` cost model's predictions.
     timings : dict of str to float
         Seconds per stage. From the CPU backend: ``bvh`` (building the scene's BVH, 0 when
-        cached), ``trace`` (pixel rays, and the rays across the edges the raster's rule
-        decides), ``resolve``, ``ties`` (peeling) and ``total``. From the GPU: ``device``
-        (creating the GPU device, first call only), ``upload`` (scene to GPU, 0 when
-        cached), ``prepare`` (per-triangle resolve data, 0 when cached on the scene),
-        ``raster`` (CPU time spent submitting and waiting for the GPU), ``raster_gpu`` (GPU
-        timestamps, when the adapter has them), ``readback``, ``resolve`` (depth, position,
-        normal and colour from each pixel's triangle id, by intersecting the pixel-centre
-        ray with that triangle in float64) and ``total``. Images are processed in chunks and
-        one chunk's resolve overlaps the next chunk's raster, so the stages can add up to
-        more than ``total``.
+        cached), ``trace`` (the pixel rays), ``edges`` (pixel centres on an edge decided by
+        the raster's rule, with their rays), ``resolve``, ``ties`` (peeling) and ``total``.
+        From the GPU: ``device`` (creating the GPU device, first call only), ``upload``
+        (scene to GPU, 0 when cached), ``prepare`` (per-triangle resolve data, 0 when cached
+        on the scene), ``raster`` (CPU time spent submitting and waiting for the GPU),
+        ``raster_gpu`` (GPU timestamps, when the adapter has them), ``readback``,
+        ``resolve`` (depth, position, normal and colour from each pixel's triangle id, by
+        intersecting the pixel-centre ray with that triangle in float64) and ``total``.
+        Images are processed in chunks and one chunk's resolve overlaps the next chunk's
+        raster, so the stages can add up to more than ``total``.
     """
 
     depth: np.ndarray

@@ -18,6 +18,7 @@ use crate::error::{Error, Result};
 use crate::gpu;
 use crate::input_err;
 use crate::scene::Scene;
+use crate::trace::{nearest_hits_facing, Query};
 use crate::types::{DepthImages, Timings};
 
 /// Every triangle's [`SurfacePlane`], in face order: a scene's cached resolve data.
@@ -107,13 +108,13 @@ pub fn discretize_ranges(
 }
 
 /// Conventional images without the GPU (the `"cpu"` backend): each camera's pixel-centre rays
-/// cast through the scene's BVH on all cores, from its near plane on, and each pixel's nearest
-/// triangle resolved by the same f64 code as the raster path ([`resolve_ids`]). The images
+/// cast through the scene's BVH on all cores between its near and far planes (back faces passed
+/// through when culling), and each pixel's nearest triangle resolved by the same f64 code as
+/// the raster path ([`resolve_ids`]). The images
 /// equal the raster path's in every field and convention. Pixel centres on an edge are then
 /// decided by the rasteriser's rule (`raster_rule`: snapped vertices, top-left fill), so
 /// triangle ids differ from the raster path's only where its own f32 transform rounds a vertex
-/// differently, or at depth ties. With `cull_backfaces`, a ray that meets a back face first
-/// resumes just beyond it (past the scene's same-point tolerance).
+/// differently, or at depth ties.
 pub fn discretize_traced(
     scene: &Scene,
     cameras: &[Camera],
@@ -132,18 +133,18 @@ pub fn discretize_traced(
             first.height
         ))
     })?;
-    let (mut bvh_seconds, mut trace_seconds) = (0.0, 0.0);
+    let mut timings = Timings::new();
     for cam in cameras {
         crate::process::check()?;
-        let (image, built, traced) = traced_ids(scene, cam, cull_backfaces)?;
+        let (image, stages) = traced_ids(scene, cam, cull_backfaces)?;
         ids.extend_from_slice(&image);
-        bvh_seconds += built;
-        trace_seconds += traced;
+        timings.merge(&stages);
     }
     let (mut img, resolve_seconds) = resolve_ids(scene, cameras, ids)?;
     img.timings = Timings::from([
-        ("bvh", bvh_seconds),
-        ("trace", trace_seconds),
+        ("bvh", timings.get("bvh").unwrap_or(0.0)),
+        ("trace", timings.get("trace").unwrap_or(0.0)),
+        ("edges", timings.get("edges").unwrap_or(0.0)),
         ("resolve", resolve_seconds),
         ("total", total.elapsed().as_secs_f64()),
     ]);
@@ -151,38 +152,46 @@ pub fn discretize_traced(
 }
 
 /// The nearest triangle at each pixel centre of `cam` between its near and far planes (−1
-/// where none), and the seconds spent building the BVH (0 when it was built) and casting.
-fn traced_ids(scene: &Scene, cam: &Camera, cull_backfaces: bool) -> Result<(Vec<i32>, f64, f64)> {
+/// where none; centres on an edge decided by the raster's rule), and the seconds spent
+/// building the BVH (`bvh`, 0 when it was built), casting (`trace`) and on the edges (`edges`).
+fn traced_ids(scene: &Scene, cam: &Camera, cull_backfaces: bool) -> Result<(Vec<i32>, Timings)> {
     let (near, far) = cam.clip_range(scene.bounds());
     let frame = TraceFrame::of(scene)?;
-    let npx = cam.width as usize * cam.height as usize;
-    let how = Walk {
-        cull_backfaces,
-        far,
-        frame: Some(&frame),
-    };
-    let none_redundant = |c: &[Sample]| Ok(vec![false; c.len()]);
-    let walked = walk(
-        scene,
-        cam,
-        (0..npx).map(|p| (p, near)).collect(),
-        how,
-        none_redundant,
-    )?;
-    let mut out = vec![-1i32; npx];
-    for (p, t) in walked.found {
-        out[p] = t;
-    }
-    let (changes, settle_seconds) =
+    let (origins, dirs) = pixel_rays_f32(cam, &frame);
+    let range = Query::new(near as f32, (far as f32).max(near as f32));
+    let target = frame.scene(scene);
+    let hits = nearest_hits_facing(target, &origins, &dirs, 1, &range, cull_backfaces)?;
+    let mut out = hits.triangle;
+    let (changes, edge_seconds) =
         super::raster_rule::settle_edges(scene, cam, cull_backfaces, &frame, &out)?;
     for (p, t) in changes {
         out[p] = t;
     }
     Ok((
         out,
-        walked.bvh_seconds,
-        walked.trace_seconds + settle_seconds,
+        Timings::from([
+            ("bvh", hits.bvh_build_seconds),
+            ("trace", hits.trace_seconds),
+            ("edges", edge_seconds),
+        ]),
     ))
+}
+
+/// Every pixel-centre ray of `cam` in `frame` (origin on the camera, direction with camera z
+/// −1, so `t` is the depth), rounded to f32 for the ray caster, row-major.
+pub(crate) fn pixel_rays_f32(cam: &Camera, frame: &TraceFrame) -> (Vec<[f32; 3]>, Vec<[f32; 3]>) {
+    let w = cam.width as usize;
+    let rays = PixelRays::new(cam);
+    (0..w * cam.height as usize)
+        .into_par_iter()
+        .map(|p| {
+            let (o, d) = rays.ray(p % w, p / w);
+            (
+                (o - frame.shift).as_vec3().to_array(),
+                d.as_vec3().to_array(),
+            )
+        })
+        .unzip()
 }
 
 /// How [`walk`] walks: culling back faces or not, up to which depth, and in which frame.

@@ -22,11 +22,9 @@ use std::time::Instant;
 
 use glam::DVec3;
 
-use rayon::prelude::*;
-
 use super::conventional::{
-    check_cameras, discretize_conventional, resolve_ids, resolve_streamed, walk, PixelRays,
-    TraceFrame, Walk,
+    check_cameras, discretize_conventional, pixel_rays_f32, resolve_ids, resolve_streamed, walk,
+    PixelRays, TraceFrame, Walk,
 };
 use super::redundancy::{self, Redundancy, Sample};
 use crate::camera::Camera;
@@ -116,16 +114,7 @@ pub fn discretize_peeling_traced(
     let target = frame.scene(scene);
     let w = camera.width as usize;
     let rays = PixelRays::new(camera);
-    let (origins, dirs): (Vec<[f32; 3]>, Vec<[f32; 3]>) = (0..npx)
-        .into_par_iter()
-        .map(|p| {
-            let (o, d) = rays.ray(p % w, p / w);
-            (
-                (o - frame.shift).as_vec3().to_array(),
-                d.as_vec3().to_array(),
-            )
-        })
-        .unzip();
+    let (origins, dirs) = pixel_rays_f32(camera, &frame);
     let range = Query::new(near as f32, (far as f32).max(near as f32));
     let hits = nearest_hits_facing(target, &origins, &dirs, layers, &range, cull_backfaces)?;
     let mut rows = hits.triangle;
@@ -149,7 +138,8 @@ pub fn discretize_peeling_traced(
     img.method = "peeling".into();
     img.timings = Timings::from([
         ("bvh", hits.bvh_build_seconds),
-        ("trace", hits.trace_seconds + settle_seconds),
+        ("trace", hits.trace_seconds),
+        ("edges", settle_seconds),
         ("resolve", resolve_seconds),
     ]);
     merge_same_surfaces(&mut img);
