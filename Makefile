@@ -25,8 +25,8 @@ test-python: ## pytest: cross-validation against pyrender and Embree, bad input,
 test-wheel: ## build the wheel and sdist, install each into a fresh venv, smoke-test them and run the quickstart outside the tree
 	PYTHON=$(PY) bash scripts/wheel_check.sh
 
-wheel: ## the abi3 manylinux wheel (CPython >= 3.9) and the sdist, into dist/
-	$(PY) -m maturin build --release --out dist
+wheel: ## the abi3 manylinux2014 wheel (CPython >= 3.9, glibc >= 2.17) and the sdist, into dist/
+	CARGO_TARGET_DIR=target/manylinux $(PY) -m maturin build --release --zig --compatibility manylinux2014 --out dist
 	$(PY) -m maturin sdist --out dist
 
 bench: setup ## side-by-side benchmarks against Embree and pyrender

@@ -11,8 +11,11 @@ WORK=$(mktemp -d)
 trap 'rm -rf "$WORK"' EXIT
 pipq() { "$1" -m pip install --quiet --disable-pip-version-check "${@:2}"; }
 
-"$PY" -m maturin build --release --quiet --out "$WORK/dist"
-WHEEL=$(ls "$WORK"/dist/scenesample-*-cp39-abi3-*.whl)
+# Linked by zig against glibc 2.17 (manylinux2014), in its own target folder so that it does not
+# invalidate the editable build's.
+CARGO_TARGET_DIR="$ROOT/target/manylinux" "$PY" -m maturin build --release --quiet --zig \
+    --compatibility manylinux2014 --out "$WORK/dist"
+WHEEL=$(ls "$WORK"/dist/scenesample-*-cp39-abi3-manylinux2014_x86_64*.whl)
 echo "wheel: $(basename "$WHEEL") ($(du -h "$WHEEL" | cut -f1))"
 
 "$PY" -m venv "$WORK/venv"

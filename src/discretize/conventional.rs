@@ -226,9 +226,9 @@ pub(crate) struct Walked {
 /// depth, and every surface it meets is a candidate sample, which `redundant` tests (a batch
 /// at a time); the first candidate not redundant (nor a culled back face) is the pixel's
 /// sample. A walk resumes just beyond each rejected surface, past the tolerance that makes two
-/// surfaces the same point, so it always advances. Conventional images on the CPU are the walk
-/// where nothing is redundant; non-redundant images under visibility redundancy, and the
-/// coincident-triangle fix-up, test each candidate against the earlier images.
+/// surfaces the same point, so it always advances. Non-redundant images under visibility
+/// redundancy, and the coincident-triangle fix-up, test each candidate against the earlier
+/// images.
 pub(crate) fn walk(
     scene: &Scene,
     cam: &Camera,

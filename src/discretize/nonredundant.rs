@@ -13,7 +13,9 @@
 //! - Depth peeling: k passes from one camera, pass i keeping the nearest fragment strictly
 //!   beyond pass i−1's depth at its pixel (`gpu::layered`, `fs_peel`). A surface within a
 //!   relative `trace::SAME_HIT` (1e-5) of the previous layer's depth is that layer met again
-//!   (duplicated and coplanar faces), so depths strictly increase along each pixel.
+//!   (duplicated and coplanar faces), so depths strictly increase along each pixel. On the CPU
+//!   (`discretize_peeling_traced`), each pixel ray gathers its k nearest distinct surfaces in
+//!   one traversal instead, with the same tie rule.
 //!
 //! All three resolve depth, position, normal and colour from the triangle ids exactly as
 //! conventional images do.
@@ -155,11 +157,7 @@ pub fn discretize_peeling_traced(
 /// there; one in front of the old first surface goes before it; any other (the neighbour across
 /// a shared edge, at the same depth) takes the first layer's place.
 fn restart_layers(scene: &Scene, row: &mut [i32], first: i32, o: DVec3, d: DVec3) {
-    let depth = |t: i32| {
-        let [a, b, c] = scene.triangle(t as usize);
-        let n = (b - a).cross(c - a);
-        n.dot(a - o) / n.dot(d)
-    };
+    let depth = |t: i32| super::raster_rule::plane_depth(scene, t as usize, o, d);
     if first < 0 {
         row.fill(-1);
     } else if let Some(k) = row.iter().position(|&t| t == first) {

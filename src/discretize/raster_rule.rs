@@ -115,7 +115,7 @@ fn covers(v: Fixed, x: usize, y: usize) -> bool {
 }
 
 /// Depth along `(o, d)` (camera z of `d` is −1, so t is the depth) of triangle `t`'s plane.
-fn plane_depth(scene: &Scene, t: usize, o: DVec3, d: DVec3) -> f64 {
+pub(crate) fn plane_depth(scene: &Scene, t: usize, o: DVec3, d: DVec3) -> f64 {
     let [a, b, c] = scene.triangle(t);
     let n = (b - a).cross(c - a);
     n.dot(a - o) / n.dot(d)
