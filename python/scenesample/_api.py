@@ -178,7 +178,7 @@ def device_info(
     Without an adapter (no Vulkan driver) it does not raise: ``available`` is False, ``error``
     says why and how to install one, ``name``/``backend``/``device_type``/``driver`` are None,
     ``timestamps`` False and the limits 0. The CPU paths (``cast_rays``, ``occluded``,
-    conventional ``discretize``) then still work; the GPU-only methods raise
+    conventional and peeling ``discretize``) then still work; the GPU-only methods raise
     :class:`GpuUnavailableError`.
 
     With ``triangles`` and ``pixels`` (per image), also ``auto``: what conventional
