@@ -193,18 +193,18 @@ impl CostModel {
         let machine = cache::machine(adapter.as_ref().ok().map(|c| &c.info));
         let path = cache::path();
         let cached = path.as_deref().and_then(|p| cache::read(p, &machine));
-        let model = match (cached, adapter) {
-            (Some((cpu, Some(gpu))), Ok(_)) => CostModel {
-                gpu: Ok(gpu),
+        // The file's model, when its GPU part matches whether there is an adapter now.
+        let from_file = match (cached, adapter) {
+            (Some((cpu, Some(gpu))), Ok(_)) => Some((cpu, Ok(gpu))),
+            (Some((cpu, None)), Err(why)) => Some((cpu, Err(why))),
+            _ => None,
+        };
+        let model = match (from_file, path.as_deref()) {
+            (Some((cpu, gpu)), Some(p)) => CostModel {
+                gpu,
                 cpu,
                 calibration_seconds: 0.0,
-                source: path.as_deref().map_or_else(String::new, cache::display),
-            },
-            (Some((cpu, None)), Err(why)) => CostModel {
-                gpu: Err(why),
-                cpu,
-                calibration_seconds: 0.0,
-                source: path.as_deref().map_or_else(String::new, cache::display),
+                source: cache::display(p),
             },
             _ => {
                 // Timing noise (another process on the machine) can flatten a slope to 0; such

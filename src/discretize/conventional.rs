@@ -647,11 +647,17 @@ impl SurfacePlane {
         })
     }
 
+    /// The `t` at which the ray `o + t·d` meets the plane (the depth, when camera-space z of `d`
+    /// is −1); not finite for an edge-on or degenerate triangle.
+    pub(crate) fn ray_depth(&self, o: DVec3, d: DVec3) -> f64 {
+        self.normal.dot(self.a - o) / self.normal.dot(d)
+    }
+
     /// Where the ray `o + t·d` (camera-space z of `d` is −1, so `t` is depth) meets the plane.
     /// The rasteriser said the triangle covers this pixel centre, so the ray meets the plane
     /// unless the triangle is edge-on or degenerate; then the centroid stands in.
     fn intersect(&self, o: DVec3, d: DVec3, forward: DVec3) -> SurfacePoint {
-        let t = self.normal.dot(self.a - o) / self.normal.dot(d);
+        let t = self.ray_depth(o, d);
         let (point, depth, b1, b2) = match self.centroid {
             Some(c) => (c, (c - o).dot(forward), 1.0 / 3.0, 1.0 / 3.0),
             None if t.is_finite() => {

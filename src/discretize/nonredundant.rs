@@ -26,7 +26,7 @@ use glam::DVec3;
 
 use super::conventional::{
     check_cameras, discretize_conventional, pixel_rays_f32, resolve_ids, resolve_streamed, walk,
-    PixelRays, TraceFrame, Walk,
+    PixelRays, SurfacePlane, TraceFrame, Walk,
 };
 use super::redundancy::{self, Redundancy, Sample};
 use crate::camera::Camera;
@@ -125,9 +125,10 @@ pub fn discretize_peeling_traced(
     let first: Vec<i32> = rows.iter().step_by(layers).copied().collect();
     let (changes, settle_seconds) =
         super::raster_rule::settle_edges(scene, camera, cull_backfaces, &frame, &first)?;
+    let planes = SurfacePlane::of(scene);
     for (p, t) in changes {
         let (o, d) = rays.ray(p % w, p / w);
-        restart_layers(scene, &mut rows[p * layers..(p + 1) * layers], t, o, d);
+        restart_layers(&planes, &mut rows[p * layers..(p + 1) * layers], t, o, d);
     }
     // Ray-major hits to layer-major images.
     let mut ids = vec![-1i32; npx * layers];
@@ -156,8 +157,8 @@ pub fn discretize_peeling_traced(
 /// its first surface: nothing (−1) empties the pixel; a surface among the layers starts them
 /// there; one in front of the old first surface goes before it; any other (the neighbour across
 /// a shared edge, at the same depth) takes the first layer's place.
-fn restart_layers(scene: &Scene, row: &mut [i32], first: i32, o: DVec3, d: DVec3) {
-    let depth = |t: i32| super::raster_rule::plane_depth(scene, t as usize, o, d);
+fn restart_layers(planes: &[SurfacePlane], row: &mut [i32], first: i32, o: DVec3, d: DVec3) {
+    let depth = |t: i32| planes[t as usize].ray_depth(o, d);
     if first < 0 {
         row.fill(-1);
     } else if let Some(k) = row.iter().position(|&t| t == first) {

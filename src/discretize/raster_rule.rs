@@ -19,10 +19,10 @@
 //! neighbouring grid point), so a few edge pixels still differ; it leaves a pixel as traced when
 //! a candidate crosses the near plane.
 
-use glam::{DVec3, Vec4};
+use glam::Vec4;
 use rayon::prelude::*;
 
-use super::conventional::{PixelRays, TraceFrame};
+use super::conventional::{PixelRays, SurfacePlane, TraceFrame};
 use crate::camera::Camera;
 use crate::error::Result;
 use crate::scene::Scene;
@@ -114,13 +114,6 @@ fn covers(v: Fixed, x: usize, y: usize) -> bool {
     })
 }
 
-/// Depth along `(o, d)` (camera z of `d` is −1, so t is the depth) of triangle `t`'s plane.
-pub(crate) fn plane_depth(scene: &Scene, t: usize, o: DVec3, d: DVec3) -> f64 {
-    let [a, b, c] = scene.triangle(t);
-    let n = (b - a).cross(c - a);
-    n.dot(a - o) / n.dot(d)
-}
-
 /// The outward unit normal (pixels) and the distance (pixels, positive inside) of the pixel
 /// centre from each edge of the snapped triangle `v`.
 fn edges(v: Fixed, x: usize, y: usize) -> [([f64; 2], f64); 3] {
@@ -168,6 +161,8 @@ pub(crate) fn settle_edges(
     let snap = Snap::new(scene, cam);
     let (near, far) = cam.clip_range(scene.bounds());
     let rays = PixelRays::new(cam);
+    // The resolve's planes (cached on the scene): candidates are ordered by the same depth.
+    let planes = SurfacePlane::of(scene);
     let ids_ro = ids;
     let neighbours = |p: usize| {
         let (x, y) = (p % w, p / w);
@@ -257,7 +252,7 @@ pub(crate) fn settle_edges(
                 if !covers(v, x, y) {
                     continue;
                 }
-                let z = plane_depth(scene, t as usize, o, d);
+                let z = planes[t as usize].ray_depth(o, d);
                 if !(near..=far).contains(&z) {
                     continue;
                 }
