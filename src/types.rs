@@ -1,7 +1,7 @@
-//! The types every room exchanges: depth images, point sets, per-stage timings, and the depth
-//! tolerance that makes two hits one surface. They sit below the rooms (`discretize`,
-//! `reconstruct`, `splat`, `shadows`, `effects`, `evaluate`, `io`, `gpu`, `trace`), so that none of
-//! those has to reach into another for them.
+//! The types every room exchanges: depth images, point sets, per-stage timings, per-call stats,
+//! and the depth tolerance that makes two hits one surface. They sit below the rooms
+//! (`discretize`, `reconstruct`, `splat`, `shadows`, `effects`, `evaluate`, `io`, `gpu`,
+//! `trace`), so that none of those has to reach into another for them.
 
 use std::time::Instant;
 
@@ -69,6 +69,52 @@ impl<const N: usize> From<[(&'static str, f64); N]> for Timings {
     }
 }
 
+/// What one call did, by name (points made, cells culled, bytes of buffers, ...), in the order
+/// first recorded. Counts are kept as f64 because Python receives them as floats.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Stats(Vec<(&'static str, f64)>);
+
+impl Stats {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Set `name` to `value`, replacing what it held.
+    pub fn set(&mut self, name: &'static str, value: f64) {
+        match self.0.iter_mut().find(|(s, _)| *s == name) {
+            Some((_, v)) => *v = value,
+            None => self.0.push((name, value)),
+        }
+    }
+
+    /// The value of `name`, if recorded.
+    pub fn get(&self, name: &str) -> Option<f64> {
+        self.0.iter().find(|(s, _)| *s == name).map(|&(_, v)| v)
+    }
+
+    /// Set every entry of `other` (the stats of a step this call ran).
+    pub fn extend(&mut self, other: &Stats) {
+        for &(s, v) in &other.0 {
+            self.set(s, v);
+        }
+    }
+
+    /// (name, value) in order.
+    pub fn iter(&self) -> impl Iterator<Item = (&'static str, f64)> + '_ {
+        self.0.iter().copied()
+    }
+}
+
+impl<const N: usize> From<[(&'static str, f64); N]> for Stats {
+    fn from(entries: [(&'static str, f64); N]) -> Self {
+        let mut s = Stats::new();
+        for (k, v) in entries {
+            s.set(k, v);
+        }
+        s
+    }
+}
+
 /// Two hits whose `t` differ by at most this fraction of the larger are one surface met twice
 /// (a duplicated or coplanar face): `nearest_hits` counts them once, and depth peeling makes
 /// them one layer (`discretize::discretize_peeling`).
@@ -111,7 +157,7 @@ pub struct Points {
     /// How many views the bit strings describe.
     pub view_count: usize,
     pub timings: Timings,
-    pub stats: Vec<(String, f64)>,
+    pub stats: Stats,
 }
 
 impl Points {
@@ -178,5 +224,27 @@ impl Points {
             );
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn timings_add_and_stats_replace_in_first_order() {
+        let mut t = Timings::from([("a", 1.0), ("b", 2.0)]);
+        t.add("a", 0.5);
+        t.set("b", 4.0);
+        assert_eq!(t.iter().collect::<Vec<_>>(), vec![("a", 1.5), ("b", 4.0)]);
+
+        let mut s = Stats::from([("points", 3.0), ("cells", 1.0)]);
+        s.extend(&Stats::from([("cells", 7.0), ("bytes", 64.0)]));
+        assert_eq!(
+            s.iter().collect::<Vec<_>>(),
+            vec![("points", 3.0), ("cells", 7.0), ("bytes", 64.0)]
+        );
+        assert_eq!(s.get("cells"), Some(7.0));
+        assert_eq!(s.get("rays"), None);
     }
 }

@@ -38,7 +38,7 @@ use crate::camera::{Camera, Projection};
 use crate::error::Result;
 use crate::input_err;
 use crate::scene::Scene;
-use crate::types::{Points, Timings};
+use crate::types::{Points, Stats, Timings};
 
 /// Most points one triangle may produce.
 pub const MAX_PER_TRIANGLE: f64 = 65536.0;
@@ -425,12 +425,12 @@ fn sample_triangles(
         }
     }
     out.timings = Timings::from([("points", start.elapsed().as_secs_f64())]);
-    out.stats = vec![
-        ("points".into(), out.len() as f64),
-        ("triangles_sampled".into(), sampled as f64),
-        ("triangles_culled".into(), culled as f64),
-        ("triangles_outside_views".into(), invisible as f64),
-    ];
+    out.stats = Stats::from([
+        ("points", out.len() as f64),
+        ("triangles_sampled", sampled as f64),
+        ("triangles_culled", culled as f64),
+        ("triangles_outside_views", invisible as f64),
+    ]);
     Ok(out)
 }
 

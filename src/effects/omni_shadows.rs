@@ -33,7 +33,7 @@ use crate::input_err;
 use crate::scene::Scene;
 use crate::shadows::{eye_points, per_pixel, raytraced};
 use crate::splat::{splat_views, Points};
-use crate::types::Timings;
+use crate::types::{Stats, Timings};
 
 /// The smallest adaptive cube-map face resolution.
 pub const MIN_RESOLUTION: u32 = 16;
@@ -83,7 +83,7 @@ pub struct OmniResult {
     pub samples: Vec<DVec3>,
     /// The cube-map face resolution used (0 for `Raytraced`).
     pub resolution: u32,
-    pub stats: Vec<(String, f64)>,
+    pub stats: Stats,
     pub timings: Timings,
 }
 
@@ -169,7 +169,7 @@ pub fn omni_shadows(
     let total = Instant::now();
     check_light(center, radius, opts)?;
     let mut timings = Timings::new();
-    let mut stats = Vec::new();
+    let mut stats = Stats::new();
 
     let start = Instant::now();
     let seen = discretize_conventional(scene, std::slice::from_ref(eye), false)?;
@@ -215,13 +215,10 @@ pub fn omni_shadows(
     };
 
     let (visible, visibility) = per_pixel(&bits, &mask, s_count);
-    stats.push(("light_samples".to_string(), s_count as f64));
-    stats.push((
-        "views".to_string(),
-        if res == 0 { 0.0 } else { 6.0 * s_count as f64 },
-    ));
-    stats.push(("resolution".to_string(), res as f64));
-    stats.push(("receivers".to_string(), points.len() as f64));
+    stats.set("light_samples", s_count as f64);
+    stats.set("views", if res == 0 { 0.0 } else { 6.0 * s_count as f64 });
+    stats.set("resolution", res as f64);
+    stats.set("receivers", points.len() as f64);
     timings.add("total", total.elapsed().as_secs_f64());
     Ok(OmniResult {
         width: eye.width,
@@ -265,7 +262,7 @@ fn mvr_bits(
     (res, near): (u32, f64),
     (points, normals): (&[DVec3], &[DVec3]),
     timings: &mut Timings,
-    stats: &mut Vec<(String, f64)>,
+    stats: &mut Stats,
 ) -> Result<Vec<u32>> {
     let s_count = samples.len();
     let diagonal = scene.diagonal();
@@ -292,10 +289,10 @@ fn mvr_bits(
         }
     }
     timings.add("shadow", start.elapsed().as_secs_f64());
-    stats.push((
-        "triangles_drawn".to_string(),
+    stats.set(
+        "triangles_drawn",
         (scene.triangle_count() * cams.len()) as f64,
-    ));
+    );
     Ok(bits)
 }
 
@@ -311,7 +308,7 @@ fn splatted_bits(
     (points, normals): (&[DVec3], &[DVec3]),
     opts: &OmniOptions,
     timings: &mut Timings,
-    stats: &mut Vec<(String, f64)>,
+    stats: &mut Stats,
 ) -> Result<Vec<u32>> {
     let diagonal = scene.diagonal();
     let density = if opts.method == OmniMethod::Epr {
@@ -324,7 +321,7 @@ fn splatted_bits(
     let start = Instant::now();
     let pts = epr::generate_shadow(scene, eye, samples, res, near, density, opts.seed)?;
     timings.add("points", start.elapsed().as_secs_f64());
-    stats.extend(pts.stats.iter().cloned());
+    stats.extend(&pts.stats);
     let cams = epr::shadow_views(samples, res, near)?;
     let start = Instant::now();
     // Clipped to the triangle: unclipped squares overhang silhouettes and over-shadow.
@@ -336,10 +333,10 @@ fn splatted_bits(
     let start = Instant::now();
     let bits = test_splatted(&keys, &pts, &cams, samples, points, normals, diagonal);
     timings.add("test", start.elapsed().as_secs_f64());
-    stats.push((
-        "buffer_bytes".to_string(),
+    stats.set(
+        "buffer_bytes",
         (keys.len() * std::mem::size_of::<u64>()) as f64,
-    ));
+    );
     Ok(bits)
 }
 

@@ -34,7 +34,7 @@ use crate::error::Result;
 use crate::input_err;
 use crate::scene::Scene;
 use crate::shading::{self, ShadeLight};
-use crate::types::{DepthImages, Timings};
+use crate::types::{DepthImages, Stats, Timings};
 
 /// Radiance where a ray leaves the scene.
 pub const BACKGROUND: [f64; 3] = [0.25, 0.3, 0.36];
@@ -78,7 +78,7 @@ pub struct ReflectionResult {
     pub image: Vec<[f32; 3]>,
     /// Whether each eye pixel shows a reflector.
     pub reflective: Vec<bool>,
-    pub stats: Vec<(String, f64)>,
+    pub stats: Stats,
     pub timings: Timings,
 }
 
@@ -235,7 +235,7 @@ pub fn reflections(
     crate::counters::add(crate::counters::Op::CubeMaps, reflectors.len() as u64);
     check_options(reflectors, opts)?;
     let mut timings = Timings::new();
-    let mut stats = Vec::new();
+    let mut stats = Stats::new();
 
     // The eye's G-buffer.
     let start = Instant::now();
@@ -321,14 +321,14 @@ pub fn reflections(
         // G-buffer (triangle id, position) and colour with its mip chain (4/3).
         Method::Mvr => texels * (4 + 12) + texels * 12 * 4 / 3,
     };
-    stats.push(("points".to_string(), point_count as f64));
-    stats.push(("shading_ops".to_string(), shading_ops as f64));
-    stats.push(("offscreen_pixels".to_string(), texels as f64));
-    stats.push(("buffer_bytes".to_string(), buffer_bytes as f64));
-    stats.push((
-        "reflective_pixels".to_string(),
+    stats.set("points", point_count as f64);
+    stats.set("shading_ops", shading_ops as f64);
+    stats.set("offscreen_pixels", texels as f64);
+    stats.set("buffer_bytes", buffer_bytes as f64);
+    stats.set(
+        "reflective_pixels",
         reflective.iter().filter(|&&r| r).count() as f64,
-    ));
+    );
     timings.add("total", total.elapsed().as_secs_f64());
     Ok(ReflectionResult {
         width: eye.width,

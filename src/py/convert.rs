@@ -227,10 +227,10 @@ pub fn redundancy(py: Python<'_>, name: &str) -> PyResult<crate::discretize::Red
     })
 }
 
-/// (name, value) pairs (timings, stats) as a dict, in their order.
-pub fn named<'py>(py: Python<'py>, items: Vec<(String, f64)>) -> PyResult<Bound<'py, PyDict>> {
+/// A call's [`Stats`](crate::types::Stats) as a dict, in the order they were recorded.
+pub fn stats<'py>(py: Python<'py>, s: &crate::types::Stats) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
-    for (k, v) in items {
+    for (k, v) in s.iter() {
         d.set_item(k, v)?;
     }
     Ok(d)

@@ -4,7 +4,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use super::camera::PyCamera;
-use super::convert::{array, flat_i32, named, rows_f64, rows_owned};
+use super::convert::{array, flat_i32, rows_f64, rows_owned, stats};
 use super::errors::input;
 use super::scene::PyScene;
 use crate::discretize::epr::Reflector;
@@ -90,7 +90,7 @@ pub fn reflections<'py>(
     let d = PyDict::new(py);
     d.set_item("image", rows_owned(py, r.image, &[h, w, 3])?)?;
     d.set_item("reflective", array(py, r.reflective, &[h, w])?)?;
-    d.set_item("stats", named(py, r.stats)?)?;
+    d.set_item("stats", stats(py, &r.stats)?)?;
     d.set_item("timings", super::convert::timings(py, &r.timings)?)?;
     super::set_ops(&d, ops)?;
     Ok(d)

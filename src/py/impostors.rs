@@ -6,7 +6,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use super::camera::PyCamera;
-use super::convert::{array, named};
+use super::convert::{array, stats};
 use super::errors::input;
 use super::scene::PyScene;
 use crate::discretize::impostors::{self as di, ImpostorOptions, ImpostorProjection, Impostors};
@@ -111,7 +111,7 @@ fn view_dict<'py>(py: Python<'py>, v: ri::ImpostorView) -> PyResult<Bound<'py, P
     d.set_item("depth", array(py, v.depth, &[h, w])?)?;
     let c = v.used.len();
     d.set_item("used", array(py, v.used, &[c])?)?;
-    d.set_item("stats", named(py, v.stats)?)?;
+    d.set_item("stats", stats(py, &v.stats)?)?;
     d.set_item("timings", super::convert::timings(py, &v.timings)?)?;
     Ok(d)
 }

@@ -5,7 +5,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use super::camera::PyCamera;
-use super::convert::{array, named, vec3};
+use super::convert::{array, stats, vec3};
 use super::errors::{input, IntoPy};
 use super::scene::PyScene;
 use crate::effects::omni_shadows::{OmniMethod, OmniOptions};
@@ -123,7 +123,7 @@ pub fn omni_shadows<'py>(
         super::convert::rows_owned(py, pts, &[count, 3])?,
     )?;
     d.set_item("resolution", r.resolution)?;
-    d.set_item("stats", named(py, r.stats)?)?;
+    d.set_item("stats", stats(py, &r.stats)?)?;
     d.set_item("timings", super::convert::timings(py, &r.timings)?)?;
     super::set_ops(&d, ops)?;
     Ok(d)

@@ -5,7 +5,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use super::camera::PyCamera;
-use super::convert::{array, flat_i32, named, rows_f32, rows_owned, vec3};
+use super::convert::{array, flat_i32, rows_f32, rows_owned, stats, vec3};
 use super::errors::{input, IntoPy};
 use super::scene::PyScene;
 use crate::discretize::epr::{self, Density};
@@ -116,7 +116,7 @@ fn points_dict<'py>(
     let cams: Vec<PyCamera> = views.into_iter().map(PyCamera::from).collect();
     d.set_item("cameras", cams)?;
     d.set_item("timings", super::convert::timings(py, &p.timings)?)?;
-    d.set_item("stats", named(py, p.stats)?)?;
+    d.set_item("stats", stats(py, &p.stats)?)?;
     Ok(d)
 }
 

@@ -23,7 +23,7 @@ use crate::discretize::{discretize_ranges, push_range};
 use crate::error::Result;
 use crate::input_err;
 use crate::scene::Scene;
-use crate::types::{DepthImages, Timings};
+use crate::types::{DepthImages, Stats, Timings};
 
 /// How each cell was drawn.
 pub const CULLED: i32 = -2;
@@ -39,7 +39,7 @@ pub struct ImpostorView {
     pub depth: Vec<f32>,
     /// Per cell: `CULLED`, `TRIANGLES`, or the index of the impostor direction used.
     pub used: Vec<i32>,
-    pub stats: Vec<(String, f64)>,
+    pub stats: Stats,
     pub timings: Timings,
 }
 
@@ -124,13 +124,13 @@ pub fn reconstruct(
         height: camera.height,
         color,
         depth,
-        stats: vec![
-            ("cells_culled".into(), count(CULLED)),
-            ("cells_triangles".into(), count(TRIANGLES)),
-            ("cells_impostors".into(), impostors),
-            ("triangles_drawn".into(), drawn as f64),
-            ("billboard_pixels".into(), billboard_pixels as f64),
-        ],
+        stats: Stats::from([
+            ("cells_culled", count(CULLED)),
+            ("cells_triangles", count(TRIANGLES)),
+            ("cells_impostors", impostors),
+            ("triangles_drawn", drawn as f64),
+            ("billboard_pixels", billboard_pixels as f64),
+        ]),
         used,
         timings: Timings::from([
             ("cull", cull_seconds),
