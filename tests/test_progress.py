@@ -88,8 +88,8 @@ def test_an_experiment_counts_its_scenes(bars, tmp_path, gpu):
     from scenesample.experiments import impostors
 
     impostors.main(
-        ["--scenes", "urban", "--distances", "1", "--depth", "1", "--subdivisions", "0"]
-        + ["--resolution", "8", "--budgets", "0", "--storage-depths", "0"]
+        ["--scenes", "urban", "--distances", "1", "--octree-depth", "1", "--subdivisions", "0"]
+        + ["--resolution", "8", "--budgets", "0", "--storage-octree-depths", "0"]
         + ["--size", "24", "--out", str(tmp_path)]
     )
     outer = [b for b in bars if b.unit == "scenes"]

@@ -61,12 +61,15 @@ def variants(args: Any) -> dict[str, dict[str, Any]]:
     kw = dict(subdivisions=args.subdivisions, resolution=args.resolution)
     out = {
         "single cell": dict(octree_depth=0, **kw),
-        f"multi-cell (depth {args.depth})": dict(octree_depth=args.depth, **kw),
-        "multi-cell, no growing": dict(octree_depth=args.depth, grow=False, **kw),
+        f"multi-cell (depth {args.octree_depth})": dict(octree_depth=args.octree_depth, **kw),
+        "multi-cell, no growing": dict(octree_depth=args.octree_depth, grow=False, **kw),
     }
     for deg in (40, 60, 90):
         out[f"perspective {deg}"] = dict(
-            octree_depth=args.depth, projection="perspective", fov=float(np.radians(deg)), **kw
+            octree_depth=args.octree_depth,
+            projection="perspective",
+            fov=float(np.radians(deg)),
+            **kw,
         )
     return out
 
@@ -86,7 +89,7 @@ def run_scene(name: str, args: Any, out: Path) -> tuple[list[dict], list[dict]]:
             view = ss.reconstruct(imp, cam)
             e = ss.evaluate(view, ref)
             rows.append(_row(name, scene, label, imp, d, 0, view, ref, e))
-    multi_label = f"multi-cell (depth {args.depth})"
+    multi_label = f"multi-cell (depth {args.octree_depth})"
     multi = built[multi_label]
     for frac in args.budgets:
         if frac == 0:
@@ -99,7 +102,7 @@ def run_scene(name: str, args: Any, out: Path) -> tuple[list[dict], list[dict]]:
             rows.append(
                 _row(name, scene, multi_label, multi, d, frac, view, ref, ss.evaluate(view, ref))
             )
-    for depth in args.storage_depths:
+    for depth in args.storage_octree_depths:
         t = time.perf_counter()
         imp = ss.discretize(
             scene,
@@ -208,7 +211,8 @@ def markdown(rows: list[dict], storage: list[dict], args: Any) -> str:
     dists = sorted({r["distance"] for r in rows})
     lines = [
         f"Impostors vs triangles; {when}, {cpu}, {ss.device_info()['name']}. Octree depth "
-        f"{args.depth}, {20 * 4**args.subdivisions} views per cell, {args.resolution}^2 images; "
+        f"{args.octree_depth}, {20 * 4**args.subdivisions} views per cell, "
+        f"{args.resolution}^2 images; "
         f"{args.size}^2 views at a constant on-screen size. Error per foreground pixel (the "
         "paper's p_diff over the reference's foreground rectangle, 0-765) / interior gap "
         "pixels, by relative camera distance.",
@@ -250,11 +254,11 @@ def main(argv: Optional[list[str]] = None) -> None:
     p = argparse.ArgumentParser(prog="python -m scenesample.experiments impostors")
     p.add_argument("--scenes", nargs="+", default=["stanford_bunny", "khr_toy_car", "urban"])
     p.add_argument("--distances", type=float, nargs="+", default=[0.5, 0.75, 1, 1.5, 2, 4])
-    p.add_argument("--depth", type=int, default=2)
+    p.add_argument("--octree-depth", type=int, default=2)
     p.add_argument("--subdivisions", type=int, default=2)
     p.add_argument("--resolution", type=int, default=32)
     p.add_argument("--budgets", type=float, nargs="+", default=[0, 0.1, 0.3])
-    p.add_argument("--storage-depths", type=int, nargs="*", default=[0, 1, 2, 3])
+    p.add_argument("--storage-octree-depths", type=int, nargs="*", default=[0, 1, 2, 3])
     p.add_argument("--size", type=int, default=128)
     p.add_argument("--out", default="out/experiments/impostors")
     args = p.parse_args(argv)
