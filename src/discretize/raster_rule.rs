@@ -157,30 +157,70 @@ pub(crate) fn settle_edges(
     ids: &[i32],
 ) -> Result<(Vec<(usize, i32)>, f64)> {
     let start = std::time::Instant::now();
-    let (w, h) = (cam.width as usize, cam.height as usize);
     let snap = Snap::new(scene, cam);
-    let (near, far) = cam.clip_range(scene.bounds());
-    let rays = PixelRays::new(cam);
-    // The resolve's planes (cached on the scene): candidates are ordered by the same depth.
+    let found = near_edge_pixels(scene, cam, &snap, ids);
+    if found.is_empty() {
+        return Ok((Vec::new(), start.elapsed().as_secs_f64()));
+    }
+    let mut suspects = Vec::with_capacity(found.len());
+    let mut offsets = Vec::new();
+    for (pixel, across) in found {
+        let at = offsets.len();
+        offsets.extend(across.into_iter().map(|o| (pixel, o)));
+        suspects.push(Suspect {
+            pixel,
+            rays: at..offsets.len(),
+        });
+    }
+    let across = trace_across(scene, cam, cull_backfaces, frame, &offsets)?;
     let planes = SurfacePlane::of(scene);
-    let ids_ro = ids;
-    let neighbours = |p: usize| {
-        let (x, y) = (p % w, p / w);
-        [
-            (x > 0).then(|| p - 1),
-            (x + 1 < w).then(|| p + 1),
-            (y > 0).then(|| p - w),
-            (y + 1 < h).then(|| p + w),
-        ]
+    let judge = Judge {
+        scene,
+        snap: &snap,
+        planes: &planes[..],
+        rays: PixelRays::new(cam),
+        clip: cam.clip_range(scene.bounds()),
+        ids,
+        size: (cam.width as usize, cam.height as usize),
     };
-    // Per pixel: the offsets (pixels) of the rays that look across its near edges; empty for
-    // an empty pixel that a neighbour's triangle nearly covers (its candidates are those).
-    let found: Vec<(usize, Vec<[f64; 2]>)> = (0..w * h)
+    let decided: Vec<Option<i32>> = suspects
+        .par_iter()
+        .map(|s| judge.decide(s.pixel, &across[s.rays.clone()]))
+        .collect();
+    let changes = suspects
+        .iter()
+        .zip(decided)
+        .filter_map(|(s, t)| t.filter(|&t| t != ids[s.pixel]).map(|t| (s.pixel, t)))
+        .collect();
+    Ok((changes, start.elapsed().as_secs_f64()))
+}
+
+/// The 4-neighbours of pixel `p` in a `w`×`h` image (None beyond the border).
+fn neighbours(p: usize, (w, h): (usize, usize)) -> [Option<usize>; 4] {
+    let (x, y) = (p % w, p / w);
+    [
+        (x > 0).then(|| p - 1),
+        (x + 1 < w).then(|| p + 1),
+        (y > 0).then(|| p - w),
+        (y + 1 < h).then(|| p + w),
+    ]
+}
+
+/// Per suspect pixel, the offsets (pixels) of the rays that look across its near edges; empty
+/// for an empty pixel that a neighbour's triangle nearly covers (its candidates are those).
+fn near_edge_pixels(
+    scene: &Scene,
+    cam: &Camera,
+    snap: &Snap,
+    ids: &[i32],
+) -> Vec<(usize, Vec<[f64; 2]>)> {
+    let size = (cam.width as usize, cam.height as usize);
+    (0..size.0 * size.1)
         .into_par_iter()
         .filter_map(|p| {
-            let (x, y) = (p % w, p / w);
-            let t = ids_ro[p];
-            let around = neighbours(p).into_iter().flatten().map(|q| ids_ro[q]);
+            let (x, y) = (p % size.0, p / size.0);
+            let t = ids[p];
+            let around = neighbours(p, size).into_iter().flatten().map(|q| ids[q]);
             if t < 0 {
                 let near_one = around.filter(|&q| q >= 0).any(|q| {
                     snap.fixed(scene, q as usize)
@@ -202,21 +242,21 @@ pub(crate) fn settle_edges(
                 .collect();
             (!across.is_empty()).then_some((p, across))
         })
-        .collect();
-    if found.is_empty() {
-        return Ok((Vec::new(), start.elapsed().as_secs_f64()));
-    }
-    let mut suspects = Vec::with_capacity(found.len());
-    let mut offsets = Vec::new();
-    for (pixel, across) in found {
-        let at = offsets.len();
-        offsets.extend(across.into_iter().map(|o| (pixel, o)));
-        suspects.push(Suspect {
-            pixel,
-            rays: at..offsets.len(),
-        });
-    }
-    let target = frame.scene(scene);
+        .collect()
+}
+
+/// The first front surface (or every surface, without culling) of one ray per (pixel, offset)
+/// between the camera's clip planes: the triangles just across each near edge, −1 for none.
+fn trace_across(
+    scene: &Scene,
+    cam: &Camera,
+    cull_backfaces: bool,
+    frame: &TraceFrame,
+    offsets: &[(usize, [f64; 2])],
+) -> Result<Vec<i32>> {
+    let w = cam.width as usize;
+    let rays = PixelRays::new(cam);
+    let (near, far) = cam.clip_range(scene.bounds());
     let (origins, dirs): (Vec<[f32; 3]>, Vec<[f32; 3]>) = offsets
         .par_iter()
         .map(|&(p, [dx, dy])| {
@@ -229,52 +269,62 @@ pub(crate) fn settle_edges(
         })
         .unzip();
     let range = Query::new(near as f32, (far as f32).max(near as f32));
-    let hits = nearest_hits_facing(target, &origins, &dirs, 1, &range, cull_backfaces)?;
-    let decided: Vec<Option<i32>> = suspects
-        .par_iter()
-        .map(|s| {
-            let p = s.pixel;
-            let (x, y) = (p % w, p / w);
-            let across = &hits.triangle[s.rays.clone()];
-            let mut candidates: Vec<i32> = across.to_vec();
-            if ids_ro[p] >= 0 {
-                candidates.push(ids_ro[p]);
-            } else {
-                candidates.extend(neighbours(p).into_iter().flatten().map(|q| ids_ro[q]));
+    let target = frame.scene(scene);
+    Ok(nearest_hits_facing(target, &origins, &dirs, 1, &range, cull_backfaces)?.triangle)
+}
+
+/// What a suspect pixel is decided against: the snapped triangles, the resolve's planes for
+/// their depth along the pixel's ray, the clip range and the traced image.
+struct Judge<'a> {
+    scene: &'a Scene,
+    snap: &'a Snap,
+    planes: &'a [SurfacePlane],
+    rays: PixelRays,
+    clip: (f64, f64),
+    ids: &'a [i32],
+    size: (usize, usize),
+}
+
+impl Judge<'_> {
+    /// The triangle the rasteriser gives pixel `p`: the nearest candidate (the traced triangle,
+    /// or the neighbours' for an empty pixel, and those `across` its near edges) whose snapped
+    /// triangle covers the centre. None leaves the pixel as traced.
+    fn decide(&self, p: usize, across: &[i32]) -> Option<i32> {
+        let (x, y) = (p % self.size.0, p / self.size.0);
+        let mut candidates: Vec<i32> = across.to_vec();
+        if self.ids[p] >= 0 {
+            candidates.push(self.ids[p]);
+        } else {
+            let around = neighbours(p, self.size).into_iter().flatten();
+            candidates.extend(around.map(|q| self.ids[q]));
+        }
+        candidates.retain(|&t| t >= 0);
+        candidates.sort_unstable();
+        candidates.dedup();
+        let (o, d) = self.rays.ray(x, y);
+        let (near, far) = self.clip;
+        let mut best: Option<(f64, i32)> = None;
+        for &t in &candidates {
+            let v = self.snap.fixed(self.scene, t as usize)?; // crosses the near plane: as traced
+            if !covers(v, x, y) {
+                continue;
             }
-            candidates.retain(|&t| t >= 0);
-            candidates.sort_unstable();
-            candidates.dedup();
-            let (o, d) = rays.ray(x, y);
-            let mut best: Option<(f64, i32)> = None;
-            for &t in &candidates {
-                let v = snap.fixed(scene, t as usize)?; // crosses the near plane: as traced
-                if !covers(v, x, y) {
-                    continue;
-                }
-                let z = planes[t as usize].ray_depth(o, d);
-                if !(near..=far).contains(&z) {
-                    continue;
-                }
-                if best.is_none_or(|(bz, bt)| (z, t) < (bz, bt)) {
-                    best = Some((z, t));
-                }
+            let z = self.planes[t as usize].ray_depth(o, d);
+            if !(near..=far).contains(&z) {
+                continue;
             }
-            match best {
-                Some((_, t)) => Some(t),
-                // The traced triangle does not cover the centre, nor does what lies across its
-                // near edges: background, when a ray across found nothing (a silhouette).
-                None if ids_ro[p] >= 0 && across.contains(&-1) => Some(-1),
-                None => None,
+            if best.is_none_or(|(bz, bt)| (z, t) < (bz, bt)) {
+                best = Some((z, t));
             }
-        })
-        .collect();
-    let changes = suspects
-        .iter()
-        .zip(decided)
-        .filter_map(|(s, t)| t.filter(|&t| t != ids[s.pixel]).map(|t| (s.pixel, t)))
-        .collect();
-    Ok((changes, start.elapsed().as_secs_f64()))
+        }
+        match best {
+            Some((_, t)) => Some(t),
+            // The traced triangle does not cover the centre, nor does what lies across its near
+            // edges: background, when a ray across found nothing (a silhouette).
+            None if self.ids[p] >= 0 && across.contains(&-1) => Some(-1),
+            None => None,
+        }
+    }
 }
 
 #[cfg(test)]
