@@ -10,10 +10,37 @@ use crate::error::Result;
 use crate::input_err;
 use crate::scene::Scene;
 
+/// Values by name, in the order each name was first recorded: the body of [`Timings`] and
+/// [`Stats`], which differ in what recording a name twice means.
+#[derive(Debug, Clone, Default, PartialEq)]
+struct Named(Vec<(&'static str, f64)>);
+
+impl Named {
+    /// The value of `name`, made 0 if new.
+    fn entry(&mut self, name: &'static str) -> &mut f64 {
+        let i = match self.0.iter().position(|(s, _)| *s == name) {
+            Some(i) => i,
+            None => {
+                self.0.push((name, 0.0));
+                self.0.len() - 1
+            }
+        };
+        &mut self.0[i].1
+    }
+
+    fn get(&self, name: &str) -> Option<f64> {
+        self.0.iter().find(|(s, _)| *s == name).map(|&(_, v)| v)
+    }
+
+    fn iter(&self) -> impl Iterator<Item = (&'static str, f64)> + '_ {
+        self.0.iter().copied()
+    }
+}
+
 /// Seconds per stage of one call, in the order the stages first ran. A stage recorded twice
 /// (a loop, or two passes of one kind) holds the sum.
 #[derive(Debug, Clone, Default, PartialEq)]
-pub struct Timings(Vec<(&'static str, f64)>);
+pub struct Timings(Named);
 
 impl Timings {
     pub fn new() -> Self {
@@ -22,10 +49,7 @@ impl Timings {
 
     /// Add `seconds` to `stage`.
     pub fn add(&mut self, stage: &'static str, seconds: f64) {
-        match self.0.iter_mut().find(|(s, _)| *s == stage) {
-            Some((_, t)) => *t += seconds,
-            None => self.0.push((stage, seconds)),
-        }
+        *self.0.entry(stage) += seconds;
     }
 
     /// Add the seconds since `start` to `stage`.
@@ -35,27 +59,24 @@ impl Timings {
 
     /// Set `stage` to `seconds` (a total measured from the call's start).
     pub fn set(&mut self, stage: &'static str, seconds: f64) {
-        match self.0.iter_mut().find(|(s, _)| *s == stage) {
-            Some((_, t)) => *t = seconds,
-            None => self.0.push((stage, seconds)),
-        }
+        *self.0.entry(stage) = seconds;
     }
 
     /// The seconds of `stage`, if it ran.
     pub fn get(&self, stage: &str) -> Option<f64> {
-        self.0.iter().find(|(s, _)| *s == stage).map(|&(_, t)| t)
+        self.0.get(stage)
     }
 
     /// Add every stage of `other`.
     pub fn merge(&mut self, other: &Timings) {
-        for &(s, t) in &other.0 {
+        for (s, t) in other.iter() {
             self.add(s, t);
         }
     }
 
     /// (stage, seconds) in order.
     pub fn iter(&self) -> impl Iterator<Item = (&'static str, f64)> + '_ {
-        self.0.iter().copied()
+        self.0.iter()
     }
 }
 
@@ -70,38 +91,36 @@ impl<const N: usize> From<[(&'static str, f64); N]> for Timings {
 }
 
 /// What one call did, by name (points made, cells culled, bytes of buffers, ...), in the order
-/// first recorded. Counts are kept as f64 because Python receives them as floats.
+/// first recorded; recording a name again replaces its value. Counts are kept as f64 because
+/// Python receives them as floats.
 #[derive(Debug, Clone, Default, PartialEq)]
-pub struct Stats(Vec<(&'static str, f64)>);
+pub struct Stats(Named);
 
 impl Stats {
     pub fn new() -> Self {
         Self::default()
     }
 
-    /// Set `name` to `value`, replacing what it held.
+    /// Set `name` to `value`.
     pub fn set(&mut self, name: &'static str, value: f64) {
-        match self.0.iter_mut().find(|(s, _)| *s == name) {
-            Some((_, v)) => *v = value,
-            None => self.0.push((name, value)),
-        }
+        *self.0.entry(name) = value;
     }
 
     /// The value of `name`, if recorded.
     pub fn get(&self, name: &str) -> Option<f64> {
-        self.0.iter().find(|(s, _)| *s == name).map(|&(_, v)| v)
+        self.0.get(name)
     }
 
     /// Set every entry of `other` (the stats of a step this call ran).
     pub fn extend(&mut self, other: &Stats) {
-        for &(s, v) in &other.0 {
+        for (s, v) in other.iter() {
             self.set(s, v);
         }
     }
 
     /// (name, value) in order.
     pub fn iter(&self) -> impl Iterator<Item = (&'static str, f64)> + '_ {
-        self.0.iter().copied()
+        self.0.iter()
     }
 }
 
