@@ -282,7 +282,7 @@ def figures(
     plt.close(fig)
 
     cam = cams[len(cams) // 2]
-    full = ss.discretize(scene, cam)
+    full = ss.discretize(scene, cam, backend="gpu")  # rasterised, as the field's views are
     tiles = [_shade(full.normal[0], full.triangle[0] >= 0, None)]
     for key, interp in (((res, 1), "none"), ((res, max(k[1] for k in fields)), "uv+st")):
         if key not in fields:
