@@ -188,8 +188,8 @@ def test_the_experiment_writes_tables_and_figures(tmp_path):
     from scenesample.experiments import impostors as experiment
 
     experiment.main(
-        ["--scenes", "urban", "--distances", "1", "3", "--depth", "1", "--subdivisions", "0"]
-        + ["--resolution", "16", "--budgets", "0", "0.5", "--storage-depths", "0", "1"]
+        ["--scenes", "urban", "--distances", "1", "3", "--octree-depth", "1", "--subdivisions", "0"]
+        + ["--resolution", "16", "--budgets", "0", "0.5", "--storage-octree-depths", "0", "1"]
         + ["--size", "48", "--out", str(tmp_path)]
     )
     md = (tmp_path / "impostors.md").read_text()
