@@ -162,10 +162,13 @@ def test_calls_from_other_threads_finish_while_the_main_thread_is_interrupted(gp
             got["hits"] = ss.cast_rays(scene, o, d, threads=1).triangle
         worker = threading.Thread(target=other)
         worker.start()
-        threading.Timer(0.3, lambda: os.kill(os.getpid(), signal.SIGINT)).start()
+        # The worker's cast takes ~0.3 s here; the main thread's, four times the rays, well over
+        # the signal's 0.1 s even on a quiet machine (it once finished first at 3M rays).
+        long_o, long_d = np.tile(o, (4, 1)), np.tile(d, (4, 1))
+        threading.Timer(0.1, lambda: os.kill(os.getpid(), signal.SIGINT)).start()
         interrupted = False
         try:
-            ss.cast_rays(scene, o, d, threads=1)
+            ss.cast_rays(scene, long_o, long_d, threads=1)
         except KeyboardInterrupt:
             interrupted = True
         worker.join()
