@@ -206,6 +206,21 @@ def test_auto_picks_a_backend_and_says_why(gpu):
     assert cold["cpu_seconds"] > warm["cpu_seconds"]
 
 
+def test_auto_sends_images_beyond_the_gpus_textures_to_the_cpu(gpu):
+    """A request the GPU cannot hold (wider than its largest texture) runs on the CPU under
+    auto, and equals what backend="cpu" makes; backend="gpu" raises GpuLimitError."""
+    scene = ss.scenes.icosphere(1)
+    wide = gpu["max_texture_dimension_2d"] + 1
+    cam = ss.Camera.look_at([0, 0, 3], [0, 0, 0], yfov=0.01, width=wide, height=2)
+    auto = ss.discretize(scene, cam)
+    assert auto.backend == "cpu" and "largest texture" in auto.backend_reason
+    assert auto.mask.any()
+    cpu = ss.discretize(scene, cam, backend="cpu")
+    assert np.array_equal(auto.triangle, cpu.triangle)
+    with pytest.raises(ss.GpuLimitError, match="largest texture"):
+        ss.discretize(scene, cam, backend="gpu")
+
+
 def test_bad_backends_are_named():
     scene = ss.scenes.shapes(seed=0, detail=0)
     cam = ss.Camera.look_at((3, 2, 3), (0, 0, 0), yfov=0.8, width=16, height=16)

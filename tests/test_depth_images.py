@@ -248,7 +248,7 @@ def test_bad_requests_raise_typed_errors(gpu, tmp_path) -> None:
         ss.discretize("scene", a)  # type: ignore[arg-type]
     huge = a.with_resolution(gpu["max_texture_dimension_2d"] + 1, 8)
     with pytest.raises(ss.GpuLimitError, match="exceed this device's largest texture"):
-        ss.discretize(s, huge)
+        ss.discretize(s, huge, backend="gpu")
     with pytest.raises(ss.ExrError):
         ss.DepthImages.load_exr(tmp_path / "absent.exr")
     (tmp_path / "junk.exr").write_bytes(b"not an exr at all")

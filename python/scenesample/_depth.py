@@ -66,7 +66,8 @@ def conventional(
         the shared scenes, 99.988% on a 4M-triangle tiling).
         ``"auto"`` (default): the backend a cost model of this machine predicts is faster,
         given the triangles, pixels, images, whether a GPU adapter exists and whether the BVH
-        and the GPU copy of the scene exist already. The model is measured once per machine
+        and the GPU copy of the scene exist already; images wider or taller than the GPU's
+        largest texture go to the CPU. The model is measured once per machine
         (about half a second of probes on first use) and kept in a calibration file,
         ``$SCENESAMPLE_CACHE_DIR`` or ``~/.cache/scenesample/cost-model.json`` (set
         ``SCENESAMPLE_CACHE_DIR=""`` to measure in every process instead); later processes
@@ -95,7 +96,7 @@ def conventional(
         ``backend="gpu"`` without a GPU adapter (install ``mesa-vulkan-drivers`` for a
         software one); ``"auto"`` falls back to the CPU instead.
     GpuLimitError
-        The images exceed the device's texture or buffer limits.
+        ``backend="gpu"`` and images beyond the device's texture or buffer limits.
     InputError
         No camera, cameras of different resolutions, an unknown backend.
     """

@@ -87,6 +87,8 @@ pub struct Workload {
     pub images: u64,
     pub bvh_built: bool,
     pub uploaded: bool,
+    /// Whether the images fit in the GPU's textures (true where that is not known).
+    pub fits_gpu: bool,
 }
 
 impl Workload {
@@ -104,6 +106,12 @@ impl Workload {
                 .map(|f| f.scene(scene).derived_if_built::<Bvh>().is_some())
                 .unwrap_or(false),
             uploaded,
+            fits_gpu: match (gpu::context(), cameras.first()) {
+                (Ok(ctx), Some(c)) => {
+                    gpu::raster::check_image_size(&ctx, c.width, c.height).is_ok()
+                }
+                _ => true,
+            },
         }
     }
 }
@@ -237,6 +245,7 @@ impl CostModel {
             images: 1,
             bvh_built: true,
             uploaded: true,
+            fits_gpu: true,
         };
         let c = &self.cpu;
         let cpu = c.build_per_triangle > 0.0
@@ -301,6 +310,10 @@ impl CostModel {
                     w.triangles,
                     crate::trace::MAX_TRIANGLES
                 ),
+            ),
+            (Ok(_), _) if !w.fits_gpu => (
+                Backend::Cpu,
+                "the images exceed the GPU's largest texture".to_string(),
             ),
             (Ok(_), Some(g)) => {
                 let backend = if g <= cpu { Backend::Gpu } else { Backend::Cpu };
@@ -713,6 +726,7 @@ mod tests {
             images: 1,
             bvh_built,
             uploaded: true,
+            fits_gpu: true,
         }
     }
 
@@ -738,9 +752,16 @@ mod tests {
         assert_eq!(m.decide(&work(100_000, true)).backend, Backend::Gpu);
         assert_eq!(m.decide(&work(5_000_000, true)).backend, Backend::Cpu);
         assert_eq!(m.decide(&work(5_000_000, false)).backend, Backend::Gpu);
-        // Past the ray caster's limit only the raster path can run.
+        // Past the ray caster's limit only the raster path can run; past the GPU's largest
+        // texture only the ray caster can.
         let huge = m.decide(&work(crate::trace::MAX_TRIANGLES as u64, true));
         assert_eq!(huge.backend, Backend::Gpu);
+        let wide = m.decide(&Workload {
+            fits_gpu: false,
+            ..work(100_000, true)
+        });
+        assert_eq!(wide.backend, Backend::Cpu);
+        assert!(wide.reason.contains("largest texture"), "{}", wide.reason);
         // Without an adapter, always the CPU, and the reason says so.
         let none = model(false).decide(&work(5_000_000, false));
         assert_eq!(none.backend, Backend::Cpu);

@@ -69,6 +69,8 @@ pub fn choose_backend<'py>(
         images,
         bvh_built,
         uploaded,
+        // Only the pixel count is given: the image's sides are not known here.
+        fits_gpu: true,
     };
     let (decision, model) = super::run(py, || {
         let model = CostModel::get()?;
