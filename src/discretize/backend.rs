@@ -93,9 +93,14 @@ pub struct Workload {
 
 impl Workload {
     pub fn of(scene: &Scene, cameras: &[Camera]) -> Self {
-        let uploaded = gpu::context()
-            .map(|ctx| gpu::SceneBuffers::cached(&ctx, scene))
-            .unwrap_or(false);
+        let ctx = gpu::context().ok();
+        let uploaded = ctx
+            .as_ref()
+            .is_some_and(|ctx| gpu::SceneBuffers::cached(ctx, scene));
+        let fits_gpu = match (&ctx, cameras.first()) {
+            (Some(ctx), Some(c)) => gpu::raster::check_image_size(ctx, c.width, c.height).is_ok(),
+            _ => true,
+        };
         Self {
             triangles: scene.triangle_count() as u64,
             pixels: cameras
@@ -106,12 +111,7 @@ impl Workload {
                 .map(|f| f.scene(scene).derived_if_built::<Bvh>().is_some())
                 .unwrap_or(false),
             uploaded,
-            fits_gpu: match (gpu::context(), cameras.first()) {
-                (Ok(ctx), Some(c)) => {
-                    gpu::raster::check_image_size(&ctx, c.width, c.height).is_ok()
-                }
-                _ => true,
-            },
+            fits_gpu,
         }
     }
 }
