@@ -172,7 +172,6 @@ pub(crate) fn settle_edges(
             rays: at..offsets.len(),
         });
     }
-    let across = trace_across(scene, cam, cull_backfaces, frame, &offsets)?;
     let planes = SurfacePlane::of(scene);
     let judge = Judge {
         scene,
@@ -183,6 +182,7 @@ pub(crate) fn settle_edges(
         ids,
         size: (cam.width as usize, cam.height as usize),
     };
+    let across = judge.trace_across(cull_backfaces, frame, &offsets)?;
     let decided: Vec<Option<i32>> = suspects
         .par_iter()
         .map(|s| judge.decide(s.pixel, &across[s.rays.clone()]))
@@ -245,36 +245,9 @@ fn near_edge_pixels(
         .collect()
 }
 
-/// The first front surface (or every surface, without culling) of one ray per (pixel, offset)
-/// between the camera's clip planes: the triangles just across each near edge, −1 for none.
-fn trace_across(
-    scene: &Scene,
-    cam: &Camera,
-    cull_backfaces: bool,
-    frame: &TraceFrame,
-    offsets: &[(usize, [f64; 2])],
-) -> Result<Vec<i32>> {
-    let w = cam.width as usize;
-    let rays = PixelRays::new(cam);
-    let (near, far) = cam.clip_range(scene.bounds());
-    let (origins, dirs): (Vec<[f32; 3]>, Vec<[f32; 3]>) = offsets
-        .par_iter()
-        .map(|&(p, [dx, dy])| {
-            let (x, y) = ((p % w) as f64 + 0.5, (p / w) as f64 + 0.5);
-            let (o, d) = rays.ray_at(x + dx, y + dy);
-            (
-                (o - frame.shift).as_vec3().to_array(),
-                d.as_vec3().to_array(),
-            )
-        })
-        .unzip();
-    let range = Query::new(near as f32, (far as f32).max(near as f32));
-    let target = frame.scene(scene);
-    Ok(nearest_hits_facing(target, &origins, &dirs, 1, &range, cull_backfaces)?.triangle)
-}
-
-/// What a suspect pixel is decided against: the snapped triangles, the resolve's planes for
-/// their depth along the pixel's ray, the clip range and the traced image.
+/// What suspect pixels are decided against: the snapped triangles, the resolve's planes for
+/// their depth along a pixel's ray, the camera's pixel rays and clip range, and the traced
+/// image. It casts the rays across near edges too, from the same rays and range.
 struct Judge<'a> {
     scene: &'a Scene,
     snap: &'a Snap,
@@ -286,6 +259,33 @@ struct Judge<'a> {
 }
 
 impl Judge<'_> {
+    /// The first front surface (or every surface, without culling) of one ray per (pixel,
+    /// offset) between the camera's clip planes: the triangles just across each near edge, −1
+    /// for none.
+    fn trace_across(
+        &self,
+        cull_backfaces: bool,
+        frame: &TraceFrame,
+        offsets: &[(usize, [f64; 2])],
+    ) -> Result<Vec<i32>> {
+        let w = self.size.0;
+        let (origins, dirs): (Vec<[f32; 3]>, Vec<[f32; 3]>) = offsets
+            .par_iter()
+            .map(|&(p, [dx, dy])| {
+                let (x, y) = ((p % w) as f64 + 0.5, (p / w) as f64 + 0.5);
+                let (o, d) = self.rays.ray_at(x + dx, y + dy);
+                (
+                    (o - frame.shift).as_vec3().to_array(),
+                    d.as_vec3().to_array(),
+                )
+            })
+            .unzip();
+        let (near, far) = self.clip;
+        let range = Query::new(near as f32, (far as f32).max(near as f32));
+        let target = frame.scene(self.scene);
+        Ok(nearest_hits_facing(target, &origins, &dirs, 1, &range, cull_backfaces)?.triangle)
+    }
+
     /// The triangle the rasteriser gives pixel `p`: the nearest candidate (the traced triangle,
     /// or the neighbours' for an empty pixel, and those `across` its near edges) whose snapped
     /// triangle covers the centre. None leaves the pixel as traced.
