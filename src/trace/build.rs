@@ -199,6 +199,9 @@ struct Candidate {
     bounds: Aabb,
     centers: Aabb,
     plan: Plan,
+    /// The surface area heuristic prefers a leaf; `plan` still says how to split it if the
+    /// node it belongs to has a slot to spare.
+    leaf: bool,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -221,6 +224,10 @@ enum Plan {
 impl Candidate {
     fn len(&self) -> usize {
         self.end - self.start
+    }
+
+    fn stays_leaf(&self) -> bool {
+        self.leaf || matches!(self.plan, Plan::Leaf)
     }
 }
 
@@ -300,6 +307,7 @@ impl Builder<'_> {
         } else {
             2
         };
+        let mut leaf = false;
         let plan = if n <= 4 {
             Plan::Leaf
         } else if extent.max_element() <= 0.0 {
@@ -313,7 +321,9 @@ impl Builder<'_> {
             // levels left fit under MAX_DEPTH (triangles < 4·2^28 = 8^10).
             Plan::Median { axis: widest }
         } else {
-            self.sah(refs, &bounds, &centers)
+            let (plan, prefers_leaf) = self.sah(refs, &bounds, &centers);
+            leaf = prefers_leaf;
+            plan
         };
         Candidate {
             start,
@@ -321,11 +331,12 @@ impl Builder<'_> {
             bounds,
             centers,
             plan,
+            leaf,
         }
     }
 
-    /// The best binned split of `refs`, or a leaf when that costs less.
-    fn sah(&self, refs: &[u32], bounds: &Aabb, centers: &Aabb) -> Plan {
+    /// The best binned split of `refs`, and whether a leaf would cost less.
+    fn sah(&self, refs: &[u32], bounds: &Aabb, centers: &Aabb) -> (Plan, bool) {
         let nb = BINS;
         let scale = centers_scale(centers);
         let fill = |chunk: &[u32]| {
@@ -393,20 +404,19 @@ impl Builder<'_> {
         let split_cost = self.p.node_cost + cost / area;
         if !split_cost.is_finite() {
             // No two bins differ (a degenerate spread of centroids): split at the median.
-            return Plan::Median { axis: 0 };
+            return (Plan::Median { axis: 0 }, false);
         }
-        if refs.len() <= self.p.max_leaf && blocks(refs.len()) <= split_cost {
-            return Plan::Leaf;
-        }
+        let leaf = refs.len() <= self.p.max_leaf && blocks(refs.len()) <= split_cost;
         let side = |range: std::ops::Range<usize>| {
             range.fold(Aabb::EMPTY, |b, i| b.union(&bins.bounds[i][axis]))
         };
-        Plan::Bins {
+        let plan = Plan::Bins {
             axis,
             bin,
             left: side(0..bin),
             right: side(bin..nb),
-        }
+        };
+        (plan, leaf)
     }
 
     /// Split `c`, partitioning its part of `refs`, into two candidates.
@@ -455,7 +465,10 @@ impl Builder<'_> {
     fn node(&self, refs: &mut [u32], mut kids: Vec<Candidate>, depth: u32, out: &mut Out) -> u32 {
         let deep = depth >= MAX_DEPTH - 12;
         while kids.len() < 8 {
-            // Open the largest candidate (by area; by count once the tree is too deep).
+            // Open the largest candidate (by area; by count once the tree is too deep), even one
+            // the surface area heuristic would keep as a leaf: a spare slot costs the node test
+            // nothing, and two small leaves are tested only where the ray enters them (Embree
+            // fills its nodes the same way). Its own split plan says how.
             let open = kids
                 .iter()
                 .enumerate()
@@ -502,7 +515,7 @@ impl Builder<'_> {
                 .into_par_iter()
                 .zip(kids.par_iter())
                 .map(|(s, kid)| {
-                    if matches!(kid.plan, Plan::Leaf) {
+                    if kid.stays_leaf() {
                         return None;
                     }
                     let mut sub = Out::default();
@@ -518,9 +531,10 @@ impl Builder<'_> {
             }
         } else {
             for (k, (s, kid)) in slices.into_iter().zip(&kids).enumerate() {
-                node.child[k] = match kid.plan {
-                    Plan::Leaf => self.leaf(s, out),
-                    _ => node_ref(self.node(s, vec![rebase(kid)], depth + 1, out) as usize),
+                node.child[k] = if kid.stays_leaf() {
+                    self.leaf(s, out)
+                } else {
+                    node_ref(self.node(s, vec![rebase(kid)], depth + 1, out) as usize)
                 };
             }
         }
