@@ -494,9 +494,16 @@ impl PacketStack {
 pub trait Sink {
     /// Whether children are visited nearest first (closest hits) or in any order (any hit).
     const ORDERED: bool = true;
+    /// Whether runs of coherent rays may travel as packets (`Kernel::packet`).
+    const PACKETS: bool = true;
     fn t_far(&self) -> f32;
     /// Take block `block`'s hits; return true to stop the traversal.
     fn take(&mut self, bvh: &Bvh8, block: usize, h: &Tri4Hit) -> bool;
+    /// A block worth testing before the traversal starts (see [`Any::hint`]).
+    #[inline(always)]
+    fn hint(&self) -> Option<usize> {
+        None
+    }
 }
 
 /// Visit the tree along `ray`, giving every leaf block's hits to `sink`. `stack` is scratch
@@ -504,6 +511,15 @@ pub trait Sink {
 #[inline(always)]
 pub fn traverse<K: Kernel, S: Sink>(k: K, bvh: &Bvh8, ray: &Ray, sink: &mut S, stack: &mut Stack) {
     let r = k.prepare(ray);
+    if let Some(b) = sink.hint() {
+        debug_assert!(b < bvh.blocks.len());
+        // SAFETY: hints are blocks an earlier ray hit in this tree.
+        let block = unsafe { bvh.blocks.get_unchecked(b) };
+        let h = k.tri4(block, &r, ray, sink.t_far());
+        if h.mask != 0 && sink.take(bvh, b, &h) {
+            return;
+        }
+    }
     let mut sp = 0usize;
     let mut cur = 0u32;
     'visit: loop {
@@ -511,6 +527,9 @@ pub fn traverse<K: Kernel, S: Sink>(k: K, bvh: &Bvh8, ray: &Ray, sink: &mut S, s
             let n = node_at(&bvh.nodes, cur);
             let (mask, d) = k.node(n, &r, sink.t_far());
             if mask != 0 {
+                if S::ORDERED {
+                    prefetch_children(bvh, n, mask);
+                }
                 let first = mask.trailing_zeros();
                 let rest = mask & (mask - 1);
                 cur = if rest == 0 {
@@ -548,6 +567,38 @@ pub fn traverse<K: Kernel, S: Sink>(k: K, bvh: &Bvh8, ray: &Ray, sink: &mut S, s
             None => return,
         }
     }
+}
+
+/// Ask the cache for what the children in `mask` will read: an inner child's four lines (boxes
+/// and references), a leaf's first block. Embree's traversal prefetches its children the same
+/// way. It pays where the tree outgrows the core's cache: a closest-hit ray pops most children
+/// it pushes, and by then their lines are in (on the 1M-triangle spheres scene, shuffled and
+/// incoherent rays ran 1.25–1.3× faster). Any-hit queries stop early and leave most pushed
+/// children unread, so they do not prefetch.
+#[inline(always)]
+fn prefetch_children(bvh: &Bvh8, n: &Node8, mask: u32) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        let mut m = mask;
+        while m != 0 {
+            let c = n.child[m.trailing_zeros() as usize];
+            m &= m - 1;
+            let (p, lines) = if c & LEAF == 0 {
+                let p = bvh.nodes.as_ptr() as *const i8;
+                (p.wrapping_add((c as usize) << 5), size_of::<Node8>() / 64)
+            } else {
+                let p = bvh.blocks.as_ptr().wrapping_add(leaf_blocks(c).start);
+                (p as *const i8, size_of::<Tri4>().div_ceil(64))
+            };
+            for l in 0..lines {
+                // SAFETY: a prefetch is only a hint: it never faults, whatever the address.
+                unsafe { _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(64 * l)) };
+            }
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (bvh, n, mask);
 }
 
 /// A hit in a leaf block: block, lane, triangle, `t` and the barycentrics' numerators and
@@ -638,11 +689,21 @@ impl Sink for Closest {
 /// Any-hit sink: stops at the first hit.
 pub struct Any {
     pub t_far: f32,
-    pub hit: bool,
+    /// The block that stopped the traversal, if any.
+    pub hit: Option<u32>,
+    /// A block to test first: the one that stopped the previous ray. Shadow rays from
+    /// neighbouring points (in image order) are mostly blocked by the same occluder, and one
+    /// block test then replaces a traversal (Haines and Greenberg's shadow cache, "The Light
+    /// Buffer", 1986). Whatever it finds is a hit in range, so the answer does not change.
+    pub hint: Option<u32>,
 }
 
 impl Sink for Any {
     const ORDERED: bool = false;
+    /// One by one, so that each ray tries its hint first: on shadow rays in image order that
+    /// beat packets on every scene measured (e.g. 0.83× → 0.89× Embree's speed on `khr_toy_car`,
+    /// 0.94× → 1.05× on the procedural shapes).
+    const PACKETS: bool = false;
 
     #[inline(always)]
     fn t_far(&self) -> f32 {
@@ -650,9 +711,14 @@ impl Sink for Any {
     }
 
     #[inline(always)]
-    fn take(&mut self, _: &Bvh8, _: usize, _: &Tri4Hit) -> bool {
-        self.hit = true;
+    fn take(&mut self, _: &Bvh8, block: usize, _: &Tri4Hit) -> bool {
+        self.hit = Some(block as u32);
         true
+    }
+
+    #[inline(always)]
+    fn hint(&self) -> Option<usize> {
+        self.hint.map(|b| b as usize)
     }
 }
 

@@ -462,7 +462,7 @@ struct Traced {
 
 impl Rays<'_> {
     /// Trace rays `base + j` for `j` in `range`, each into a sink made by `sink`, handed to
-    /// `done(j, sink)`. Runs of eight coherent rays go as packets where the kernel can.
+    /// `done(j, sink)`. Runs of eight coherent rays go as packets where the kernel and the sink can.
     #[inline(always)]
     fn trace<K: Kernel, S: Sink>(
         &self,
@@ -475,7 +475,7 @@ impl Rays<'_> {
     ) {
         let mut j = range.start;
         while j < range.end {
-            if K::PACKETS && j + WIDTH <= range.end {
+            if K::PACKETS && S::PACKETS && j + WIDTH <= range.end {
                 let group: [Traced; WIDTH] = std::array::from_fn(|i| self.ray(base + j + i));
                 let rays = group.each_ref().map(|r| r.ray);
                 if coherent(&rays, &group.each_ref().map(|r| r.d), self.origin_extent) {
@@ -606,13 +606,19 @@ impl Job for AnyJob<'_> {
     #[inline(always)]
     fn chunk<K: Kernel>(&self, k: K, base: usize, out: &mut [bool]) {
         let mut scratch = Scratch::new();
+        // The block that stopped the last ray, tried first on the next (`Any::hint`).
+        let last = std::cell::Cell::new(None);
         let any = |r: &Traced| Any {
             t_far: r.t_far,
-            hit: false,
+            hit: None,
+            hint: last.get(),
         };
         self.0
             .trace(k, base, 0..out.len(), &mut scratch, any, |j, sink| {
-                out[j] = sink.hit
+                out[j] = sink.hit.is_some();
+                if sink.hit.is_some() {
+                    last.set(sink.hit);
+                }
             });
     }
 }
@@ -1054,6 +1060,46 @@ pub(crate) mod tests {
             let want: Vec<bool> = h.triangle.iter().map(|&t| t >= 0).collect();
             assert_eq!(a.hit, want, "t_max {t_max}");
         }
+    }
+
+    /// Shadow rays in image order, where each ray's predecessor was stopped by a block (the
+    /// hint it tries first): every other segment ends short of that occluder, and some rays pass
+    /// beside it. The hint must never turn them into hits.
+    #[test]
+    fn occluded_hints_never_add_hits() {
+        // A quad at z = 1 over [0, 1]²; shadow rays rise from a grid over [-0.5, 1.5]².
+        let v = [
+            [0.0, 0.0, 1.0],
+            [1.0, 0.0, 1.0],
+            [1.0, 1.0, 1.0],
+            [0.0, 1.0, 1.0],
+        ];
+        let s = Scene::from_arrays(v.to_vec(), vec![[0, 1, 2], [0, 2, 3]], None, None).unwrap();
+        let (mut o, mut d) = (vec![], vec![]);
+        for i in 0..64 {
+            for j in 0..64 {
+                o.push([
+                    -0.5 + 2.0 * j as f32 / 63.0,
+                    -0.5 + 2.0 * i as f32 / 63.0,
+                    0.0,
+                ]);
+                d.push([0.0, 0.0, if (i + j) % 2 == 0 { 2.0 } else { 0.5 }]);
+            }
+        }
+        let q = Query::new(0.0, 1.0);
+        let a = occluded(&s, &o, &d, &q).unwrap();
+        let want: Vec<bool> = cast_rays_with(&s, &o, &d, &q)
+            .unwrap()
+            .triangle
+            .iter()
+            .map(|&t| t >= 0)
+            .collect();
+        assert_eq!(a.hit, want);
+        let blocked = want.iter().filter(|&&h| h).count();
+        assert!(
+            blocked > 500 && blocked < 4096 / 2,
+            "{blocked} rays blocked"
+        );
     }
 
     /// The k nearest hits are the brute force's, nearest first, ties (duplicated triangles)
