@@ -99,6 +99,19 @@ def ray_sets(
     return out
 
 
+def cpu_model() -> str:
+    """The processor's model name (``/proc/cpuinfo`` on Linux), else the architecture: ratios
+    against Embree depend on it, since Embree picks its kernels by instruction set."""
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
 def _seconds(fn: Callable[[], Any]) -> float:
     t = time.perf_counter()
     fn()
@@ -201,6 +214,7 @@ def run(
         "rays": width * height,
         "rounds": rounds,
         "cores": os.cpu_count(),
+        "cpu": cpu_model(),
         "scenes": {},
     }
     for name, scene in bench_scenes(quick):
@@ -281,7 +295,7 @@ def report(r: dict[str, Any]) -> str:
     lines = [
         f"# `python -m scenesample.bench rays`, {datetime.date.today().isoformat()}",
         "",
-        f"{platform.processor() or platform.machine()}, {r['cores']} cores; {r['rays']:,} rays "
+        f"{r.get('cpu') or cpu_model()}, {r['cores']} cores; {r['rays']:,} rays "
         f"per set; ratios are medians of {r['rounds']} interleaved rounds (peer time / ours: "
         "> 1 means we are faster), Mrays/s the best round. embreex runs Embree 4 on one "
         "thread (`rtcIntersect1`/`rtcOccluded1` per ray, robust mode); Open3D's "
