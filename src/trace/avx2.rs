@@ -52,6 +52,18 @@ impl Kernel for Avx2 {
     }
 
     #[inline(always)]
+    fn origin_last(self, (near, hit): Self::D, t_min: f32, t_far: f32) -> Self::D {
+        // SAFETY: AVX2 (the token).
+        unsafe {
+            let at_origin = _mm256_cmp_ps::<_CMP_LE_OQ>(near, _mm256_set1_ps(t_min));
+            (
+                _mm256_blendv_ps(near, _mm256_set1_ps(t_far), at_origin),
+                hit,
+            )
+        }
+    }
+
+    #[inline(always)]
     fn node(self, n: &Node8, r: &Ray, t_far: f32) -> (u32, Self::D) {
         // No closures here or below: a closure would not inherit the caller's AVX2 target
         // feature, and its intrinsics would become calls.

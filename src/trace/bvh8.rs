@@ -337,6 +337,15 @@ pub trait Kernel: Copy {
     /// Push the children in `mask` (three or more) onto `s` above `sp`, farthest first (by
     /// entry distance); return the nearest, unpushed.
     fn push_sorted(self, n: &Node8, mask: u32, d: Self::D, s: &mut Stack, sp: &mut usize) -> u32;
+    /// The order of an any-hit query: entry distances at `t_min` (boxes that hold the ray's
+    /// start) moved to `t_far`, so that those boxes come last and the rest nearest first. A
+    /// shadow ray leaves a surface, which the boxes around its start hold and which rarely
+    /// blocks it; the nearest boxes beyond them hold the likeliest occluders. Against slot order
+    /// (interleaved A/B against embreex on occlusion rays): khr_toy_car 0.79-0.85x -> 0.99-1.01x,
+    /// the procedural shapes 0.90x -> 1.01-1.03x, khr_specular_test 1.04-1.07x -> 1.17-1.19x; the
+    /// plain nearest-first order was the slowest (0.73x on the toy car). `t_far` is still a
+    /// distance the stack keeps, so no child is culled.
+    fn origin_last(self, d: Self::D, t_min: f32, t_far: f32) -> Self::D;
     /// The watertight test of a block's four triangles.
     fn tri4(self, b: &Tri4, r: &Self::R, ray: &Ray, t_far: f32) -> Tri4Hit;
     /// Refine hits in f64 (`refine`), as `refine::refine_one` does one by one.
@@ -409,20 +418,6 @@ impl Stack {
     }
 }
 
-/// Push the children in `mask` (two or more) in slot order; return the last, unpushed.
-#[inline(always)]
-fn push_unordered(n: &Node8, mask: u32, s: &mut Stack, sp: &mut usize) -> u32 {
-    let mut m = mask;
-    loop {
-        let i = m.trailing_zeros() as usize;
-        m &= m - 1;
-        if m == 0 {
-            return n.child[i];
-        }
-        s.push(sp, n.child[i], 0.0);
-    }
-}
-
 /// Rays in a packet (`packet`).
 pub const WIDTH: usize = 8;
 
@@ -492,7 +487,8 @@ impl PacketStack {
 
 /// Where hits go. `t_far` bounds the search (hits at or beyond it are not reported).
 pub trait Sink {
-    /// Whether children are visited nearest first (closest hits) or in any order (any hit).
+    /// Whether children are visited strictly nearest first (closest hits), or nearest first
+    /// after those whose boxes hold the ray's start (any hit, see [`Kernel::origin_last`]).
     const ORDERED: bool = true;
     /// Whether runs of coherent rays may travel as packets (`Kernel::packet`).
     const PACKETS: bool = true;
@@ -534,20 +530,25 @@ pub fn traverse<K: Kernel, S: Sink>(k: K, bvh: &Bvh8, ray: &Ray, sink: &mut S, s
                 let rest = mask & (mask - 1);
                 cur = if rest == 0 {
                     n.child[first as usize]
-                } else if !S::ORDERED {
-                    push_unordered(n, mask, stack, &mut sp)
-                } else if rest & (rest - 1) == 0 {
-                    // Two children: the nearer next, the other pushed. Both references are
-                    // loaded before the comparison, which then only selects.
-                    let second = rest.trailing_zeros();
-                    let (ca, cb) = (n.child[first as usize], n.child[second as usize]);
-                    let a = sort_key(k.dist(&d, first), first);
-                    let b = sort_key(k.dist(&d, second), second);
-                    let (near, far, far_key) = if a < b { (ca, cb, b) } else { (cb, ca, a) };
-                    stack.push(&mut sp, far, key_dist(far_key));
-                    near
                 } else {
-                    k.push_sorted(n, mask, d, stack, &mut sp)
+                    let d = if S::ORDERED {
+                        d
+                    } else {
+                        k.origin_last(d, ray.t_min, sink.t_far())
+                    };
+                    if rest & (rest - 1) == 0 {
+                        // Two children: the nearer next, the other pushed. Both references are
+                        // loaded before the comparison, which then only selects.
+                        let second = rest.trailing_zeros();
+                        let (ca, cb) = (n.child[first as usize], n.child[second as usize]);
+                        let a = sort_key(k.dist(&d, first), first);
+                        let b = sort_key(k.dist(&d, second), second);
+                        let (near, far, far_key) = if a < b { (ca, cb, b) } else { (cb, ca, a) };
+                        stack.push(&mut sp, far, key_dist(far_key));
+                        near
+                    } else {
+                        k.push_sorted(n, mask, d, stack, &mut sp)
+                    }
                 };
                 continue 'visit;
             }
@@ -749,6 +750,11 @@ pub mod portable {
         #[inline(always)]
         fn dist(self, d: &[f32; 8], lane: u32) -> f32 {
             d[lane as usize]
+        }
+
+        #[inline(always)]
+        fn origin_last(self, d: [f32; 8], t_min: f32, t_far: f32) -> [f32; 8] {
+            d.map(|x| if x <= t_min { t_far } else { x })
         }
 
         fn push_sorted(
