@@ -8,7 +8,9 @@
 //! Traversal is depth first with a short stack. A node whose ray hits several children pushes
 //! them sorted by entry distance (an 8-lane sorting network on AVX2) and descends into the
 //! nearest; entries popped beyond the closest hit so far are skipped. The same loop serves the
-//! three queries through a [`Sink`]: closest hit, any hit, and the k nearest hits.
+//! three queries through a [`Sink`]: closest hit, any hit, and the k nearest hits. Any-hit rays
+//! put the boxes around their start last (`Kernel::origin_last`) and first try the block that
+//! stopped the previous ray (`Any::hint`).
 
 use std::mem::MaybeUninit;
 use std::ops::Range;
