@@ -1048,6 +1048,12 @@ pub(crate) mod tests {
         assert_eq!(any, occluded(&s, &o, &d, &q).unwrap().hit);
     }
 
+    /// Whether `cast_rays` finds a hit in the range, per ray.
+    fn hit_by_closest(s: &Scene, o: &[[f32; 3]], d: &[[f32; 3]], q: &Query) -> Vec<bool> {
+        let h = cast_rays_with(s, o, d, q).unwrap();
+        h.triangle.iter().map(|&t| t >= 0).collect()
+    }
+
     /// `occluded` is true exactly where `cast_rays` finds a hit in the range.
     #[test]
     fn occluded_agrees_with_closest_hits() {
@@ -1055,10 +1061,8 @@ pub(crate) mod tests {
         let (o, d) = random_rays(5000, 12);
         for t_max in [0.3, 1.0, f32::INFINITY] {
             let q = Query::new(0.05, t_max);
-            let h = cast_rays_with(&s, &o, &d, &q).unwrap();
             let a = occluded(&s, &o, &d, &q).unwrap();
-            let want: Vec<bool> = h.triangle.iter().map(|&t| t >= 0).collect();
-            assert_eq!(a.hit, want, "t_max {t_max}");
+            assert_eq!(a.hit, hit_by_closest(&s, &o, &d, &q), "t_max {t_max}");
         }
     }
 
@@ -1088,12 +1092,7 @@ pub(crate) mod tests {
         }
         let q = Query::new(0.0, 1.0);
         let a = occluded(&s, &o, &d, &q).unwrap();
-        let want: Vec<bool> = cast_rays_with(&s, &o, &d, &q)
-            .unwrap()
-            .triangle
-            .iter()
-            .map(|&t| t >= 0)
-            .collect();
+        let want = hit_by_closest(&s, &o, &d, &q);
         assert_eq!(a.hit, want);
         let blocked = want.iter().filter(|&&h| h).count();
         assert!(
