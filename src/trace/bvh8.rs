@@ -449,20 +449,23 @@ impl<S: Sink> Lanes for [S; WIDTH] {
 /// (camera rays of neighbouring pixels do; shuffled or random rays do not, and go one by one).
 #[inline(always)]
 pub fn coherent(rays: &[Ray; WIDTH], d: &[Vec3A; WIDTH], origin_extent: f32) -> bool {
+    // Octants first: rays in random order almost never share one, and then nothing else is
+    // computed.
     let octant = rays[0].octant_shift;
+    if rays.iter().any(|r| r.octant_shift != octant) {
+        return false;
+    }
     let (mut lo, mut hi) = (rays[0].o, rays[0].o);
     // Directions scaled to a largest component of 1: the spread of each component then
     // measures the angle between them, with no square root.
     let unit = |d: Vec3A| d / d.abs().max_element();
     let (mut dlo, mut dhi) = (unit(d[0]), unit(d[0]));
-    let mut same = true;
     for i in 1..WIDTH {
-        same &= rays[i].octant_shift == octant;
         (lo, hi) = (lo.min(rays[i].o), hi.max(rays[i].o));
         let u = unit(d[i]);
         (dlo, dhi) = (dlo.min(u), dhi.max(u));
     }
-    same && (hi - lo).max_element() <= origin_extent && (dhi - dlo).max_element() <= 0.25
+    (hi - lo).max_element() <= origin_extent && (dhi - dlo).max_element() <= 0.25
 }
 
 /// A packet's stack: node references with the lanes that entered them.
