@@ -592,6 +592,10 @@ impl Job for ClosestJob<'_> {
                 start..end,
                 &mut scratch,
                 || Closest::new(rays.range.1),
+                // Inlined, so compiled with the kernel's instructions: a closure does not
+                // inherit its caller's target features, and a call from AVX2 code into this
+                // one, for every ray, spilled the traversal's registers around it.
+                #[inline(always)]
                 |j, sink| {
                     if let Some(h) = sink.best {
                         tri[j] = h.triangle as i32;
@@ -631,13 +635,20 @@ impl Job for AnyJob<'_> {
             hit: None,
             hint: last.get(),
         };
-        self.0
-            .trace(k, base, 0..out.len(), &mut scratch, any, |j, sink| {
+        self.0.trace(
+            k,
+            base,
+            0..out.len(),
+            &mut scratch,
+            any,
+            #[inline(always)]
+            |j, sink| {
                 out[j] = sink.hit.is_some();
                 if sink.hit.is_some() {
                     last.set(sink.hit);
                 }
-            });
+            },
+        );
     }
 }
 
@@ -761,22 +772,26 @@ fn check_rays(
     if t_min.is_nan() || t_max.is_nan() || t_min < 0.0 || t_max < t_min {
         return input_err!("need 0 <= t_min <= t_max, got t_min={t_min}, t_max={t_max}");
     }
-    // One cheap pass (no square roots), in parallel unless the caller asked for its own
-    // thread only; the first bad row is looked up only when there is one.
-    let bad_origin = |v: &[f32; 3]| !v.iter().all(|x| x.is_finite());
+    // One cheap pass (no square roots, no branches: it vectorises), in parallel unless the
+    // caller asked for its own thread only; the first bad row is looked up only when there is
+    // one. A direction whose squared length is positive and finite has finite components.
+    let bad_origin = |v: &[f32; 3]| !(v[0].is_finite() & v[1].is_finite() & v[2].is_finite());
     let bad_direction = |v: &[f32; 3]| {
         let l2 = Vec3::from(*v).length_squared();
-        !(v.iter().all(|x| x.is_finite()) && l2 > 0.0 && l2.is_finite())
+        !((l2 > 0.0) & l2.is_finite())
     };
-    let any = |rows: &[[f32; 3]], bad: &(dyn Fn(&[f32; 3]) -> bool + Sync)| match threads {
-        Threads::One => rows.iter().any(bad),
-        _ => rows.par_iter().with_min_len(1 << 14).any(bad),
-    };
-    if any(o, &bad_origin) {
+    fn any(rows: &[[f32; 3]], threads: Threads, bad: impl Fn(&[f32; 3]) -> bool + Sync) -> bool {
+        let chunk = |c: &[[f32; 3]]| c.iter().fold(false, |b, v| b | bad(v));
+        match threads {
+            Threads::One => chunk(rows),
+            _ => rows.par_chunks(1 << 14).any(chunk),
+        }
+    }
+    if any(o, threads, bad_origin) {
         let i = o.iter().position(bad_origin).expect("found above");
         return input_err!("origins[{i}] is not finite: {:?}", o[i]);
     }
-    if any(d, &bad_direction) {
+    if any(d, threads, bad_direction) {
         let i = d.iter().position(bad_direction).expect("found above");
         return input_err!(
             "directions[{i}] must be finite and non-zero, got {:?}",
