@@ -474,8 +474,8 @@ impl Rays<'_> {
     /// Rays are set up in place, in `scratch`, by a plain loop: built with `array::from_fn`
     /// and copied into the packet's arrays, the setup of a group was a call the compiler did
     /// not inline (so compiled without AVX2) plus two copies of 1 KB, and took 40% of the time
-    /// of rays that miss the scene (`khr_glass_vase_flowers`' incoherent rays ran 1.2x faster
-    /// without them).
+    /// of rays that miss the scene (786K rays that miss `khr_glass_vase_flowers`: 72 -> 39 ms;
+    /// its incoherent rays, which mostly hit, 3-5% faster against embreex).
     #[inline(always)]
     fn trace<K: Kernel, S: Sink>(
         &self,
