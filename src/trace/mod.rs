@@ -490,9 +490,7 @@ impl Rays<'_> {
         while j < range.end {
             if K::PACKETS && S::PACKETS && j + WIDTH <= range.end {
                 for i in 0..WIDTH {
-                    let (o, d) = self.input(base + j + i);
-                    scratch.rays[i] = Ray::new(o, d, self.range.0);
-                    scratch.dirs[i] = d;
+                    (scratch.rays[i], scratch.dirs[i]) = self.traversal_ray(base + j + i);
                 }
                 if coherent(&scratch.rays, &scratch.dirs, self.origin_extent) {
                     let mut sinks = [(); WIDTH].map(|_| sink());
@@ -519,8 +517,7 @@ impl Rays<'_> {
                 j += WIDTH;
                 continue;
             }
-            let (o, d) = self.input(base + j);
-            let ray = Ray::new(o, d, self.range.0);
+            let (ray, _) = self.traversal_ray(base + j);
             let mut s = sink();
             traverse(k, self.bvh, &ray, &mut s, &mut scratch.single);
             done(j, s);
@@ -537,13 +534,20 @@ impl Rays<'_> {
         )
     }
 
+    /// Ray `i` set up for traversal, and its direction as given.
+    #[inline(always)]
+    fn traversal_ray(&self, i: usize) -> (Ray, Vec3A) {
+        let (o, d) = self.input(i);
+        (Ray::new(o, d, self.range.0), d)
+    }
+
     #[inline(always)]
     fn ray(&self, i: usize) -> Traced {
-        let (o, d) = self.input(i);
+        let (ray, d) = self.traversal_ray(i);
         Traced {
-            o,
+            o: ray.o,
             d,
-            ray: Ray::new(o, d, self.range.0),
+            ray,
             t_far: self.range.1,
         }
     }
