@@ -130,6 +130,10 @@ def test_bvh_is_cached_and_concurrent_calls_agree() -> None:
     [
         ([[0, 0, 0]], [[0, 0, 0]], {}, r"directions\[0\] must be finite and non-zero"),
         ([[0, 0, np.nan]], [[0, 0, 1]], {}, r"origins\[0\] is not finite"),
+        ([[0, 0, 0], [0, np.inf, 0]], [[0, 0, 1]] * 2, {}, r"origins\[1\] is not finite"),
+        ([[0, 0, 0]], [[np.inf, 0, 1]], {}, r"directions\[0\] must be finite and non-zero"),
+        # Finite components whose squared length overflows float32.
+        ([[0, 0, 0]], [[3e19, 0, 1]], {}, r"directions\[0\] must be finite and non-zero"),
         ([[0, 0, 0], [1, 1, 1]], [[0, 0, 1]], {}, "origins has 2 rows but directions has 1"),
         ([[0, 0]], [[0, 0, 1]], {}, r"origins must have shape \(n, 3\), got \(1, 2\)"),
         ([[0, 0, 0]], [[0, 0, 1]], {"t_min": 2.0, "t_max": 1.0}, "t_min <= t_max"),
