@@ -286,7 +286,7 @@ impl Ray {
             near,
             far: std::array::from_fn(|a| ROW_BYTES * ((row(a) + 3) % 6)),
             shear,
-            o_k: shear.k.map(|a| o[a]),
+            o_k: shear.permute(o),
             t_min,
             octant_shift: 3 * (0..3).map(|a| u32::from(inv[a] < 0.0) << a).sum::<u32>(),
         }

@@ -29,25 +29,53 @@ impl RayShear {
     /// is then not done twice).
     #[inline(always)]
     pub fn with_inverse(d: Vec3A, inv: Vec3A) -> Self {
-        // Arithmetic rather than branches: for incoherent rays every branch on the direction
-        // would be a coin toss for the predictor.
+        // Arithmetic and table lookups rather than branches: for incoherent rays every branch
+        // on the direction would be a coin toss for the predictor. Components are picked from
+        // arrays by index (a load), not from `Vec3A` (whose indexing is a three-way match).
         let a = d.abs();
-        let x_wins = usize::from(a.x > a.y && a.x > a.z);
+        let x_wins = usize::from((a.x > a.y) & (a.x > a.z));
         let y_wins = usize::from(a.y > a.z) & (1 - x_wins);
         let kz = 2 - 2 * x_wins - y_wins;
-        let next = [1, 2, 0];
-        let (k1, k2) = (next[kz], next[next[kz]]);
+        let dv = lanes(d);
         // Swap to keep the triangles' winding when the dominant component is negative.
-        let neg = usize::from(d[kz] < 0.0);
-        let (kx, ky) = (k1 * (1 - neg) + k2 * neg, k2 * (1 - neg) + k1 * neg);
+        let neg = usize::from(dv[kz & 3] < 0.0);
+        let [kx, ky] = AXES[(kz << 1 | neg) & 7];
         // One division: the shear constants need not be correctly rounded quotients, only the
         // same for every triangle the ray meets.
-        let sz = inv[kz];
+        let sz = lanes(inv)[kz & 3];
         Self {
             k: [kx, ky, kz],
-            s: [d[kx] * sz, d[ky] * sz, sz],
+            s: [dv[kx & 3] * sz, dv[ky & 3] * sz, sz],
         }
     }
+
+    /// `p`'s components in the shear's axis order (kx, ky, kz).
+    #[inline(always)]
+    pub fn permute(&self, p: Vec3A) -> [f32; 3] {
+        let p = lanes(p);
+        self.k.map(|a| p[a & 3])
+    }
+}
+
+/// (kx, ky) by `2 kz + (1 if d[kz] < 0)`: the two axes after kz in cyclic order, swapped when
+/// the dominant component is negative (Woop et al. 2013, Listing 1). The last two rows pad the
+/// table to eight, so a masked index needs no bounds check.
+const AXES: [[usize; 2]; 8] = [
+    [1, 2],
+    [2, 1],
+    [2, 0],
+    [0, 2],
+    [0, 1],
+    [1, 0],
+    [0, 1],
+    [0, 1],
+];
+
+/// A vector's components in an array of four (the fourth 0), to index with `& 3`.
+#[inline(always)]
+fn lanes(v: Vec3A) -> [f32; 4] {
+    let [x, y, z] = v.to_array();
+    [x, y, z, 0.0]
 }
 
 /// Intersect; returns `(t, [u, v])` for a hit with `t_min <= t < t_max`, both faces counting.
@@ -59,17 +87,13 @@ pub fn intersect(
     t_min: f32,
     t_max: f32,
 ) -> Option<(f32, [f32; 2])> {
-    let [kx, ky, kz] = ray.k;
     let [sx, sy, sz] = ray.s;
-    let a = tri.v[0] - o;
-    let b = tri.v[1] - o;
-    let c = tri.v[2] - o;
-    let ax = a[kx] - sx * a[kz];
-    let ay = a[ky] - sy * a[kz];
-    let bx = b[kx] - sx * b[kz];
-    let by = b[ky] - sy * b[kz];
-    let cx = c[kx] - sx * c[kz];
-    let cy = c[ky] - sy * c[kz];
+    let [ax, ay, az] = ray.permute(tri.v[0] - o);
+    let [bx, by, bz] = ray.permute(tri.v[1] - o);
+    let [cx, cy, cz] = ray.permute(tri.v[2] - o);
+    let (ax, ay) = (ax - sx * az, ay - sy * az);
+    let (bx, by) = (bx - sx * bz, by - sy * bz);
+    let (cx, cy) = (cx - sx * cz, cy - sy * cz);
     let mut u = cx * by - cy * bx;
     let mut v = ax * cy - ay * cx;
     let mut w = bx * ay - by * ax;
@@ -93,7 +117,7 @@ pub fn intersect(
     if det == 0.0 {
         return None;
     }
-    let t_scaled = u * (sz * a[kz]) + v * (sz * b[kz]) + w * (sz * c[kz]);
+    let t_scaled = u * (sz * az) + v * (sz * bz) + w * (sz * cz);
     let t = t_scaled / det;
     if !(t >= t_min && t < t_max) {
         return None;
