@@ -597,18 +597,19 @@ fn prefetch_children(bvh: &Bvh8, n: &Node8, mask: u32) {
     #[cfg(target_arch = "x86_64")]
     {
         use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        let nodes = bvh.nodes.as_ptr() as usize;
+        let blocks = bvh.blocks.as_ptr() as usize;
         let mut m = mask;
         while m != 0 {
             let c = n.child[m.trailing_zeros() as usize];
             m &= m - 1;
-            let (p, lines) = if c & LEAF == 0 {
-                let p = node_at(&bvh.nodes, c) as *const Node8;
-                (p as *const i8, size_of::<Node8>() / 64)
-            } else {
-                let p = bvh.blocks.as_ptr().wrapping_add(leaf_blocks(c).start);
-                (p as *const i8, size_of::<Tri4>().div_ceil(64))
-            };
-            for l in 0..lines {
+            // Both addresses, then a select by mask arithmetic: a branch on inner or leaf
+            // would be a coin toss for the predictor at every child.
+            let inner = nodes.wrapping_add((c as usize) << 5);
+            let leaf = blocks.wrapping_add((c & ((1 << 28) - 1)) as usize * size_of::<Tri4>());
+            let is_leaf = ((c >> 31) as usize).wrapping_neg();
+            let p = (inner ^ ((inner ^ leaf) & is_leaf)) as *const i8;
+            for l in 0..4 {
                 // SAFETY: a prefetch is only a hint: it never faults, whatever the address.
                 unsafe { _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(64 * l)) };
             }
