@@ -58,8 +58,8 @@ impl RayShear {
 }
 
 /// (kx, ky) by `2 kz + (1 if d[kz] < 0)`: the two axes after kz in cyclic order, swapped when
-/// the dominant component is negative (Woop et al. 2013, Listing 1). The last two rows pad the
-/// table to eight, so a masked index needs no bounds check.
+/// the dominant component is negative, as Woop et al. (2013) choose them. The last two rows pad
+/// the table to eight, so a masked index needs no bounds check.
 const AXES: [[usize; 2]; 8] = [
     [1, 2],
     [2, 1],
