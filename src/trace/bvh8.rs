@@ -52,7 +52,19 @@ pub fn node_ref(index: usize) -> u32 {
 pub(crate) fn node_at(nodes: &[Node8], r: u32) -> &Node8 {
     debug_assert!((r as usize) < nodes.len() * NODE_UNITS && r as usize % NODE_UNITS == 0);
     // SAFETY: inner references name nodes of `nodes` (checked by the builder's tests).
-    unsafe { &*((nodes.as_ptr() as *const u8).add((r as usize) << 5) as *const Node8) }
+    unsafe { &*((nodes.as_ptr() as *const u8).add(node_offset(r)) as *const Node8) }
+}
+
+/// The byte offset in `nodes` of the node an inner reference names.
+#[inline(always)]
+fn node_offset(r: u32) -> usize {
+    (r as usize) << 5
+}
+
+/// The first block of the leaf a leaf reference names.
+#[inline(always)]
+fn leaf_first(r: u32) -> usize {
+    (r & ((1 << 28) - 1)) as usize
 }
 
 #[inline(always)]
@@ -63,7 +75,7 @@ pub fn leaf_ref(first: u32, blocks: u32) -> u32 {
 
 #[inline(always)]
 pub fn leaf_blocks(r: u32) -> Range<usize> {
-    let first = (r & ((1 << 28) - 1)) as usize;
+    let first = leaf_first(r);
     first..first + ((r >> 28) & 7) as usize + 1
 }
 
@@ -605,8 +617,8 @@ fn prefetch_children(bvh: &Bvh8, n: &Node8, mask: u32) {
             m &= m - 1;
             // Both addresses, then a select by mask arithmetic: a branch on inner or leaf
             // would be a coin toss for the predictor at every child.
-            let inner = nodes.wrapping_add((c as usize) << 5);
-            let leaf = blocks.wrapping_add((c & ((1 << 28) - 1)) as usize * size_of::<Tri4>());
+            let inner = nodes.wrapping_add(node_offset(c));
+            let leaf = blocks.wrapping_add(leaf_first(c) * size_of::<Tri4>());
             let is_leaf = ((c >> 31) as usize).wrapping_neg();
             let p = (inner ^ ((inner ^ leaf) & is_leaf)) as *const i8;
             for l in 0..4 {
