@@ -64,6 +64,22 @@ def test_matches_embree_on_primary_and_random_rays() -> None:
     compare_with_embree(s, *random_rays(s, 200_000, seed=3))
 
 
+def test_matches_embree_on_a_tree_traced_in_turns() -> None:
+    """Trees larger than 8 MiB trace closest hits several rays in turns (Rust `interleave`)."""
+    pytest.importorskip("embreex")
+    s = ss.scenes.shapes(seed=5, detail=5)
+    assert ss.bvh_stats(s)["bytes"] > 8 << 20
+    cam = orbit_cameras(s, 1, 128, 128, seed=5)[0]
+    o, d = cam.pixel_rays()
+    compare_with_embree(s, o.reshape(-1, 3), d.reshape(-1, 3))
+    o, d = random_rays(s, 50_001, seed=5)
+    compare_with_embree(s, o, d)
+    one = ss.cast_rays(s, o, d, threads=1)
+    every = ss.cast_rays(s, o, d)
+    np.testing.assert_array_equal(one.triangle, every.triangle)
+    np.testing.assert_array_equal(one.t, every.t)
+
+
 @pytest.mark.skipif("stanford_bunny" not in SHARED, reason="../shared/scenes is absent")
 def test_matches_embree_on_the_bunny() -> None:
     pytest.importorskip("embreex")

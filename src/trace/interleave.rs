@@ -1,0 +1,177 @@
+//! Several single rays traversed in turns on one core, each fetching its next node while the
+//! others work: asynchronous memory access chaining (Kocberber, Falsafi and Grot, "Asynchronous
+//! Memory Access Chaining", PVLDB 9(4), 2015), applied to BVH traversal.
+//!
+//! One ray's traversal is a chain of dependent loads: the next node's address comes out of the
+//! current node's test. Where the tree outgrows the core's cache, each link waits for memory,
+//! and the processor cannot run ahead into the next ray, because every node ends in branches it
+//! mispredicts. Here up to [`FLIGHTS`] rays are in flight. Each turn visits one node (or one
+//! leaf) of one ray, picks that ray's next node, asks the cache for it, and moves on to the next
+//! ray; by the time the turn comes back, the node has arrived.
+//!
+//! Each ray visits exactly the nodes and blocks, in exactly the order, that
+//! [`bvh8::traverse`](super::bvh8::traverse) would: only the interleaving differs, so every
+//! query reports the same hits.
+
+use super::bvh8::{
+    block_stops, descend, leaf_blocks, node_at, prefetch_ref, Bvh8, Kernel, Ray, Sink, Stack, LEAF,
+};
+
+/// Rays in flight at once.
+pub const FLIGHTS: usize = 8;
+
+/// One ray in flight: its constants, its sink, the node it visits next and its stack's height
+/// and place in [`Flights::stacks`].
+pub struct Flight<K: Kernel, S> {
+    ray: Ray,
+    r: K::R,
+    sink: S,
+    cur: u32,
+    sp: usize,
+    stack: usize,
+    /// The ray's index in the range being traced.
+    j: usize,
+}
+
+/// Scratch space for [`traverse`], reused from call to call: the flights, and a stack for each
+/// (apart, so that a ray's flight is a few hundred bytes, not 4 KB more). Allocated on first
+/// use.
+pub struct Flights<K: Kernel, S> {
+    flights: Vec<Flight<K, S>>,
+    stacks: Vec<Stack>,
+}
+
+impl<K: Kernel, S> Default for Flights<K, S> {
+    fn default() -> Self {
+        Self {
+            flights: Vec::new(),
+            stacks: Vec::new(),
+        }
+    }
+}
+
+/// Trace rays `range`, [`FLIGHTS`] at a time in turns. `start(j)` gives ray `j` and a fresh sink;
+/// `done(j, sink)` takes each ray's sink when its traversal ends (in the order they end, not
+/// the order of `range`).
+#[inline(always)]
+pub fn traverse<K: Kernel, S: Sink + Copy>(
+    k: K,
+    bvh: &Bvh8,
+    range: std::ops::Range<usize>,
+    scratch: &mut Flights<K, S>,
+    mut start: impl FnMut(usize) -> (Ray, S),
+    mut done: impl FnMut(usize, S),
+) {
+    let Flights { flights, stacks } = scratch;
+    flights.clear();
+    let mut next = range.start;
+    if stacks.is_empty() {
+        stacks.resize_with(FLIGHTS, Stack::new);
+    }
+    while flights.len() < FLIGHTS {
+        match launch(k, bvh, &mut next, range.end, &mut start, &mut done) {
+            Some((ray, r, sink, j)) => flights.push(Flight {
+                ray,
+                r,
+                sink,
+                cur: 0,
+                sp: 0,
+                stack: flights.len(),
+                j,
+            }),
+            None => break,
+        }
+    }
+    let mut i = 0;
+    while !flights.is_empty() {
+        if i >= flights.len() {
+            i = 0;
+        }
+        // SAFETY: `i < flights.len()`, just checked, and every flight's `stack` is a distinct
+        // index below FLIGHTS.
+        let f = unsafe { flights.get_unchecked_mut(i) };
+        let stack = unsafe { stacks.get_unchecked_mut(f.stack) };
+        if step(k, bvh, f, stack) {
+            // Ended: hand over its sink first (an any-hit ray's block becomes the next ray's
+            // hint), then launch the next ray in its place, with the same stack. The flight is
+            // rewritten where it lies: moving it (some 400 bytes) cost a call to memcpy per ray.
+            done(f.j, f.sink);
+            match launch(k, bvh, &mut next, range.end, &mut start, &mut done) {
+                Some((ray, r, sink, j)) => {
+                    (f.ray, f.r, f.sink, f.cur, f.sp, f.j) = (ray, r, sink, 0, 0, j);
+                }
+                None => {
+                    flights.swap_remove(i);
+                    continue;
+                }
+            }
+        }
+        i += 1;
+    }
+}
+
+/// The next ray from `*next` on that its hint block does not settle (those that it does go to
+/// `done`), set up for traversal: its constants, the kernel's, its sink and its index. `None`
+/// when the rays up to `end` are spent.
+#[inline(always)]
+fn launch<K: Kernel, S: Sink>(
+    k: K,
+    bvh: &Bvh8,
+    next: &mut usize,
+    end: usize,
+    start: &mut impl FnMut(usize) -> (Ray, S),
+    done: &mut impl FnMut(usize, S),
+) -> Option<(Ray, K::R, S, usize)> {
+    while *next < end {
+        let j = *next;
+        *next += 1;
+        let (ray, mut sink) = start(j);
+        let r = k.prepare(&ray);
+        if sink
+            .hint()
+            .is_some_and(|b| block_stops(k, bvh, b, &r, &ray, &mut sink))
+        {
+            done(j, sink);
+            continue;
+        }
+        return Some((ray, r, sink, j));
+    }
+    None
+}
+
+/// Visit `f`'s current node or leaf and pick its next node, asking the cache for it; true when
+/// the ray's traversal has ended.
+#[inline(always)]
+fn step<K: Kernel, S: Sink>(k: K, bvh: &Bvh8, f: &mut Flight<K, S>, stack: &mut Stack) -> bool {
+    let cur = f.cur;
+    if cur & LEAF == 0 {
+        let n = node_at(&bvh.nodes, cur);
+        let (mask, d) = k.node(n, &f.r, f.sink.t_far());
+        if mask != 0 {
+            f.cur = descend(k, bvh, n, mask, d, &f.ray, &f.sink, stack, &mut f.sp);
+            // Closest-hit rays asked for every child they entered already (`descend`).
+            if !S::ORDERED {
+                prefetch_ref(bvh, f.cur);
+            }
+            return false;
+        }
+    } else {
+        for b in leaf_blocks(cur) {
+            if block_stops(k, bvh, b, &f.r, &f.ray, &mut f.sink) {
+                return true;
+            }
+        }
+    }
+    match stack.pop(&mut f.sp, f.sink.t_far()) {
+        Some(next) => {
+            f.cur = next;
+            // Closest-hit rays asked for it when they entered it (`descend`); asking again cost
+            // more than it found.
+            if !S::ORDERED {
+                prefetch_ref(bvh, next);
+            }
+            false
+        }
+        None => true,
+    }
+}
