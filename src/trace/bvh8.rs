@@ -509,7 +509,8 @@ pub trait Sink {
     const ORDERED: bool = true;
     /// Whether runs of coherent rays may travel as packets (`Kernel::packet`).
     const PACKETS: bool = true;
-    /// Whether rays may be traced in turns where the tree is large (`interleave`).
+    /// Whether rays may be traced in turns where the tree is large (`interleave`; only for
+    /// `ORDERED` sinks, whose descent prefetches the children it enters).
     const INTERLEAVE: bool = false;
     fn t_far(&self) -> f32;
     /// Take block `block`'s hits; return true to stop the traversal.
@@ -649,30 +650,6 @@ fn prefetch_children(bvh: &Bvh8, n: &Node8, mask: u32) {
     }
     #[cfg(not(target_arch = "x86_64"))]
     let _ = (bvh, n, mask);
-}
-
-/// Ask the cache for what node reference `c` will read: an inner node's four lines, or the
-/// lines of a leaf's blocks (at most eight).
-#[inline(always)]
-pub(crate) fn prefetch_ref(bvh: &Bvh8, c: u32) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-        let (p, lines) = if c & LEAF == 0 {
-            (bvh.nodes.as_ptr() as usize + node_offset(c), 4)
-        } else {
-            let b = leaf_blocks(c);
-            let start = bvh.blocks.as_ptr() as usize + b.start * size_of::<Tri4>();
-            let end = start + b.len() * size_of::<Tri4>();
-            (start & !63, (end - (start & !63)).div_ceil(64).min(8))
-        };
-        for l in 0..lines {
-            // SAFETY: a prefetch is only a hint: it never faults, whatever the address.
-            unsafe { _mm_prefetch::<_MM_HINT_T0>((p + 64 * l) as *const i8) };
-        }
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = (bvh, c);
 }
 
 /// A hit in a leaf block: block, lane, triangle, `t` and the barycentrics' numerators and

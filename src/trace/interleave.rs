@@ -6,15 +6,18 @@
 //! current node's test. Where the tree outgrows the core's cache, each link waits for memory,
 //! and the processor cannot run ahead into the next ray, because every node ends in branches it
 //! mispredicts. Here up to [`FLIGHTS`] rays are in flight. Each turn visits one node (or one
-//! leaf) of one ray, picks that ray's next node, asks the cache for it, and moves on to the next
-//! ray; by the time the turn comes back, the node has arrived.
+//! leaf) of one ray, picks that ray's next node and moves on to the next ray. The node's lines
+//! were asked for when the ray entered it (`descend` prefetches every child a closest-hit ray
+//! enters), so by the time the turn comes back, they have arrived. Only sinks that visit
+//! children nearest first ([`Sink::ORDERED`]: closest hits) are traced in turns; any-hit rays
+//! lost there (see `bvh8::Any`).
 //!
 //! Each ray visits exactly the nodes and blocks, in exactly the order, that
 //! [`bvh8::traverse`](super::bvh8::traverse) would: only the interleaving differs, so every
 //! query reports the same hits.
 
 use super::bvh8::{
-    block_stops, descend, leaf_blocks, node_at, prefetch_ref, Bvh8, Kernel, Ray, Sink, Stack, LEAF,
+    block_stops, descend, leaf_blocks, node_at, Bvh8, Kernel, Ray, Sink, Stack, LEAF,
 };
 
 /// Rays in flight at once.
@@ -62,6 +65,10 @@ pub fn traverse<K: Kernel, S: Sink + Copy>(
     mut start: impl FnMut(usize) -> (Ray, S),
     mut done: impl FnMut(usize, S),
 ) {
+    debug_assert!(
+        S::ORDERED,
+        "only closest-hit sinks prefetch the children they enter"
+    );
     let Flights { flights, stacks } = scratch;
     flights.clear();
     let mut next = range.start;
@@ -92,9 +99,9 @@ pub fn traverse<K: Kernel, S: Sink + Copy>(
         let f = unsafe { flights.get_unchecked_mut(i) };
         let stack = unsafe { stacks.get_unchecked_mut(f.stack) };
         if step(k, bvh, f, stack) {
-            // Ended: hand over its sink first (an any-hit ray's block becomes the next ray's
-            // hint), then launch the next ray in its place, with the same stack. The flight is
-            // rewritten where it lies: moving it (some 400 bytes) cost a call to memcpy per ray.
+            // Ended: hand over its sink first (a sink may give the next ray its hint), then
+            // launch the next ray in its place, with the same stack. The flight is rewritten
+            // where it lies: moving it (some 400 bytes) cost a call to memcpy per ray.
             done(f.j, f.sink);
             match launch(k, bvh, &mut next, range.end, &mut start, &mut done) {
                 Some((ray, r, sink, j)) => {
@@ -139,8 +146,8 @@ fn launch<K: Kernel, S: Sink>(
     None
 }
 
-/// Visit `f`'s current node or leaf and pick its next node, asking the cache for it; true when
-/// the ray's traversal has ended.
+/// Visit `f`'s current node or leaf and pick its next node (whose lines `descend` asked the cache
+/// for when the ray entered it); true when the ray's traversal has ended.
 #[inline(always)]
 fn step<K: Kernel, S: Sink>(k: K, bvh: &Bvh8, f: &mut Flight<K, S>, stack: &mut Stack) -> bool {
     let cur = f.cur;
@@ -149,10 +156,6 @@ fn step<K: Kernel, S: Sink>(k: K, bvh: &Bvh8, f: &mut Flight<K, S>, stack: &mut 
         let (mask, d) = k.node(n, &f.r, f.sink.t_far());
         if mask != 0 {
             f.cur = descend(k, bvh, n, mask, d, &f.ray, &f.sink, stack, &mut f.sp);
-            // Closest-hit rays asked for every child they entered already (`descend`).
-            if !S::ORDERED {
-                prefetch_ref(bvh, f.cur);
-            }
             return false;
         }
     } else {
@@ -164,12 +167,9 @@ fn step<K: Kernel, S: Sink>(k: K, bvh: &Bvh8, f: &mut Flight<K, S>, stack: &mut 
     }
     match stack.pop(&mut f.sp, f.sink.t_far()) {
         Some(next) => {
-            f.cur = next;
-            // Closest-hit rays asked for it when they entered it (`descend`); asking again cost
+            // Asked for when the ray entered it (`descend`); asking again as it is popped cost
             // more than it found.
-            if !S::ORDERED {
-                prefetch_ref(bvh, next);
-            }
+            f.cur = next;
             false
         }
         None => true,
