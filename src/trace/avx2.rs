@@ -12,7 +12,8 @@ use std::arch::x86_64::*;
 use std::ops::{Add, Div, Mul, Sub};
 
 use super::bvh8::{
-    portable, Bvh8, Kernel, Lanes, Node8, PacketStack, Ray, Stack, Tri4, Tri4Hit, STACK, WIDTH,
+    portable, Bvh8, Kernel, Lanes, Node8, PacketStack, Ray, Stack, Tri4, Tri4Hit, ANY_SHIFT, STACK,
+    WIDTH,
 };
 use super::refine::{self, moller_trumbore, Lane, Pending};
 
@@ -52,18 +53,6 @@ impl Kernel for Avx2 {
     }
 
     #[inline(always)]
-    fn origin_last(self, (near, hit): Self::D, t_min: f32, t_far: f32) -> Self::D {
-        // SAFETY: AVX2 (the token).
-        unsafe {
-            let at_origin = _mm256_cmp_ps::<_CMP_LE_OQ>(near, _mm256_set1_ps(t_min));
-            (
-                _mm256_blendv_ps(near, _mm256_set1_ps(t_far), at_origin),
-                hit,
-            )
-        }
-    }
-
-    #[inline(always)]
     fn node(self, n: &Node8, r: &Ray, t_far: f32) -> (u32, Self::D) {
         // No closures here or below: a closure would not inherit the caller's AVX2 target
         // feature, and its intrinsics would become calls.
@@ -94,6 +83,50 @@ impl Kernel for Avx2 {
             );
             let hit = _mm256_cmp_ps::<_CMP_LE_OQ>(near, far);
             (_mm256_movemask_ps(hit) as u32, (near, hit))
+        }
+    }
+
+    #[inline(always)]
+    fn push_any(
+        self,
+        n: &Node8,
+        _: u32,
+        (near, hit): Self::D,
+        t_min: f32,
+        s: &mut Stack,
+        sp: &mut usize,
+    ) -> u32 {
+        unsafe {
+            // The slots in the any-hit order, last first.
+            let ranked = _mm256_srli_epi32::<{ ANY_SHIFT as i32 }>(_mm256_load_si256(
+                n.order.as_ptr() as *const __m256i,
+            ));
+            let slots = _mm256_permutevar8x32_epi32(
+                _mm256_and_si256(ranked, _mm256_set1_epi32(7)),
+                _mm256_setr_epi32(7, 6, 5, 4, 3, 2, 1, 0),
+            );
+            let child = _mm256_permutevar8x32_epi32(
+                _mm256_load_si256(n.child.as_ptr() as *const __m256i),
+                slots,
+            );
+            let hit = _mm256_permutevar8x32_ps(hit, slots);
+            let start = _mm256_cmp_ps::<_CMP_LE_OQ>(
+                _mm256_permutevar8x32_ps(near, slots),
+                _mm256_set1_ps(t_min),
+            );
+            let zero = _mm256_setzero_si256();
+            debug_assert!(*sp + 16 <= STACK);
+            // The boxes around the start at the bottom, then the rest; each group packed low.
+            for group in [_mm256_and_ps(hit, start), _mm256_andnot_ps(start, hit)] {
+                let m = _mm256_movemask_ps(group) as u32;
+                let packed = _mm256_permutevar8x32_epi32(child, packed_lanes(m));
+                _mm256_storeu_si256(s.node.as_mut_ptr().add(*sp) as *mut __m256i, packed);
+                _mm256_storeu_si256(s.dist.as_mut_ptr().add(*sp) as *mut __m256i, zero);
+                *sp += m.count_ones() as usize;
+            }
+            debug_assert!(*sp >= 2 && *sp + 8 <= STACK);
+            *sp -= 1;
+            s.node.get_unchecked(*sp).assume_init()
         }
     }
 
@@ -314,6 +347,34 @@ pub(crate) unsafe fn sort8_descending(v: __m256i) -> __m256i {
     layer::<0x2A>(v, _mm256_setr_epi32(0, 2, 1, 4, 3, 6, 5, 7))
 }
 
+/// For each 8-bit mask, the indices of its set lanes packed low, a byte each.
+static PACKED_LANES: [u64; 256] = {
+    let mut table = [0u64; 256];
+    let mut m = 0;
+    while m < 256 {
+        let (mut packed, mut count, mut lane) = (0u64, 0, 0);
+        while lane < 8 {
+            if m >> lane & 1 == 1 {
+                packed |= (lane as u64) << (8 * count);
+                count += 1;
+            }
+            lane += 1;
+        }
+        table[m] = packed;
+        m += 1;
+    }
+    table
+};
+
+/// The permutation that moves the lanes set in `m` (8 bits) to the low lanes, in order.
+#[inline(always)]
+unsafe fn packed_lanes(m: u32) -> __m256i {
+    debug_assert!(m < 256);
+    _mm256_cvtepu8_epi32(_mm_cvtsi64_si128(
+        *PACKED_LANES.get_unchecked(m as usize) as i64
+    ))
+}
+
 /// Keep only a distance's magnitude bits above the slot bits (see `bvh8::sort_key`).
 const KEY_BITS: i32 = 0x7FFF_FFF8;
 
@@ -327,6 +388,63 @@ mod tests {
         let mut out = [0i32; 8];
         _mm256_storeu_si256(out.as_mut_ptr() as *mut __m256i, v);
         out
+    }
+
+    #[target_feature(enable = "avx2")]
+    unsafe fn push_any(
+        k: Avx2,
+        n: &Node8,
+        mask: u32,
+        near: [f32; 8],
+        hit: [f32; 8],
+        s: &mut Stack,
+        sp: &mut usize,
+    ) -> u32 {
+        let d = (
+            _mm256_loadu_ps(near.as_ptr()),
+            _mm256_loadu_ps(hit.as_ptr()),
+        );
+        k.push_any(n, mask, d, 0.0, s, sp)
+    }
+
+    /// The AVX2 any-hit push leaves the stack as the portable one does, for every set of two or
+    /// more children entered and every split between boxes around the start and the rest.
+    #[test]
+    fn push_any_matches_portable() {
+        let Some(k) = Avx2::detect() else {
+            return;
+        };
+        let mut node = Node8::EMPTY;
+        node.child = std::array::from_fn(|i| 100 + i as u32);
+        let mut seed = 1u32;
+        for round in 0..64 {
+            // A permutation of the slots as the any-hit order.
+            let mut slots: [u32; 8] = std::array::from_fn(|i| i as u32);
+            for i in (1..8).rev() {
+                seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                slots.swap(i, (seed >> 16) as usize % (i + 1));
+            }
+            node.set_any_order(slots);
+            let start_mask = (round * 37) as u32 & 0xFF;
+            let near: [f32; 8] =
+                std::array::from_fn(|i| if start_mask >> i & 1 == 1 { 0.0 } else { 0.5 });
+            for mask in (0u32..256).filter(|m| m.count_ones() >= 2) {
+                let hit: [f32; 8] = std::array::from_fn(|i| {
+                    f32::from_bits(if mask >> i & 1 == 1 { u32::MAX } else { 0 })
+                });
+                let (mut a, mut b) = (Stack::new(), Stack::new());
+                let (mut sa, mut sb) = (3usize, 3usize);
+                let first_a = portable::Portable.push_any(&node, mask, near, 0.0, &mut a, &mut sa);
+                // SAFETY: AVX2 was detected (the token).
+                let first_b = unsafe { push_any(k, &node, mask, near, hit, &mut b, &mut sb) };
+                assert_eq!((first_a, sa), (first_b, sb), "mask {mask:08b}");
+                for i in 3..sa {
+                    // SAFETY: both pushes wrote entries 3..sa.
+                    let (x, y) = unsafe { (a.node[i].assume_init(), b.node[i].assume_init()) };
+                    assert_eq!(x, y, "mask {mask:08b}, entry {i}");
+                }
+            }
+        }
     }
 
     /// The network sorts every 0/1 input (which proves it sorts everything, by the 0-1

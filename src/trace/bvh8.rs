@@ -9,7 +9,8 @@
 //! them sorted by entry distance (an 8-lane sorting network on AVX2) and descends into the
 //! nearest; entries popped beyond the closest hit so far are skipped. The same loop serves the
 //! three queries through a [`Sink`]: closest hit, any hit, and the k nearest hits. Any-hit rays
-//! put the boxes around their start last (`Kernel::origin_last`) and first try the block that
+//! visit children in an order the builder fixed, the likeliest to stop a ray for its cost first
+//! and the boxes around the ray's start last (`Kernel::push_any`), and first try the block that
 //! stopped the previous ray (`Any::hint`).
 
 use std::mem::MaybeUninit;
@@ -30,9 +31,10 @@ pub const MAX_BLOCKS: u32 = (1 << 28) - 1;
 /// The reference of a child slot with nothing in it (its box is empty: lo = +inf, hi = −inf).
 pub const EMPTY: u32 = u32::MAX;
 /// Entries of the traversal stack. The builder keeps trees at most `MAX_DEPTH` nodes deep, and
-/// each node leaves at most 7 entries behind, plus 8 lanes written at once by the AVX2 push.
+/// each node leaves at most 7 entries behind, plus up to 16 lanes written at once by an AVX2
+/// push (the any-hit push stores two groups of 8).
 pub const STACK: usize = 512;
-pub const MAX_DEPTH: u32 = (STACK as u32 - 8) / 7;
+pub const MAX_DEPTH: u32 = (STACK as u32 - 16) / 7;
 
 /// 32-byte units in a node.
 pub const NODE_UNITS: usize = size_of::<Node8>() / 32;
@@ -45,6 +47,12 @@ pub const MAX_NODES: usize = (LEAF as usize) / NODE_UNITS;
 pub fn node_ref(index: usize) -> u32 {
     debug_assert!(index < MAX_NODES);
     (index * NODE_UNITS) as u32
+}
+
+/// The index in `Bvh8::nodes` of the node an inner reference names.
+#[inline(always)]
+pub fn node_index(r: u32) -> usize {
+    r as usize / NODE_UNITS
 }
 
 /// The node an inner reference names.
@@ -82,7 +90,8 @@ pub fn leaf_blocks(r: u32) -> Range<usize> {
 /// Eight children: `b[0..3]` their low x, y, z, `b[3..6]` their high x, y, z; and for each of
 /// the eight octants a ray's direction can point into, the children in the order the ray meets
 /// their centres: bits `3o..3o+3` of `order[r]` hold the slot of rank `r` for octant `o`
-/// (Fuetterling et al. 2017, §4.2).
+/// (Fuetterling et al. 2017, §4.2). Bits `ANY_SHIFT..ANY_SHIFT+3` of `order[r]` hold the slot of
+/// rank `r` in the any-hit order (`build::rank_for_any_hit`).
 #[repr(C, align(64))]
 #[derive(Clone, Copy, Debug)]
 pub struct Node8 {
@@ -90,6 +99,9 @@ pub struct Node8 {
     pub child: [u32; 8],
     pub order: [u32; 8],
 }
+
+/// Where the any-hit order lies in each entry of `Node8::order` (above the octants' 24 bits).
+pub const ANY_SHIFT: u32 = 24;
 
 /// The size of one row of `Node8::b`.
 pub const ROW_BYTES: usize = std::mem::size_of::<[f32; 8]>();
@@ -120,10 +132,13 @@ impl Node8 {
         order: [0; 8],
     };
 
-    /// Fill `order` from the boxes: valid children by the position of their centres along each
-    /// octant's diagonal, nearest first; empty slots last.
+    /// Fill the octants' part of `order` from the boxes: valid children by the position of their
+    /// centres along each octant's diagonal, nearest first; empty slots last. The any-hit order
+    /// is left as it was.
     pub fn set_order(&mut self) {
-        self.order = [0; 8];
+        for o in &mut self.order {
+            *o &= !((1 << ANY_SHIFT) - 1);
+        }
         for o in 0..8u32 {
             let sign = [0, 1, 2].map(|a| if o >> a & 1 == 1 { -1.0f32 } else { 1.0 });
             let mut slots: Vec<(f32, u32)> = (0..8)
@@ -143,6 +158,27 @@ impl Node8 {
                 self.order[rank] |= k << (3 * o);
             }
         }
+    }
+
+    /// Set the any-hit order: `slots[r]` is the slot of rank `r` (a permutation of 0..8).
+    pub fn set_any_order(&mut self, slots: [u32; 8]) {
+        for (o, k) in self.order.iter_mut().zip(slots) {
+            debug_assert!(k < 8);
+            *o = (*o & ((1 << ANY_SHIFT) - 1)) | k << ANY_SHIFT;
+        }
+    }
+
+    /// The slot of rank `rank` in the any-hit order.
+    #[inline(always)]
+    pub fn any_slot(&self, rank: usize) -> usize {
+        (self.order[rank] >> ANY_SHIFT) as usize & 7
+    }
+
+    /// The surface area of child `k`'s box (0 for an empty slot).
+    pub fn child_area(&self, k: usize) -> f64 {
+        let e: [f64; 3] =
+            std::array::from_fn(|a| (self.b[a + 3][k] - self.b[a][k]).max(0.0) as f64);
+        2.0 * (e[0] * e[1] + e[1] * e[2] + e[2] * e[0])
     }
 }
 
@@ -351,15 +387,20 @@ pub trait Kernel: Copy {
     /// Push the children in `mask` (three or more) onto `s` above `sp`, farthest first (by
     /// entry distance); return the nearest, unpushed.
     fn push_sorted(self, n: &Node8, mask: u32, d: Self::D, s: &mut Stack, sp: &mut usize) -> u32;
-    /// The order of an any-hit query: entry distances at `t_min` (boxes that hold the ray's
-    /// start) moved to `t_far`, so that those boxes come last and the rest nearest first. A
-    /// shadow ray leaves a surface, which the boxes around its start hold and which rarely
-    /// blocks it; the nearest boxes beyond them hold the likeliest occluders. Against slot order
-    /// (interleaved A/B against embreex on occlusion rays): khr_toy_car 0.79-0.85x -> 0.99-1.01x,
-    /// the procedural shapes 0.90x -> 1.01-1.03x, khr_specular_test 1.04-1.07x -> 1.17-1.19x; the
-    /// plain nearest-first order was the slowest (0.73x on the toy car). `t_far` is still a
-    /// distance the stack keeps, so no child is culled.
-    fn origin_last(self, d: Self::D, t_min: f32, t_far: f32) -> Self::D;
+    /// Push the children in `mask` (two or more) for an any-hit query and return the first to
+    /// visit, unpushed: the node's any-hit order ([`Node8::any_slot`]), with the boxes that hold
+    /// the ray's start (entry distance `t_min`) below the rest. A shadow ray leaves a surface,
+    /// which those boxes hold and which rarely blocks it. The entries' distances are 0: an any-hit
+    /// query never shortens its range, so nothing on its stack is culled.
+    fn push_any(
+        self,
+        n: &Node8,
+        mask: u32,
+        d: Self::D,
+        t_min: f32,
+        s: &mut Stack,
+        sp: &mut usize,
+    ) -> u32;
     /// The watertight test of a block's four triangles.
     fn tri4(self, b: &Tri4, r: &Self::R, ray: &Ray, t_far: f32) -> Tri4Hit;
     /// Refine hits in f64 (`refine`), as `refine::refine_one` does one by one.
@@ -417,7 +458,8 @@ impl Stack {
     pub(crate) fn pop(&self, sp: &mut usize, t_far: f32) -> Option<u32> {
         while *sp > 0 {
             *sp -= 1;
-            // SAFETY: entries below `sp` were written by `push` or a kernel's `push_sorted`.
+            // SAFETY: entries below `sp` were written by `push` or a kernel's `push_sorted` or
+            // `push_any`.
             let (node, dist) = unsafe {
                 (
                     self.node.get_unchecked(*sp).assume_init(),
@@ -504,8 +546,8 @@ impl PacketStack {
 
 /// Where hits go. `t_far` bounds the search (hits at or beyond it are not reported).
 pub trait Sink {
-    /// Whether children are visited strictly nearest first (closest hits), or nearest first
-    /// after those whose boxes hold the ray's start (any hit, see [`Kernel::origin_last`]).
+    /// Whether children are visited strictly nearest first (closest hits), or in the builder's
+    /// any-hit order (any hit, see [`Kernel::push_any`]).
     const ORDERED: bool = true;
     /// Whether runs of coherent rays may travel as packets (`Kernel::packet`).
     const PACKETS: bool = true;
@@ -540,7 +582,7 @@ pub fn traverse<K: Kernel, S: Sink>(k: K, bvh: &Bvh8, ray: &Ray, sink: &mut S, s
             let n = node_at(&bvh.nodes, cur);
             let (mask, d) = k.node(n, &r, sink.t_far());
             if mask != 0 {
-                cur = descend(k, bvh, n, mask, d, ray, sink, stack, &mut sp);
+                cur = descend::<K, S>(k, bvh, n, mask, d, ray, stack, &mut sp);
                 continue 'visit;
             }
         } else {
@@ -557,9 +599,10 @@ pub fn traverse<K: Kernel, S: Sink>(k: K, bvh: &Bvh8, ray: &Ray, sink: &mut S, s
     }
 }
 
-/// The child of `n` to visit next, of those in `mask` (not empty) that the ray enters: the
-/// nearest, by the order `S` asks for. The others are pushed onto `stack` above `sp`, farthest
-/// first. Closest-hit rays also ask the cache for every child entered (`prefetch_children`).
+/// The child of `n` to visit next, of those in `mask` (not empty) that the ray enters, by the
+/// order `S` asks for: the nearest, or the first in the any-hit order. The others are pushed
+/// onto `stack` above `sp`, the last to visit first. Closest-hit rays also ask the cache for
+/// every child entered (`prefetch_children`).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 pub(crate) fn descend<K: Kernel, S: Sink>(
@@ -569,7 +612,6 @@ pub(crate) fn descend<K: Kernel, S: Sink>(
     mask: u32,
     d: K::D,
     ray: &Ray,
-    sink: &S,
     stack: &mut Stack,
     sp: &mut usize,
 ) -> u32 {
@@ -581,11 +623,9 @@ pub(crate) fn descend<K: Kernel, S: Sink>(
     if rest == 0 {
         return n.child[first as usize];
     }
-    let d = if S::ORDERED {
-        d
-    } else {
-        k.origin_last(d, ray.t_min, sink.t_far())
-    };
+    if !S::ORDERED {
+        return k.push_any(n, mask, d, ray.t_min, stack, sp);
+    }
     if rest & (rest - 1) == 0 {
         // Two children: the nearer next, the other pushed. Both references are loaded before
         // the comparison, which then only selects.
@@ -748,10 +788,14 @@ pub struct Any {
     pub t_far: f32,
     /// The block that stopped the traversal, if any.
     pub hit: Option<u32>,
-    /// A block to test first: the one that stopped the previous ray. Shadow rays from
-    /// neighbouring points (in image order) are mostly blocked by the same occluder, and one
-    /// block test then replaces a traversal (Haines and Greenberg's shadow cache, "The Light
-    /// Buffer", 1986). Whatever it finds is a hit in range, so the answer does not change.
+    /// A block to test first: the one that stopped the previous ray (none when nothing did).
+    /// Shadow rays from neighbouring points (in image order) are mostly blocked by the same
+    /// occluder, and one block test then replaces a traversal (Haines and Greenberg's shadow
+    /// cache, "The Light Buffer", 1986). Whatever it finds is a hit in range, so the answer does
+    /// not change. After a ray that nothing blocked, the next is likely unblocked too, and the
+    /// test is skipped (the cache is emptied): with one thread on the occlusion rays of
+    /// `bench rays`, 1.06x on the procedural shapes, whose tests mostly missed; 0.97-1.02x on
+    /// the real scenes.
     pub hint: Option<u32>,
 }
 
@@ -811,9 +855,31 @@ pub mod portable {
             d[lane as usize]
         }
 
-        #[inline(always)]
-        fn origin_last(self, d: [f32; 8], t_min: f32, t_far: f32) -> [f32; 8] {
-            d.map(|x| if x <= t_min { t_far } else { x })
+        fn push_any(
+            self,
+            n: &Node8,
+            mask: u32,
+            d: [f32; 8],
+            t_min: f32,
+            s: &mut Stack,
+            sp: &mut usize,
+        ) -> u32 {
+            // Each group last rank first, so that it is popped in rank order.
+            let last_first = || {
+                (0..8)
+                    .rev()
+                    .map(|r| n.any_slot(r))
+                    .filter(|k| mask >> k & 1 == 1)
+            };
+            for k in last_first().filter(|&k| d[k] <= t_min) {
+                s.push(sp, n.child[k], 0.0);
+            }
+            for k in last_first().filter(|&k| d[k] > t_min) {
+                s.push(sp, n.child[k], 0.0);
+            }
+            *sp -= 1;
+            // SAFETY: pushed just above (`mask` has at least two children).
+            unsafe { s.node.get_unchecked(*sp).assume_init() }
         }
 
         fn push_sorted(

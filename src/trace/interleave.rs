@@ -155,7 +155,7 @@ fn step<K: Kernel, S: Sink>(k: K, bvh: &Bvh8, f: &mut Flight<K, S>, stack: &mut 
         let n = node_at(&bvh.nodes, cur);
         let (mask, d) = k.node(n, &f.r, f.sink.t_far());
         if mask != 0 {
-            f.cur = descend(k, bvh, n, mask, d, &f.ray, &f.sink, stack, &mut f.sp);
+            f.cur = descend::<K, S>(k, bvh, n, mask, d, &f.ray, stack, &mut f.sp);
             return false;
         }
     } else {

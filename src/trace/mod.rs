@@ -676,7 +676,8 @@ impl Job for AnyJob<'_> {
     #[inline(always)]
     fn chunk<K: Kernel>(&self, k: K, base: usize, out: &mut [bool]) {
         let mut scratch = Scratch::new();
-        // The block that stopped the last ray, tried first on the next (`Any::hint`).
+        // The block that stopped the last ray, tried first on the next; none after a ray that
+        // nothing stopped (`Any::hint`).
         let last = std::cell::Cell::new(None);
         let any = || Any {
             t_far: self.0.range.1,
@@ -692,9 +693,7 @@ impl Job for AnyJob<'_> {
             #[inline(always)]
             |j, sink| {
                 out[j] = sink.hit.is_some();
-                if sink.hit.is_some() {
-                    last.set(sink.hit);
-                }
+                last.set(sink.hit);
             },
         );
     }
