@@ -162,10 +162,11 @@ pub fn build(tris: &[Tri], params: BuildParams) -> Bvh8 {
 ///   what a node does).
 ///
 /// Measured with one thread on the occlusion rays of `bench rays`, against children nearest
-/// first by entry distance with the same boxes around the start last (interleaved rounds, in a
-/// Rust harness): `khr_toy_car` 1.10-1.18x (6.5 nodes and 2.5 blocks per ray instead of 7.3
-/// and 2.8); the other scenes within 0.97-1.04x, but for the glass vase (0.94-1.03x) and the
-/// 1M-triangle spheres (0.97-1.01x).
+/// first by entry distance with the same boxes around the start last (a Rust harness, rounds
+/// interleaved in one process or alternated between two): `khr_toy_car` 1.07-1.20x (6.5 node
+/// and 2.5 block tests per ray instead of 7.3 and 2.8); the other nine scenes' medians
+/// 0.97-1.05x, single runs 0.89-1.04x (this machine's noise). Each child's order is fixed, so
+/// there is no per-ray sort, but it ignores where along the ray the boxes lie.
 fn rank_for_any_hit(nodes: &mut [Node8], blocks: &[Tri4]) {
     // Each node's subtree: triangle area and expected cost. Children follow their parents in
     // `nodes`, so one pass from the back sees every child before its parent.

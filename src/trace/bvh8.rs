@@ -575,28 +575,41 @@ pub fn traverse<K: Kernel, S: Sink>(k: K, bvh: &Bvh8, ray: &Ray, sink: &mut S, s
     {
         return;
     }
-    let mut sp = 0usize;
-    let mut cur = 0u32;
-    'visit: loop {
-        if cur & LEAF == 0 {
-            let n = node_at(&bvh.nodes, cur);
-            let (mask, d) = k.node(n, &r, sink.t_far());
-            if mask != 0 {
-                cur = descend::<K, S>(k, bvh, n, mask, d, ray, stack, &mut sp);
-                continue 'visit;
-            }
-        } else {
-            for b in leaf_blocks(cur) {
-                if block_stops(k, bvh, b, &r, ray, sink) {
-                    return;
-                }
-            }
+    let (mut cur, mut sp) = (0u32, 0usize);
+    while let Some(next) = visit(k, bvh, cur, &r, ray, sink, stack, &mut sp) {
+        cur = next;
+    }
+}
+
+/// One step of a traversal: visit node or leaf `cur` and return the next to visit (a child
+/// entered, or the stack's top), or `None` when the traversal has ended (the sink wants no
+/// more, or the stack is spent). `traverse` loops over it; `interleave` takes one step per turn.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub(crate) fn visit<K: Kernel, S: Sink>(
+    k: K,
+    bvh: &Bvh8,
+    cur: u32,
+    r: &K::R,
+    ray: &Ray,
+    sink: &mut S,
+    stack: &mut Stack,
+    sp: &mut usize,
+) -> Option<u32> {
+    if cur & LEAF == 0 {
+        let n = node_at(&bvh.nodes, cur);
+        let (mask, d) = k.node(n, r, sink.t_far());
+        if mask != 0 {
+            return Some(descend::<K, S>(k, bvh, n, mask, d, ray, stack, sp));
         }
-        match stack.pop(&mut sp, sink.t_far()) {
-            Some(next) => cur = next,
-            None => return,
+    } else {
+        for b in leaf_blocks(cur) {
+            if block_stops(k, bvh, b, r, ray, sink) {
+                return None;
+            }
         }
     }
+    stack.pop(sp, sink.t_far())
 }
 
 /// The child of `n` to visit next, of those in `mask` (not empty) that the ray enters, by the

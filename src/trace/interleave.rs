@@ -9,16 +9,14 @@
 //! leaf) of one ray, picks that ray's next node and moves on to the next ray. The node's lines
 //! were asked for when the ray entered it (`descend` prefetches every child a closest-hit ray
 //! enters), so by the time the turn comes back, they have arrived. Only sinks that visit
-//! children nearest first ([`Sink::ORDERED`]: closest hits) are traced in turns; any-hit rays
-//! lost there (see `bvh8::Any`).
+//! children nearest first ([`Sink::ORDERED`]: closest hits, which have no hint block to try
+//! first) are traced in turns; any-hit rays lost there (see `bvh8::Any`).
 //!
 //! Each ray visits exactly the nodes and blocks, in exactly the order, that
 //! [`bvh8::traverse`](super::bvh8::traverse) would: only the interleaving differs, so every
 //! query reports the same hits.
 
-use super::bvh8::{
-    block_stops, descend, leaf_blocks, node_at, Bvh8, Kernel, Ray, Sink, Stack, LEAF,
-};
+use super::bvh8::{visit, Bvh8, Kernel, Ray, Sink, Stack};
 
 /// Rays in flight at once.
 pub const FLIGHTS: usize = 8;
@@ -76,7 +74,7 @@ pub fn traverse<K: Kernel, S: Sink + Copy>(
         stacks.resize_with(FLIGHTS, Stack::new);
     }
     while flights.len() < FLIGHTS {
-        match launch(k, bvh, &mut next, range.end, &mut start, &mut done) {
+        match launch(k, &mut next, range.end, &mut start) {
             Some((ray, r, sink, j)) => flights.push(Flight {
                 ray,
                 r,
@@ -99,11 +97,11 @@ pub fn traverse<K: Kernel, S: Sink + Copy>(
         let f = unsafe { flights.get_unchecked_mut(i) };
         let stack = unsafe { stacks.get_unchecked_mut(f.stack) };
         if step(k, bvh, f, stack) {
-            // Ended: hand over its sink first (a sink may give the next ray its hint), then
-            // launch the next ray in its place, with the same stack. The flight is rewritten
-            // where it lies: moving it (some 400 bytes) cost a call to memcpy per ray.
+            // Ended: hand over its sink, then launch the next ray in its place, with the same
+            // stack. The flight is rewritten where it lies: moving it (some 400 bytes) cost a
+            // call to memcpy per ray.
             done(f.j, f.sink);
-            match launch(k, bvh, &mut next, range.end, &mut start, &mut done) {
+            match launch(k, &mut next, range.end, &mut start) {
                 Some((ray, r, sink, j)) => {
                     (f.ray, f.r, f.sink, f.cur, f.sp, f.j) = (ray, r, sink, 0, 0, j);
                 }
@@ -117,58 +115,33 @@ pub fn traverse<K: Kernel, S: Sink + Copy>(
     }
 }
 
-/// The next ray from `*next` on that its hint block does not settle (those that it does go to
-/// `done`), set up for traversal: its constants, the kernel's, its sink and its index. `None`
-/// when the rays up to `end` are spent.
+/// Ray `*next`, set up for traversal: its constants, the kernel's, its sink and its index.
+/// `None` when the rays up to `end` are spent.
 #[inline(always)]
 fn launch<K: Kernel, S: Sink>(
     k: K,
-    bvh: &Bvh8,
     next: &mut usize,
     end: usize,
     start: &mut impl FnMut(usize) -> (Ray, S),
-    done: &mut impl FnMut(usize, S),
 ) -> Option<(Ray, K::R, S, usize)> {
-    while *next < end {
-        let j = *next;
-        *next += 1;
-        let (ray, mut sink) = start(j);
-        let r = k.prepare(&ray);
-        if sink
-            .hint()
-            .is_some_and(|b| block_stops(k, bvh, b, &r, &ray, &mut sink))
-        {
-            done(j, sink);
-            continue;
-        }
-        return Some((ray, r, sink, j));
+    if *next >= end {
+        return None;
     }
-    None
+    let j = *next;
+    *next += 1;
+    let (ray, sink) = start(j);
+    // `bvh8::traverse` would try a hint block first; sinks traced in turns have none.
+    debug_assert!(sink.hint().is_none());
+    Some((ray, k.prepare(&ray), sink, j))
 }
 
-/// Visit `f`'s current node or leaf and pick its next node (whose lines `descend` asked the cache
-/// for when the ray entered it); true when the ray's traversal has ended.
+/// Visit `f`'s current node or leaf and pick its next node (`bvh8::visit`; the next node's lines
+/// were asked for when the ray entered it, in `descend`, and asking again as it is popped cost
+/// more than it found); true when the ray's traversal has ended.
 #[inline(always)]
 fn step<K: Kernel, S: Sink>(k: K, bvh: &Bvh8, f: &mut Flight<K, S>, stack: &mut Stack) -> bool {
-    let cur = f.cur;
-    if cur & LEAF == 0 {
-        let n = node_at(&bvh.nodes, cur);
-        let (mask, d) = k.node(n, &f.r, f.sink.t_far());
-        if mask != 0 {
-            f.cur = descend::<K, S>(k, bvh, n, mask, d, &f.ray, stack, &mut f.sp);
-            return false;
-        }
-    } else {
-        for b in leaf_blocks(cur) {
-            if block_stops(k, bvh, b, &f.r, &f.ray, &mut f.sink) {
-                return true;
-            }
-        }
-    }
-    match stack.pop(&mut f.sp, f.sink.t_far()) {
+    match visit(k, bvh, f.cur, &f.r, &f.ray, &mut f.sink, stack, &mut f.sp) {
         Some(next) => {
-            // Asked for when the ray entered it (`descend`); asking again as it is popped cost
-            // more than it found.
             f.cur = next;
             false
         }
