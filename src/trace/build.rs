@@ -842,6 +842,13 @@ mod tests {
                 (0..8).collect::<Vec<_>>(),
                 "node {i}: not a permutation"
             );
+            for (rank, &k) in slots.iter().enumerate() {
+                assert_eq!(
+                    n.any_rank(k),
+                    rank as u32,
+                    "node {i}: rank and slot disagree"
+                );
+            }
             let valid = (0..8).filter(|&k| n.child[k] != EMPTY).count();
             assert!(slots[..valid].iter().all(|&k| n.child[k] != EMPTY));
             let worth: Vec<f64> = slots[..valid]
