@@ -174,14 +174,7 @@ fn rank_for_any_hit(nodes: &mut [Node8], blocks: &[Tri4]) {
     for i in (0..nodes.len()).rev() {
         let n = &nodes[i];
         let surface: f64 = {
-            let mut lo = [f32::INFINITY; 3];
-            let mut hi = [f32::NEG_INFINITY; 3];
-            for k in (0..8).filter(|&k| n.child[k] != EMPTY) {
-                for a in 0..3 {
-                    lo[a] = lo[a].min(n.b[a][k]);
-                    hi[a] = hi[a].max(n.b[a + 3][k]);
-                }
-            }
+            let (lo, hi) = n.bounds();
             let e: [f64; 3] = std::array::from_fn(|a| (hi[a] - lo[a]).max(0.0) as f64);
             2.0 * (e[0] * e[1] + e[1] * e[2] + e[2] * e[0])
         };
@@ -789,15 +782,7 @@ mod tests {
         // (triangle area, expected cost) of the subtree at an inner reference.
         fn subtree(bvh: &Bvh8, r: u32) -> (f64, f64) {
             let n = node_at(&bvh.nodes, r);
-            let (lo, hi) = (0..8).filter(|&k| n.child[k] != EMPTY).fold(
-                ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]),
-                |(lo, hi), k| {
-                    (
-                        std::array::from_fn(|a| lo[a].min(n.b[a][k])),
-                        std::array::from_fn(|a| hi[a].max(n.b[a + 3][k])),
-                    )
-                },
-            );
+            let (lo, hi) = n.bounds();
             let e: [f64; 3] = std::array::from_fn(|a| (hi[a] - lo[a]) as f64);
             let surface = 2.0 * (e[0] * e[1] + e[1] * e[2] + e[2] * e[0]);
             let (mut area, mut cost) = (0.0, 1.0);

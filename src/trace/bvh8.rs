@@ -185,6 +185,19 @@ impl Node8 {
         (self.order[rank] >> ANY_SHIFT) as usize & 7
     }
 
+    /// The box around the occupied children's boxes, as (low, high) corners (low above high
+    /// when no slot is occupied).
+    pub fn bounds(&self) -> ([f32; 3], [f32; 3]) {
+        let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+        for k in (0..8).filter(|&k| self.child[k] != EMPTY) {
+            for a in 0..3 {
+                lo[a] = lo[a].min(self.b[a][k]);
+                hi[a] = hi[a].max(self.b[a + 3][k]);
+            }
+        }
+        (lo, hi)
+    }
+
     /// The surface area of child `k`'s box (0 for an empty slot).
     pub fn child_area(&self, k: usize) -> f64 {
         let e: [f64; 3] =
@@ -248,39 +261,20 @@ pub struct Bvh8 {
 impl Bvh8 {
     /// The diagonal of the root's box (0 for an empty tree).
     pub fn diagonal(&self) -> f32 {
-        let root = &self.nodes[0];
-        let (mut lo, mut hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
-        for k in (0..8).filter(|&k| root.child[k] != EMPTY) {
-            lo = lo.min(Vec3A::new(root.b[0][k], root.b[1][k], root.b[2][k]));
-            hi = hi.max(Vec3A::new(root.b[3][k], root.b[4][k], root.b[5][k]));
-        }
-        if lo.x > hi.x {
+        let (lo, hi) = self.nodes[0].bounds();
+        if lo[0] > hi[0] {
             0.0
         } else {
-            (hi - lo).length()
+            (Vec3A::from(hi) - Vec3A::from(lo)).length()
         }
     }
 
     /// See `BvhStats::sah`.
     pub fn sah(&self) -> f64 {
-        let area = |n: &Node8, k: usize| {
-            let e: [f64; 3] = std::array::from_fn(|a| (n.b[a + 3][k] - n.b[a][k]).max(0.0) as f64);
-            e[0] * e[1] + e[1] * e[2] + e[2] * e[0]
-        };
-        let root = &self.nodes[0];
-        let mut lo = [f64::INFINITY; 3];
-        let mut hi = [f64::NEG_INFINITY; 3];
-        for k in 0..8 {
-            if root.child[k] == EMPTY {
-                continue;
-            }
-            for a in 0..3 {
-                lo[a] = lo[a].min(root.b[a][k] as f64);
-                hi[a] = hi[a].max(root.b[a + 3][k] as f64);
-            }
-        }
-        let e = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
-        let ra = (e[0] * e[1] + e[1] * e[2] + e[2] * e[0]).max(f64::MIN_POSITIVE);
+        let (lo, hi) = self.nodes[0].bounds();
+        let e: [f64; 3] = std::array::from_fn(|a| hi[a] as f64 - lo[a] as f64);
+        // Surface areas: twice the root's half area over each child's full area.
+        let ra = 2.0 * (e[0] * e[1] + e[1] * e[2] + e[2] * e[0]).max(f64::MIN_POSITIVE);
         let mut cost = 1.0;
         for n in self.nodes.iter() {
             for k in 0..8 {
@@ -293,7 +287,7 @@ impl Bvh8 {
                 } else {
                     1.0
                 };
-                cost += area(n, k) / ra * w;
+                cost += n.child_area(k) / ra * w;
             }
         }
         cost
