@@ -70,28 +70,50 @@ pub struct Progress {
     pub total: AtomicU64,
 }
 
+impl Progress {
+    /// `n` more units to do.
+    pub fn add_total(&self, n: u64) {
+        self.total.fetch_add(n, Ordering::Relaxed);
+    }
+
+    /// `n` more units done.
+    pub fn advance(&self, n: u64) {
+        self.done.fetch_add(n, Ordering::Relaxed);
+    }
+
+    /// `(done, total)` now.
+    pub fn now(&self) -> (u64, u64) {
+        (
+            self.done.load(Ordering::Relaxed),
+            self.total.load(Ordering::Relaxed),
+        )
+    }
+}
+
 thread_local! {
     /// The progress of the call whose work runs on this thread, if it keeps one.
     static COUNTING: RefCell<Option<Arc<Progress>>> = const { RefCell::new(None) };
 }
 
+/// The progress of the call whose work runs on this thread, if it keeps one: a parallel loop
+/// takes it on the work's thread and counts into it from its workers.
+pub fn counter() -> Option<Arc<Progress>> {
+    COUNTING.with(|c| c.borrow().clone())
+}
+
 /// Count `n` more units of work for the current call (a no-op when nobody watches).
 pub fn add_total(n: u64) {
-    COUNTING.with(|c| {
-        if let Some(p) = c.borrow().as_ref() {
-            p.total.fetch_add(n, Ordering::Relaxed);
-        }
-    });
+    if let Some(p) = counter() {
+        p.add_total(n);
+    }
 }
 
 /// Count `n` units of the current call's work as done. Call it from the thread that runs the
-/// call's work (its outer loop), not from parallel workers.
+/// call's work (its outer loop); parallel workers count into [`counter`] instead.
 pub fn advance(n: u64) {
-    COUNTING.with(|c| {
-        if let Some(p) = c.borrow().as_ref() {
-            p.done.fetch_add(n, Ordering::Relaxed);
-        }
-    });
+    if let Some(p) = counter() {
+        p.advance(n);
+    }
 }
 
 /// Run `f` with `progress` counting what it reports on this thread.

@@ -94,3 +94,37 @@ def test_an_experiment_counts_its_scenes(bars, tmp_path, gpu):
     )
     outer = [b for b in bars if b.unit == "scenes"]
     assert len(outer) == 1 and outer[0].total == outer[0].n == 1
+
+
+def recorder():
+    """A progress callable and the list of ``(done, total)`` it was told."""
+    seen: list = []
+    return seen, lambda *a: seen.append(a)
+
+
+def test_ray_queries_count_rays_and_a_callable_hears_the_counts():
+    ball = ss.scenes.icosphere(2)
+    rng = np.random.default_rng(0)
+    o = rng.uniform(-2, 2, (5000, 3)).astype(np.float32)
+    d = rng.normal(size=(5000, 3)).astype(np.float32)
+    for threads in (None, 1):
+        seen, hear = recorder()
+        ss.cast_rays(ball, o, d, threads=threads, progress=hear)
+        assert seen[-1] == (5000, 5000), (threads, seen)
+        assert all(done <= total for done, total in seen)
+    seen, hear = recorder()
+    ss.occluded(ball, o, d, progress=hear)
+    assert seen[-1] == (5000, 5000)
+    # Inner ray casts of other methods do not count as theirs: the field counts samples.
+    seen, hear = recorder()
+    ss.discretize(ball, method="visibility_field", uv=(2, 2), st=(2, 2), progress=hear)
+    assert seen[-1] == (6 * 16, 6 * 16)
+
+
+def test_a_sweep_tells_a_callable_each_setting():
+    ball = ss.scenes.icosphere(2)
+    cam = ss.Camera.look_at((2.5, 2.0, 1.5), (0, 0, 0), (0, 0, 1), yfov=0.8, width=24, height=24)
+    knobs = {"depth": [0, 1], "resolution": [8], "subdivisions": [1]}
+    seen, hear = recorder()
+    ss.tradeoff(ball, "impostors", knobs=knobs, camera=cam, progress=hear, as_frame=False)
+    assert seen == [(1, 2), (2, 2)]

@@ -550,6 +550,7 @@ def cast_rays(
     t_max: float = ...,
     max_hits: int = 1,
     threads: Optional[int] = None,
+    progress: Optional[Callable[[int, int], object]] = None,
 ) -> _HitsDict: ...
 def occluded(
     scene: Scene,
@@ -558,6 +559,7 @@ def occluded(
     t_min: float = 0.0,
     t_max: float = ...,
     threads: Optional[int] = None,
+    progress: Optional[Callable[[int, int], object]] = None,
 ) -> _OcclusionDict: ...
 def bvh_stats(scene: Scene) -> _BvhStatsDict: ...
 def device_info() -> _DeviceInfo: ...

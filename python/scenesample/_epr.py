@@ -11,7 +11,7 @@ from typing import Any, Optional, Union
 import numpy as np
 
 from . import _core
-from ._progress import Bar
+from ._progress import Bar, Progress
 from ._scene import Scene
 from .errors import InputError
 
@@ -344,7 +344,7 @@ def epr_points(
     seed: int = 0,
     resolution: Union[None, int, Sequence[int]] = None,
     density: str = "eye",
-    progress: Optional[bool] = None,
+    progress: Progress = None,
 ) -> Points:
     """Points for the reflectors' cube maps (see :func:`scenesample.discretize`)."""
     refl, res = cube_maps(scene, eye, reflectors, resolution)

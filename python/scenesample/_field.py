@@ -15,7 +15,7 @@ import numpy as np
 
 from . import _core
 from ._depth import conventional
-from ._progress import Bar
+from ._progress import Bar, Progress
 from ._rays import cast_rays
 from ._scene import Scene
 from .errors import InputError, SceneWarning
@@ -345,7 +345,7 @@ def visibility_field(
     jitter: bool = False,
     seed: int = 0,
     memory_limit: Optional[int] = None,
-    progress: Optional[bool] = None,
+    progress: Progress = None,
 ) -> VisibilityField:
     """The visibility field (visibility-field.txt §3): for every sample (iu, iv, is, it) of
     each slab, ``supersample^4`` BVH rays from its uv cell to its st cell; the
@@ -388,10 +388,12 @@ def visibility_field(
         Bytes the field may take (ids, overflow flags, one uv sample's rays); default half the
         machine's memory. A larger field raises :class:`InputError` before anything is
         allocated.
-    progress : bool, optional
+    progress : bool, callable or None
         A tqdm bar over the slab samples when tqdm is installed. None (default): only once the
-        work has run for 2 s; True: at once; False: never. Ctrl-C stops it within half a
-        second (``KeyboardInterrupt``).
+        work has run for 2 s; True: at once; False: never; a callable ``f(done, total)``
+        hears the counts instead, from the calling thread (a last time where the work ended
+        or was interrupted). Ctrl-C stops the work within a fraction of a second
+        (``KeyboardInterrupt``).
 
     Returns
     -------
@@ -483,7 +485,7 @@ def _check_memory(settings: dict, k: int, limit: Optional[int]) -> None:
 
 
 def _sample(
-    scene: Scene, slabs: list, settings: dict, seed: Optional[int], progress: Optional[bool]
+    scene: Scene, slabs: list, settings: dict, seed: Optional[int], progress: Progress
 ) -> VisibilityField:
     start = time.perf_counter()
     grid = settings["grid"]

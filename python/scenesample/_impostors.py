@@ -12,7 +12,7 @@ from typing import Any, Optional
 import numpy as np
 
 from . import _core
-from ._progress import Bar
+from ._progress import Bar, Progress
 from ._scene import Scene
 from .errors import InputError, check_integer
 from .imageio import linear_to_srgb
@@ -169,7 +169,7 @@ def impostors(
     projection: str = "orthographic",
     fov: Optional[float] = None,
     grow: bool = True,
-    progress: Optional[bool] = None,
+    progress: Progress = None,
 ) -> Impostors:
     """Multi-cell orthographic impostors (multi-cell-orthographic-impostors.txt §3.1): per
     non-empty octree cell and icosahedron direction, a ``resolution``² image of the cell
@@ -193,7 +193,7 @@ def impostors(
     grow : bool
         Cell growing (§4.3): each cell's images show every triangle that intersects its bounding
         sphere; without it only the geometry inside the cell, rays clipped to its box.
-    progress : bool, optional
+    progress : bool, callable or None
         A tqdm bar over the cells (see :func:`visibility_field`).
 
     Returns

@@ -8,6 +8,7 @@ from typing import Any, Optional
 import numpy as np
 
 from . import _core
+from ._progress import Bar, Progress
 from ._scene import Scene, core_of
 from .errors import check_integer
 from .results import RayHits
@@ -33,6 +34,7 @@ def cast_rays(
     t_max: float = float("inf"),
     max_hits: int = 1,
     threads: Optional[int] = None,
+    progress: Progress = None,
 ) -> RayHits:
     """Closest hit of each ray, or its ``max_hits`` nearest hits, on the CPU.
 
@@ -58,6 +60,11 @@ def cast_rays(
         the smaller ``t``, then the smaller index.
     threads : int, optional
         None: every core. 1: the calling thread only. k: a pool of k threads (made once).
+    progress : bool, callable or None
+        A tqdm bar over the rays (see :func:`scenesample.methods.visibility_field`): None
+        (default) once the call has run for 2 s, True at once, False never; a callable
+        ``f(done, total)`` hears the counts instead. Ctrl-C stops the call within a fraction
+        of a second.
 
     Returns
     -------
@@ -74,15 +81,17 @@ def cast_rays(
         ``threads`` below 1 or not an integer.
     """
     k = check_integer("max_hits", max_hits)
-    r = _core.cast_rays(
-        core_of(scene),
-        _rows(origins),
-        _rows(directions),
-        float(t_min),
-        float(t_max),
-        k,
-        _threads(threads),
-    )
+    with Bar(progress, "rays", "rays") as bar:
+        r = _core.cast_rays(
+            core_of(scene),
+            _rows(origins),
+            _rows(directions),
+            float(t_min),
+            float(t_max),
+            k,
+            _threads(threads),
+            bar.callback,
+        )
     return RayHits(**r)
 
 
@@ -94,6 +103,7 @@ def occluded(
     t_min: float = 0.0,
     t_max: float = float("inf"),
     threads: Optional[int] = None,
+    progress: Progress = None,
 ) -> np.ndarray:
     """Whether anything lies on each ray within ``t_min <= t < t_max`` (an any-hit query).
 
@@ -110,20 +120,24 @@ def occluded(
         ``t_max = 1``, only what lies between each origin and its target counts.
     threads : int, optional
         None: every core; 1: the calling thread only; k: a pool of k threads.
+    progress : bool, callable or None
+        As for :func:`cast_rays`.
 
     Returns
     -------
     (N,) bool
         True where the ray hits a triangle in range.
     """
-    r = _core.occluded(
-        core_of(scene),
-        _rows(origins),
-        _rows(directions),
-        float(t_min),
-        float(t_max),
-        _threads(threads),
-    )
+    with Bar(progress, "occlusion rays", "rays") as bar:
+        r = _core.occluded(
+            core_of(scene),
+            _rows(origins),
+            _rows(directions),
+            float(t_min),
+            float(t_max),
+            _threads(threads),
+            bar.callback,
+        )
     return r["hit"]
 
 

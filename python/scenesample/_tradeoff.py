@@ -17,7 +17,7 @@ from ._field import Slab
 from ._impostors import ImpostorView
 from ._omni import omni_shadows
 from ._plan import emissive_lights
-from ._progress import Bar
+from ._progress import Bar, Progress
 from ._reflections import reflection_reference, reflections
 from ._scene import Scene
 from ._shadows import AreaLight, soft_shadows
@@ -281,7 +281,7 @@ def tradeoff(
     reference: Any = None,
     camera: Optional[Camera] = None,
     executor: Optional[Executor] = None,
-    progress: Optional[bool] = None,
+    progress: Progress = None,
     as_frame: Optional[bool] = None,
 ) -> Any:
     """Sweep the accuracy knobs of an effect or method and tabulate what each setting costs.
@@ -308,9 +308,10 @@ def tradeoff(
         Runs the settings (one task each), e.g. a process pool or a dask cluster's
         ``client.get_executor()``; the scene and camera are pickled to the workers. Default:
         one after another in this process.
-    progress : bool, optional
+    progress : bool, callable or None
         A tqdm bar over the settings when tqdm is installed: None (default) once the sweep has
-        run for 2 s, True at once, False never.
+        run for 2 s, True at once, False never; a callable ``f(done, total)`` hears the count
+        of settings done instead.
     as_frame : bool, optional
         Return a pandas DataFrame (default: when pandas is installed) or a numpy structured
         array.

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import inspect
 from collections.abc import Sequence
-from typing import Any, Callable, Optional, Union
+from typing import Any, Callable, Union
 
 import numpy as np
 
@@ -30,6 +30,7 @@ from ._epr import Points, epr_points
 from ._field import field_view, visibility_field
 from ._impostors import impostor_view, impostors
 from ._omni import shadow_points
+from ._progress import Progress
 from ._scene import Scene
 from .errors import InputError
 
@@ -61,7 +62,7 @@ def _points(
     rho_scale: float,
     seed: int,
     resolution: Union[None, int, Sequence[int]],
-    progress: Optional[bool],
+    progress: Progress,
 ) -> Points:
     if not isinstance(eye, Camera):
         raise InputError(f"eye must be a scenesample.Camera, got {type(eye).__name__}")
@@ -102,7 +103,7 @@ def epr(
     rho_scale: float = 0.5,
     seed: int = 0,
     resolution: Union[None, int, Sequence[int]] = None,
-    progress: Optional[bool] = None,
+    progress: Progress = None,
 ) -> Points:
     """Eye-based point sampling (eye-based-point-rendering.txt §3.1-3.4, Eq. 2-4): points for
     the cube maps of reflectors, or of a light's shadows, spaced by what ``eye`` can resolve.
@@ -144,7 +145,7 @@ def epr(
         Cube-map face resolution (one, or one per reflector); by default the adaptive size of
         §4.1.1 (see :func:`scenesample.cube_resolution`), or for shadow points Eq. 6 (see
         :func:`scenesample.omni_shadows`).
-    progress : bool, optional
+    progress : bool, callable or None
         A tqdm bar over the triangles of reflector points (see :func:`visibility_field`).
 
     Returns
@@ -165,7 +166,7 @@ def ivir(
     light_samples: int = 20,
     seed: int = 0,
     resolution: Union[None, int, Sequence[int]] = None,
-    progress: Optional[bool] = None,
+    progress: Progress = None,
 ) -> Points:
     """Points at the cube maps' own density (iVIR, the baseline of
     eye-based-point-rendering.txt §6): as :func:`epr`, but each triangle is spaced by the

@@ -60,69 +60,93 @@ pub(crate) fn set_ops(
 }
 
 /// [`run`], reporting the work's progress (`process::advance`) to `progress(done, total)`,
-/// a Python callable, from the calling thread at each poll and once at the end.
+/// a Python callable, from the calling thread at each poll and once at the end, also when the
+/// work was interrupted (so a bar, or a test, sees where it stopped).
 pub(crate) fn run_with<T: Send>(
     py: Python<'_>,
     progress: Option<Py<PyAny>>,
     work: impl Fn() -> crate::error::Result<T> + Sync,
 ) -> PyResult<T> {
-    let counter = progress
-        .is_some()
-        .then(|| Arc::new(crate::process::Progress::default()));
-    let mut poll = poller(progress, counter.clone());
-    let r = py.detach(|| crate::process::interruptible(&work, &mut poll, counter.as_ref()));
-    finish(py, r, poll)
+    let watch = Watch::new(progress);
+    let mut poll = watch.poller(py);
+    let r = py.detach(|| crate::process::interruptible(&work, &mut poll, watch.counter.as_ref()));
+    watch.finish(py, r.map(|r| r.py_err(py)), poll)
 }
 
 /// [`run`] for single-threaded work that stays on the calling thread (`threads=1`): it checks
 /// for signals itself, from its loops (`process::interruptible_here`).
 pub(crate) fn run_here<T: Send>(
     py: Python<'_>,
+    progress: Option<Py<PyAny>>,
     work: impl Fn() -> crate::error::Result<T> + Sync,
 ) -> PyResult<T> {
-    let poll = poller(None, None);
-    let r = py.detach(|| crate::process::interruptible_here(&work, poll, None));
-    match r {
-        Ok(r) => r.py_err(py),
-        Err(e) => Err(e),
-    }
+    let watch = Watch::new(progress);
+    let poll = watch.poller(py);
+    let r = py.detach(|| crate::process::interruptible_here(&work, poll, watch.counter.as_ref()));
+    let poll = watch.poller(py);
+    watch.finish(py, r.map(|r| r.py_err(py)), poll)
 }
 
-/// What the calling thread does at each poll: check for signals, then report progress when it
-/// moved. The last report also runs once more after the work ([`finish`]).
-fn poller(
+/// A call's progress callback and the counter its work advances.
+struct Watch {
     progress: Option<Py<PyAny>>,
     counter: Option<Arc<crate::process::Progress>>,
-) -> impl FnMut() -> PyResult<()> + 'static {
-    let mut shown = (u64::MAX, u64::MAX);
-    move || {
-        Python::attach(|py| {
-            py.check_signals()?;
-            if let (Some(f), Some(c)) = (&progress, &counter) {
-                use std::sync::atomic::Ordering::Relaxed;
-                let now = (c.done.load(Relaxed), c.total.load(Relaxed));
-                if now != shown {
-                    shown = now;
-                    f.call1(py, now)?;
-                }
-            }
-            Ok(())
-        })
-    }
 }
 
-fn finish<T>(
-    py: Python<'_>,
-    r: Result<crate::error::Result<T>, PyErr>,
-    mut poll: impl FnMut() -> PyResult<()>,
-) -> PyResult<T> {
-    let r = match r {
-        Ok(r) => r.py_err(py)?,
-        Err(e) => return Err(e),
-    };
-    // The final count, so a bar ends full.
-    poll()?;
-    Ok(r)
+impl Watch {
+    fn new(progress: Option<Py<PyAny>>) -> Self {
+        let counter = progress
+            .is_some()
+            .then(|| Arc::new(crate::process::Progress::default()));
+        Self { progress, counter }
+    }
+
+    /// What the calling thread does at each poll: check for signals, then report progress
+    /// when it moved.
+    fn poller(&self, py: Python<'_>) -> impl FnMut() -> PyResult<()> + Send + 'static {
+        let progress = self.progress.as_ref().map(|p| p.clone_ref(py));
+        let counter = self.counter.clone();
+        let mut shown = (u64::MAX, u64::MAX);
+        move || {
+            Python::attach(|py| {
+                py.check_signals()?;
+                if let (Some(f), Some(c)) = (&progress, &counter) {
+                    let now = c.now();
+                    if now != shown {
+                        shown = now;
+                        f.call1(py, now)?;
+                    }
+                }
+                Ok(())
+            })
+        }
+    }
+
+    /// The work's result, after a last report: the final count, so a bar ends full; or, when
+    /// the work was interrupted, where it stopped (the report's own errors then give way to
+    /// the interruption's).
+    fn finish<T>(
+        &self,
+        py: Python<'_>,
+        r: PyResult<PyResult<T>>,
+        mut poll: impl FnMut() -> PyResult<()>,
+    ) -> PyResult<T> {
+        match r {
+            Ok(r) => {
+                let r = r?;
+                poll()?;
+                Ok(r)
+            }
+            Err(e) => {
+                if let (Some(f), Some(c)) = (&self.progress, &self.counter) {
+                    if let Err(late) = f.call1(py, c.now()) {
+                        late.write_unraisable(py, None);
+                    }
+                }
+                Err(e)
+            }
+        }
+    }
 }
 
 #[pymodule]

@@ -25,19 +25,22 @@ fn query(py: Python<'_>, t_min: f32, t_max: f32, threads: Option<usize>) -> PyRe
         t_min,
         t_max,
         threads: Threads::from_count(threads).py_err(py)?,
+        report: true,
     })
 }
 
-/// Run a ray query where `q.threads` says: `threads=1` on the calling thread, else on the pool.
+/// Run a ray query where `q.threads` says: `threads=1` on the calling thread, else on the pool;
+/// `progress(done, total)` hears the rays traced.
 fn on_threads<T: Send>(
     py: Python<'_>,
     q: &trace::Query,
+    progress: Option<Py<PyAny>>,
     work: impl Fn() -> crate::error::Result<T> + Sync,
 ) -> PyResult<T> {
     if q.threads == trace::Threads::One {
-        super::run_here(py, work)
+        super::run_here(py, progress, work)
     } else {
-        super::run(py, work)
+        super::run_with(py, progress, work)
     }
 }
 
@@ -49,7 +52,7 @@ fn timings<'py>(py: Python<'py>, build: f64, trace: f64) -> PyResult<Bound<'py, 
 }
 
 #[pyfunction]
-#[pyo3(signature = (scene, origins, directions, t_min=0.0, t_max=f32::INFINITY, max_hits=1, threads=None))]
+#[pyo3(signature = (scene, origins, directions, t_min=0.0, t_max=f32::INFINITY, max_hits=1, threads=None, progress=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn cast_rays<'py>(
     py: Python<'py>,
@@ -60,11 +63,12 @@ pub fn cast_rays<'py>(
     t_max: f32,
     max_hits: usize,
     threads: Option<usize>,
+    progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     rays!(origins, directions);
     let q = query(py, t_min, t_max, threads)?;
     let s = scene.inner.clone();
-    let hits = on_threads(py, &q, || {
+    let hits = on_threads(py, &q, progress, || {
         trace::nearest_hits(&s, origins, directions, max_hits, &q)
     })?;
     let n = origins.len();
@@ -86,7 +90,8 @@ pub fn cast_rays<'py>(
 }
 
 #[pyfunction]
-#[pyo3(signature = (scene, origins, directions, t_min=0.0, t_max=f32::INFINITY, threads=None))]
+#[pyo3(signature = (scene, origins, directions, t_min=0.0, t_max=f32::INFINITY, threads=None, progress=None))]
+#[allow(clippy::too_many_arguments)]
 pub fn occluded<'py>(
     py: Python<'py>,
     scene: &PyScene,
@@ -95,11 +100,14 @@ pub fn occluded<'py>(
     t_min: f32,
     t_max: f32,
     threads: Option<usize>,
+    progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     rays!(origins, directions);
     let q = query(py, t_min, t_max, threads)?;
     let s = scene.inner.clone();
-    let r = on_threads(py, &q, || trace::occluded(&s, origins, directions, &q))?;
+    let r = on_threads(py, &q, progress, || {
+        trace::occluded(&s, origins, directions, &q)
+    })?;
     let n = r.hit.len();
     let d = PyDict::new(py);
     d.set_item("hit", array(py, r.hit, &[n])?)?;

@@ -147,6 +147,9 @@ pub struct Query {
     pub t_min: f32,
     pub t_max: f32,
     pub threads: Threads,
+    /// Count the rays as the calling call's progress (`process::counter`): set by a ray query
+    /// that is itself the call, not by the algorithms that cast rays on the way to theirs.
+    pub report: bool,
 }
 
 impl Query {
@@ -155,6 +158,7 @@ impl Query {
             t_min,
             t_max,
             threads: Threads::All,
+            report: false,
         }
     }
 }
@@ -255,11 +259,11 @@ fn nearest_hits_here(
     let job = Rays::new(&bvh.tree, origins, directions, q);
     let out: HitSlices = (&mut t, &mut triangle, &mut barycentric);
     if k == 1 && !front_only {
-        run(q.threads, out, 1, |base, out| {
+        run(q, out, 1, |base, out| {
             dispatch(&ClosestJob(&job), base, out)
         })?;
     } else {
-        run(q.threads, out, k, |base, out| {
+        run(q, out, k, |base, out| {
             dispatch(&NearestJob(&job, k, front_only), base, out)
         })?;
     }
@@ -294,7 +298,7 @@ fn occluded_here(
     let start = Instant::now();
     let mut hit = vec![false; origins.len()];
     let job = Rays::new(&bvh.tree, origins, directions, q);
-    run(q.threads, &mut hit[..], 1, |base, out| {
+    run(q, &mut hit[..], 1, |base, out| {
         dispatch(&AnyJob(&job), base, out)
     })?;
     Ok(Occlusion {
@@ -358,9 +362,14 @@ impl Chunks for HitSlices<'_> {
     }
 }
 
-/// Run `f(first ray, its chunk of out)` over `out` in chunks of [`CHUNK`] rays, on `threads`;
-/// every chunk first checks for an interruption (`process::check`).
-fn run<O: Chunks>(threads: Threads, out: O, k: usize, f: impl Fn(usize, O) + Sync) -> Result<()> {
+/// Run `f(first ray, its chunk of out)` over `out` in chunks of [`CHUNK`] rays, on `q.threads`;
+/// every chunk first checks for an interruption (`process::check`), and with `q.report` counts
+/// its rays as the call's progress once done.
+fn run<O: Chunks>(q: &Query, out: O, k: usize, f: impl Fn(usize, O) + Sync) -> Result<()> {
+    let progress = q.report.then(crate::process::counter).flatten();
+    if let Some(p) = &progress {
+        p.add_total(out.rays(k) as u64);
+    }
     let mut chunks = Vec::with_capacity(out.rays(k).div_ceil(CHUNK));
     let mut rest = out;
     while rest.rays(k) > CHUNK {
@@ -371,10 +380,14 @@ fn run<O: Chunks>(threads: Threads, out: O, k: usize, f: impl Fn(usize, O) + Syn
     chunks.push(rest);
     let each = |(c, o): (usize, O)| {
         crate::process::check()?;
+        let rays = o.rays(k) as u64;
         f(c * CHUNK, o);
+        if let Some(p) = &progress {
+            p.advance(rays);
+        }
         Ok(())
     };
-    if threads == Threads::One {
+    if q.threads == Threads::One {
         chunks.into_iter().enumerate().try_for_each(each)
     } else {
         chunks.into_par_iter().enumerate().try_for_each(each)
