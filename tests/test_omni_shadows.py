@@ -56,7 +56,7 @@ def test_results_carry_their_cost(results):
     assert epr.stats["points"] * 3 < ivir.stats["points"]
     assert epr.stats["buffer_bytes"] == 24 * epr.resolution**2 * 8
     for r in results.values():
-        assert r.timings["total"] >= r.timings["eye"] > 0
+        assert r.timings["total"] >= r.timings["eye"] >= 0
     for k in ("points", "splat", "test"):
         assert k in epr.timings and k not in mvr.timings
     assert "shadow" in mvr.timings

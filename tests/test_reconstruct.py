@@ -169,7 +169,7 @@ def test_shadows_agree_with_ray_casting_on_a_simple_scene(occluder_shadows):
             if d in ("nonredundant", "conventional", "peeling")
             else ()
         ):
-            assert r.timings[k] > 0
+            assert r.timings[k] >= 0
 
 
 def test_intensity_error_never_exceeds_visibility_error(gpu):

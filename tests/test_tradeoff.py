@@ -24,7 +24,7 @@ def test_a_sweep_tabulates_error_time_memory_and_the_front(ball):
     table = ss.tradeoff(ball, "impostors", knobs=KNOBS, camera=CAM, progress=False, as_frame=False)
     assert table.dtype.names[:3] == ("octree_depth", "resolution", "subdivisions")
     assert len(table) == 4
-    assert np.isfinite(table["error"]).all() and (table["seconds"] > 0).all()
+    assert np.isfinite(table["error"]).all() and (table["seconds"] >= 0).all()
     assert (table["memory"] > 0).all() and table["pareto"].any()
     # Finer images cost more memory; the front is not dominated by any row.
     for d in (0, 1):
@@ -139,7 +139,7 @@ def test_the_visibility_field_sweeps_quality_with_missed_cells_as_the_error():
     assert ((t["error"] >= 0) & (t["error"] <= 1)).all()
     assert (t["covered"] > 0).all() and t["hole_fraction"][1] <= 0.01
     assert t["error"][1] <= t["error"][0]  # exact traces every mixed sample's lines
-    assert (t["build_seconds"] > 0).all()
+    assert (t["build_seconds"] >= 0).all()
     paper = {"resolution": [6], "fallback": [False], "single_slab": [True], "ids_per_sample": [1]}
     p = ss.tradeoff(
         ball, "visibility_field", knobs=paper, camera=cam, progress=False, as_frame=False
