@@ -2,28 +2,28 @@
 PY ?= python3
 export PYOPENGL_PLATFORM ?= egl
 
-.PHONY: help setup demo test test-rust test-python test-wheel wheel bench lint fmt
+.PHONY: help setup demo test check test-rust test-python wheel bench lint fmt
 
 help: ## list the targets
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-12s %s\n", $$1, $$2}'
 
-setup: ## install system packages (Mesa Vulkan, EGL) and build scenesample with its test extras
+setup: ## install system packages (Mesa Vulkan, EGL) and build scenesample (editable) with its test extras
 	@bash scripts/setup.sh
 
 demo: setup ## the main job: discretize a scene, write EXR/PNG to out/, print a timing table
 	$(PY) -m scenesample.demo
 
-test: setup lint test-rust test-python test-wheel ## every test: lints, cargo (Rust internals, shaders), pytest, the wheel
+test: ## every check, as CI runs it: lints, cargo tests, the wheel built from the sdist, pytest on it, a clean-venv install; ends with a timing table
+	$(PY) scripts/make_test.py
 
-test-rust: ## cargo tests of the Rust core: optimized with debug assertions and overflow checks, then in debug
+check: ## the fast inner loop on a warm tree: lints, a rebuild, and the tests a change touches (not a substitute for `make test`)
+	$(PY) scripts/make_check.py
+
+test-rust: ## cargo tests of the Rust core, with debug assertions and overflow checks
 	cargo test --profile checked
-	cargo test
 
-test-python: ## pytest: cross-validation against pyrender and Embree, bad input, stubs, notebooks
-	$(PY) -m pytest
-
-test-wheel: ## build the wheel and sdist, install each into a fresh venv, smoke-test them and run the quickstart outside the tree
-	PYTHON=$(PY) bash scripts/wheel_check.sh
+test-python: ## pytest against the editable install (`make setup`), on both cores
+	$(PY) -m pytest -n 2 --dist worksteal
 
 wheel: ## the abi3 manylinux2014 wheel (CPython >= 3.9, glibc >= 2.17) and the sdist, into dist/
 	CARGO_TARGET_DIR=target/manylinux $(PY) -m maturin build --release --zig --compatibility manylinux2014 --out dist
@@ -34,10 +34,10 @@ bench: setup ## side-by-side benchmarks against Embree and pyrender
 
 lint: ## formatting and lints, Rust and Python
 	cargo fmt --check
-	cargo clippy --release --all-targets --features python -- -D warnings
-	$(PY) -m ruff check python tests
-	$(PY) -m ruff format --check python tests
+	cargo clippy --profile checked --all-targets --features python -- -D warnings
+	$(PY) -m ruff check python tests scripts
+	$(PY) -m ruff format --check python tests scripts
 
 fmt: ## format Rust and Python
 	cargo fmt
-	$(PY) -m ruff format python tests
+	$(PY) -m ruff format python tests scripts

@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Set up a fresh Debian/Ubuntu machine: system packages (Mesa's software Vulkan driver for the GPU
-# path, EGL for pyrender, libusb for Open3D), then scenesample built in release mode with the test extras.
-# Idempotent: installs only what is missing, so `make demo` and `make test` can both call it.
+# path, EGL for pyrender, libusb for Open3D), then scenesample built in release mode with the test
+# extras, as an editable install into the current Python (what `make demo` and `make check` use).
+# `--system`: the system packages only (`make test` builds and tests in target/test-venv).
+# Idempotent: installs only what is missing.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -22,6 +24,7 @@ if ! command -v cargo >/dev/null; then
     echo "scenesample needs a Rust toolchain (cargo); install it with rustup first" >&2
     exit 1
 fi
+if [ "${1:-}" = "--system" ]; then exit 0; fi
 
 PY="${PYTHON:-python3}"
 # Editable install: maturin builds the extension in release mode into python/scenesample/.

@@ -6,7 +6,6 @@ import sys
 from pathlib import Path
 
 import numpy as np
-
 import scenesample as ss
 
 root = Path(sys.argv[1]).resolve() if len(sys.argv) > 1 else None

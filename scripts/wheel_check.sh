@@ -1,22 +1,21 @@
 #!/usr/bin/env bash
-# Prove that `pip install scenesample-*.whl` is all a user needs: build the abi3 wheel, install it
-# into a fresh virtual environment (only numpy comes with it), and from outside the source tree
-# run a smoke test and the quickstart notebook; then build the sdist and install that too (with
-# the Rust toolchain, reusing this checkout's cargo target folder for the dependencies).
+# Prove that `pip install scenesample-*.whl` is all a user needs: install the given wheel into a
+# fresh virtual environment (only numpy may come with it) and, from outside the source tree, run
+# a smoke test and the quickstart notebook. `make test` passes the wheel it built from the sdist.
+# Usage: scripts/wheel_check.sh path/to/scenesample-*.whl
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$PWD
 PY="${PYTHON:-python3}"
+WHEEL=$(realpath "$1")
+case "$(basename "$WHEEL")" in
+    scenesample-*-cp39-abi3-manylinux2014_x86_64*.whl) ;;
+    *) echo "not the abi3 manylinux2014 wheel: $WHEEL" >&2; exit 1 ;;
+esac
+echo "wheel: $(basename "$WHEEL") ($(du -h "$WHEEL" | cut -f1))"
 WORK=$(mktemp -d)
 trap 'rm -rf "$WORK"' EXIT
 pipq() { "$1" -m pip install --quiet --disable-pip-version-check "${@:2}"; }
-
-# Linked by zig against glibc 2.17 (manylinux2014), in its own target folder so that it does not
-# invalidate the editable build's.
-CARGO_TARGET_DIR="$ROOT/target/manylinux" "$PY" -m maturin build --release --quiet --zig \
-    --compatibility manylinux2014 --out "$WORK/dist"
-WHEEL=$(ls "$WORK"/dist/scenesample-*-cp39-abi3-manylinux2014_x86_64*.whl)
-echo "wheel: $(basename "$WHEEL") ($(du -h "$WHEEL" | cut -f1))"
 
 "$PY" -m venv "$WORK/venv"
 V="$WORK/venv/bin/python"
@@ -41,12 +40,3 @@ errors = [o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs",
 assert not errors, errors
 print("quickstart notebook ok (from the wheel)")
 PYEOF
-
-cd "$ROOT"
-"$PY" -m maturin sdist --out "$WORK/sdist" >/dev/null
-SDIST=$(ls "$WORK"/sdist/scenesample-*.tar.gz)
-"$PY" -m venv "$WORK/venv-sdist"
-CARGO_TARGET_DIR="$ROOT/target" pipq "$WORK/venv-sdist/bin/python" "$SDIST"
-cd "$WORK"
-"$WORK/venv-sdist/bin/python" "$ROOT/scripts/smoke.py" "$ROOT"
-echo "sdist: $(basename "$SDIST") builds and installs"
