@@ -11,6 +11,7 @@ pub mod error;
 pub mod evaluate;
 pub mod gpu;
 pub mod io;
+pub mod limits;
 pub mod process;
 pub mod reconstruct;
 pub mod scene;

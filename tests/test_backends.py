@@ -227,7 +227,7 @@ def test_bad_backends_are_named():
     with pytest.raises(ss.InputError, match="'auto', 'gpu', 'cpu'"):
         ss.discretize(scene, cam, backend="vulkan")
     with pytest.raises(ss.InputError, match="GPU only.*'conventional'"):
-        ss.discretize(scene, cam, "nonredundant", backend="cpu")
+        ss.discretize(scene, method="impostors", backend="cpu")
     with pytest.raises(ss.InputError, match="triangles= and pixels="):
         ss.device_info(triangles=10)
 
@@ -298,34 +298,66 @@ CALIBRATE = (
 )
 
 
-def test_the_cost_model_is_measured_once_per_machine(tmp_path):
-    """The first process runs the probes and writes the calibration file; the next reads it
-    (no probes, the same coefficients); a run with Vulkan hidden (another machine key) adds its
-    own model beside it; a file that does not parse is measured anew."""
-    env = dict(os.environ, SCENESAMPLE_CACHE_DIR=str(tmp_path))
-
-    def run(**extra: str) -> list:
-        r = subprocess.run(
+def calibrate(cache_dir: str, n: int = 1, **extra: str) -> list[list]:
+    """`[source, probe seconds, coefficients]` of `n` fresh processes started at once."""
+    env = dict(os.environ, SCENESAMPLE_CACHE_DIR=cache_dir, **extra)
+    procs = [
+        subprocess.Popen(
             [sys.executable, "-c", CALIBRATE],
-            capture_output=True,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
             text=True,
-            env=dict(env, **extra),
-            timeout=300,
+            env=env,
         )
-        assert r.returncode == 0, r.stderr
-        return json.loads(r.stdout.strip().splitlines()[-1])
+        for _ in range(n)
+    ]
+    out = []
+    for p in procs:
+        stdout, stderr = p.communicate(timeout=300)
+        assert p.returncode == 0, stderr
+        out.append(json.loads(stdout.strip().splitlines()[-1]))
+    return out
 
-    source, seconds, first = run()
-    assert source == "probes" and seconds > 0
+
+def test_the_cost_model_is_measured_once_per_machine(tmp_path):
+    """The first process runs the probes and writes the calibration file, then uses what the
+    file holds; the next reads it (no probes, the same coefficients); a run with Vulkan hidden
+    (another machine key) adds its own model beside it; a file that does not parse is measured
+    anew."""
     path = tmp_path / "cost-model.json"
+    [[source, seconds, first]] = calibrate(str(tmp_path))
+    assert source == str(path) and seconds > 0
     assert all(k.startswith("scenesample ") for k in json.loads(path.read_text())["models"])
-    source, seconds, again = run()
+    [[source, seconds, again]] = calibrate(str(tmp_path))
     assert source == str(path) and seconds == 0 and again == first
     hidden = str(tmp_path / "none.json")
-    source, _, cpu_only = run(VK_ICD_FILENAMES=hidden, VK_DRIVER_FILES=hidden)
-    assert source == "probes" and not any(k.startswith("gpu_") for k in cpu_only)
+    [[source, _, cpu_only]] = calibrate(
+        str(tmp_path), VK_ICD_FILENAMES=hidden, VK_DRIVER_FILES=hidden
+    )
+    assert source == str(path) and not any(k.startswith("gpu_") for k in cpu_only)
     assert len(json.loads(path.read_text())["models"]) == 2
-    assert run()[:2] == [str(path), 0]
+    assert calibrate(str(tmp_path))[0][:2] == [str(path), 0]
     path.write_text("{not json")
-    source, seconds, _ = run()
-    assert source == "probes" and seconds > 0 and len(json.loads(path.read_text())["models"]) == 1
+    [[source, seconds, _]] = calibrate(str(tmp_path))
+    assert source == str(path) and seconds > 0 and len(json.loads(path.read_text())["models"]) == 1
+
+
+def test_processes_starting_together_share_one_model(tmp_path):
+    """Three processes that need the model at once: one measures it under the file's lock, the
+    others wait and read it, so all three decide alike."""
+    runs = calibrate(str(tmp_path), n=3)
+    assert {r[0] for r in runs} == {str(tmp_path / "cost-model.json")}
+    assert sum(r[1] > 0 for r in runs) == 1, runs
+    assert runs[0][2] == runs[1][2] == runs[2][2]
+
+
+def test_without_a_calibration_file_auto_uses_the_builtin_model(tmp_path):
+    """No file can be kept (switched off, or a cache directory that cannot be made): nothing is
+    measured, and every process uses the same built-in coefficients."""
+    off = calibrate("", n=2)
+    assert all(r[0].startswith("built-in (SCENESAMPLE_CACHE_DIR is empty") for r in off), off
+    assert off[0][1] == off[1][1] == 0 and off[0][2] == off[1][2]
+    (tmp_path / "file").write_text("")
+    [[source, seconds, coefficients]] = calibrate(str(tmp_path / "file" / "below"))
+    assert source.startswith("built-in (no lock file") and seconds == 0, source
+    assert coefficients == off[0][2]

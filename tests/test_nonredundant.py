@@ -16,7 +16,7 @@ RES = 192
 def grass_set(gpu):
     scene = ss.scenes.grass()
     cams = ss.scenes.reference_cameras(scene, RES)
-    conv = ss.discretize(scene, cams, backend="gpu")
+    conv = ss.discretize(scene, cams)
     return scene, cams, conv, ss.discretize(scene, cams, "nonredundant")
 
 
@@ -38,6 +38,41 @@ def test_image0_is_the_conventional_image(grass_set):
     assert nr.method == "nonredundant" and conv.method == "conventional"
     np.testing.assert_array_equal(nr.triangle[0], conv.triangle[0])
     np.testing.assert_array_equal(nr.depth[0], conv.depth[0])
+
+
+FIELDS = ("depth", "triangle", "normal", "position", "color")
+
+
+@pytest.mark.skipif("khr_toy_car" not in SHARED, reason="shared scenes not present")
+@pytest.mark.parametrize("size", [128, 384, 1024])
+def test_image0_equals_the_default_conventional_image_at_every_size(gpu, size):
+    """§3: the first non-redundant image is a conventional one. With the defaults both calls
+    make it on the backend `auto` picks for these cameras (the CPU at the smaller sizes here,
+    the GPU at 1024²), and with either backend named both make it there."""
+    scene = load_quiet(SHARED["khr_toy_car"])
+    cams = ss.scenes.reference_cameras(scene, size)
+    for backend in ("auto", "cpu", "gpu"):
+        conv = ss.discretize(scene, cams, backend=backend)
+        for redundancy in ("pixel", "visibility") if size < 1024 else ("pixel",):
+            nr = ss.discretize(scene, cams, "nonredundant", redundancy=redundancy, backend=backend)
+            assert nr.backend == conv.backend, (backend, nr.backend_reason)
+            for f in FIELDS:
+                np.testing.assert_array_equal(
+                    getattr(nr, f)[0], getattr(conv, f)[0], err_msg=f"{backend} {redundancy} {f}"
+                )
+
+
+def test_an_image0_traced_on_the_cpu_is_what_the_later_passes_test_against(gpu):
+    """Pixel redundancy after a CPU image 0: no later sample is redundant with the image 0
+    returned (the passes read it, not a raster of their own), and every conventional triangle
+    is still captured."""
+    scene = ss.scenes.grass()
+    cams = ss.scenes.reference_cameras(scene, RES)
+    nr = ss.discretize(scene, cams, "nonredundant", backend="cpu")
+    assert nr.backend == "cpu" and "later images rendered on the gpu" in nr.backend_reason
+    assert_no_sample_is_pixel_redundant(cams, nr)
+    conv = ss.discretize(scene, cams, backend="cpu")
+    np.testing.assert_array_equal(nr.triangle[0], conv.triangle[0])
 
 
 def assert_no_sample_is_pixel_redundant(cams: list[ss.Camera], nr: ss.DepthImages) -> None:
@@ -149,7 +184,7 @@ def test_nonredundant_captures_every_conventional_triangle(gpu, name):
     scene = ss.scenes.PAPER_SCENES[name]()
     cams = ss.scenes.reference_cameras(scene, 160)
     conv = ss.discretize(scene, cams, backend="gpu")
-    nr = ss.discretize(scene, cams, "nonredundant")
+    nr = ss.discretize(scene, cams, "nonredundant", backend="gpu")
     got = set(np.unique(nr.triangle)) - {-1}
     want = set(np.unique(conv.triangle)) - {-1}
     assert want <= got, f"{len(want - got)} conventional triangles missing"
@@ -160,7 +195,7 @@ def test_visibility_redundancy_agrees_with_embree(gpu):
     scene = ss.scenes.grass()
     cams = ss.scenes.reference_cameras(scene, 128)
     nv = ss.discretize(scene, cams, "nonredundant", redundancy="visibility")
-    conv = ss.discretize(scene, cams[:1], backend="gpu")
+    conv = ss.discretize(scene, cams)
     np.testing.assert_array_equal(nv.triangle[0], conv.triangle[0])
     ref = ss.references.EmbreeReference(scene)
     tol = 1e-5 * float(np.linalg.norm(scene.bounds[1] - scene.bounds[0]))
@@ -492,7 +527,9 @@ def test_duplicated_faces_are_one_triangle_to_the_layered_passes(gpu):
     copy[::2] = copy[::2, ::-1]
     doubled = ss.Scene.from_arrays(np.concatenate([v, v]), np.concatenate([f, copy]))
     cams = orbit_cameras(scene, 4, 96, 72, seed=3)
+    # On the GPU both: `auto` may pick another backend for twice the triangles.
     for method, kw in [("nonredundant", {}), ("peeling", {"layers": 3, "camera": cams[0]})]:
+        kw["backend"] = "gpu"
         a = ss.discretize(scene, cams, method, **kw)
         b = ss.discretize(doubled, cams, method, **kw)
         np.testing.assert_array_equal(b.triangle, a.triangle, err_msg=method)

@@ -179,7 +179,7 @@ def test_coincident_viewpoints_in_nonredundant_rendering():
     assert agree >= 0.99, agree
 
 
-def test_one_pixel_and_too_large_images():
+def test_one_pixel_and_too_large_images(gpu):
     scene = blocks()
     one = ss.Camera.look_at((12, 12, 7), (0, 0, 0.5), (0, 0, 1), yfov=0.7, width=1, height=1)
     img = ss.discretize(scene, one)
@@ -189,11 +189,15 @@ def test_one_pixel_and_too_large_images():
         abs(ss.cast_rays(scene, o.reshape(-1, 3), d.reshape(-1, 3)).t[0] - img.depth[0, 0, 0])
         < 1e-4
     )
+    # Too large for memory on any backend: refused before anything is allocated.
     huge = one.with_resolution(100_000, 100_000)
+    for backend in ("gpu", "cpu", "auto"):
+        with pytest.raises(ss.InputError, match="100000x100000 pixels would take .*memory limit"):
+            ss.discretize(scene, huge, backend=backend)
+    # Too wide for the GPU's textures alone.
+    wide = one.with_resolution(gpu["max_texture_dimension_2d"] + 1, 1)
     with pytest.raises(ss.GpuLimitError, match="largest texture"):
-        ss.discretize(scene, huge, backend="gpu")
-    with pytest.raises(ss.InputError, match="do not fit in host memory"):
-        ss.discretize(scene, huge, backend="cpu")
+        ss.discretize(scene, wide, backend="gpu")
     # Nothing was left broken: the next call works.
     assert ss.discretize(scene, one).mask.all()
 

@@ -167,7 +167,7 @@ def device_info(
     triangles: Optional[int] = None,
     pixels: Optional[int] = None,
     images: int = 1,
-    bvh_built: bool = False,
+    bvh_built: bool = True,
     uploaded: bool = True,
 ) -> dict[str, Any]:
     """The GPU adapter scenesample uses: ``available`` (True), ``name``, ``backend``,
@@ -183,12 +183,14 @@ def device_info(
 
     With ``triangles`` and ``pixels`` (per image), also ``auto``: what conventional
     ``discretize(..., backend="auto")`` would choose for ``images`` images of a scene of that
-    size, given whether its BVH is built (``bvh_built``) and its GPU copy made (``uploaded``):
-    ``backend`` ("gpu" or "cpu"; always "cpu" without an adapter), ``reason``, the predicted
-    ``gpu_seconds`` (None without an adapter) and ``cpu_seconds``, ``calibration_seconds``
-    (the cost model's probes; 0 when it came from the calibration cache), ``calibration``
-    ("probes" or the cache file's path) and ``coefficients`` (the fitted seconds per call,
-    triangle, pixel and ray; see ``src/discretize/backend.rs``)."""
+    size: ``backend`` ("gpu" or "cpu"; always "cpu" without an adapter), ``reason``, the
+    predicted ``gpu_seconds`` (None without an adapter) and ``cpu_seconds``,
+    ``calibration_seconds`` (the cost model's probes, run in this process; 0 when another
+    process had run them), ``calibration`` (the calibration file's path, or ``"built-in (...)"``
+    where no file can be kept) and ``coefficients`` (seconds per call, triangle, pixel and ray;
+    see ``src/discretize/backend.rs``). ``discretize`` weighs every request as one whose BVH
+    is built and whose GPU copy is made, whatever ran before, so that its choice depends only
+    on the call; ``bvh_built=False`` or ``uploaded=False`` predict a first call instead."""
     try:
         info: dict[str, Any] = {"available": True, **_core.device_info()}
     except GpuUnavailableError as e:

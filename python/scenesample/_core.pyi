@@ -13,6 +13,7 @@ __all__ = [
     "Scene",
     "bvh_stats",
     "cast_rays",
+    "check_memory",
     "choose_backend",
     "default_slab",
     "device_info",
@@ -383,7 +384,8 @@ def discretize_nonredundant(
     cameras: list[Camera],
     redundancy: _Redundancy = "pixel",
     cull_backfaces: bool = False,
-) -> _ImagesDict: ...
+    backend: Literal["auto", "gpu", "cpu"] = "auto",
+) -> _BackendImagesDict: ...
 def discretize_peeling(
     scene: Scene,
     camera: Camera,
@@ -563,6 +565,7 @@ def occluded(
 ) -> _OcclusionDict: ...
 def bvh_stats(scene: Scene) -> _BvhStatsDict: ...
 def device_info() -> _DeviceInfo: ...
+def check_memory(what: str, count: int, each: int) -> int: ...
 
 class _BackendChoiceDict(TypedDict):
     backend: Literal["gpu", "cpu"]
@@ -577,7 +580,7 @@ def choose_backend(
     triangles: int,
     pixels: int,
     images: int = 1,
-    bvh_built: bool = False,
+    bvh_built: bool = True,
     uploaded: bool = True,
 ) -> _BackendChoiceDict: ...
 def write_exr(

@@ -64,17 +64,18 @@ def conventional(
         from the GPU's where its own float32 transform rounds a vertex to the neighbouring
         grid point, or where two surfaces meet at one depth (99.99% of the pixels agree on
         the shared scenes, 99.988% on a 4M-triangle tiling).
-        ``"auto"`` (default): the backend a cost model of this machine predicts is faster,
-        given the triangles, pixels, images, whether a GPU adapter exists and whether the BVH
-        and the GPU copy of the scene exist already; images wider or taller than the GPU's
-        largest texture go to the CPU. The model is measured once per machine
-        (about half a second of probes on first use) and kept in a calibration file,
-        ``$SCENESAMPLE_CACHE_DIR`` or ``~/.cache/scenesample/cost-model.json`` (set
-        ``SCENESAMPLE_CACHE_DIR=""`` to measure in every process instead); later processes
-        read it. See :func:`scenesample.device_info`. The
-        choice rests on timings, so two processes may choose differently for the same call
-        and their ids then differ at those edge pixels: pass the backend explicitly where
-        results must match bit for bit across processes or machines.
+        ``"auto"`` (default): the backend a cost model of this machine predicts is faster for
+        the triangles, pixels and images (as if the scene's BVH and GPU copy existed, so the
+        choice does not depend on what ran before), where a GPU adapter exists; images wider
+        or taller than the GPU's largest texture go to the CPU. The model is measured once per
+        machine (about half a second of probes, by the first process that needs it, under a
+        file lock) and kept in a calibration file, ``$SCENESAMPLE_CACHE_DIR`` or
+        ``~/.cache/scenesample/cost-model.json``; every process uses what that file holds, and
+        none decides from its own timings. With ``SCENESAMPLE_CACHE_DIR=""`` (or a cache that
+        cannot be written) a built-in model for the adapter's kind is used instead. So the same
+        call gives the same images in every process on a machine; across machines, the two
+        backends' ids differ at a few edge pixels, so pass the backend explicitly where
+        results must match bit for bit across machines. See :func:`scenesample.device_info`.
 
     Returns
     -------
@@ -111,11 +112,13 @@ def nonredundant(
     *,
     redundancy: Literal["pixel", "visibility"] = "pixel",
     cull_backfaces: bool = False,
+    backend: Literal["auto", "gpu", "cpu"] = "auto",
 ) -> DepthImages:
     """Non-redundant images (non-redundant-rendering.txt §3, Algorithm 1): one image per
     camera, rendered in order; image i keeps at each pixel the nearest sample that is not
     redundant with images 0..i-1, so a redundant sample never hides a new one behind it.
-    Image 0 is conventional.
+    Image 0 is conventional: bit for bit the image 0 of :func:`conventional` with the same
+    cameras and ``backend``.
 
     Parameters
     ----------
@@ -133,16 +136,22 @@ def nonredundant(
         diagonal (plus ``1e-5`` of the distance) count as the same point.
     cull_backfaces : bool
         Drop triangles whose counter-clockwise front faces away (off by default).
+    backend : {"auto", "gpu", "cpu"}
+        Where image 0 is made, as for :func:`conventional` (``"auto"``: the backend
+        ``conventional(scene, cameras)`` picks). The later images are rendered on the GPU
+        (pixel redundancy, testing against an image 0 traced on the CPU as against their own)
+        or traced on the CPU (visibility redundancy).
 
     Returns
     -------
     DepthImages
-        As :func:`conventional`, ``method="nonredundant"``.
+        As :func:`conventional`, ``method="nonredundant"``; ``backend`` is image 0's, and
+        ``backend_reason`` says where each image was made.
     """
     if redundancy not in ("pixel", "visibility"):
         raise InputError(f"redundancy must be 'pixel' or 'visibility', got {redundancy!r}")
     cams, cull = camera_list(cameras), bool(cull_backfaces)
-    d = _core.discretize_nonredundant(core_of(scene), cams, redundancy, cull)
+    d = _core.discretize_nonredundant(core_of(scene), cams, redundancy, cull, backend)
     return _images(d, scene, cams, cull, "nonredundant", redundancy)
 
 

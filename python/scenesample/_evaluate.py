@@ -61,6 +61,8 @@ def intermediate_cameras(region: Sequence[Any], count: int, seed: int = 0) -> li
             raise InputError(f"region[{i}] must be a scenesample.Camera, got {type(c).__name__}")
     if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 0:
         raise InputError(f"intermediate must be a non-negative integer, got {count!r}")
+    # Each camera's Python object and weights, before any is made.
+    _core.check_memory(f"{count} intermediate cameras", int(count), 1024)
     rng = np.random.default_rng(seed)
     k = len(cams)
     if k == 1:

@@ -3,7 +3,6 @@ resampled per view to cull hidden geometry."""
 
 from __future__ import annotations
 
-import os
 import time
 import warnings
 import zlib
@@ -307,11 +306,9 @@ def default_settings(scene: Scene, slabs: Sequence[Slab], quality: str = "balanc
 
 
 def _memory_limit() -> int:
-    """Half of this machine's physical memory (8 GiB where it cannot be read)."""
-    try:
-        return int(os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")) // 2
-    except (ValueError, OSError, AttributeError):
-        return 8 << 30
+    """scenesample's memory limit: ``SCENESAMPLE_MEMORY_LIMIT`` bytes, else half of this
+    machine's physical memory (``src/limits.rs``)."""
+    return _core.check_memory("nothing", 0, 0)
 
 
 def _encloses(slab: Slab, lo: np.ndarray, hi: np.ndarray) -> bool:
@@ -385,8 +382,9 @@ def visibility_field(
     seed : int
         Seeds the jitter (any non-negative integer, 0 included); unused without ``jitter``.
     memory_limit : int, optional
-        Bytes the field may take (ids, overflow flags, one uv sample's rays); default half the
-        machine's memory. A larger field raises :class:`InputError` before anything is
+        Bytes the field may take (ids, overflow flags, one uv sample's rays); default
+        scenesample's memory limit (``SCENESAMPLE_MEMORY_LIMIT``, else half the machine's
+        memory). A larger field raises :class:`InputError` before anything is
         allocated.
     progress : bool, callable or None
         A tqdm bar over the slab samples when tqdm is installed. None (default): only once the
@@ -479,8 +477,9 @@ def _check_memory(settings: dict, k: int, limit: Optional[int]) -> None:
     if need > limit:
         raise InputError(
             f"a field of {k} slab(s) x {u}x{v}x{s}x{t} samples x {settings['ids_per_sample']} "
-            f"ids needs {need / 2**30:.2f} GiB, over the memory limit of {limit / 2**30:.2f} "
-            "GiB: lower uv/st/ids_per_sample or raise memory_limit"
+            f"ids would take {need / 2**30:.2f} GiB, over the memory limit of "
+            f"{limit / 2**30:.2f} GiB (memory_limit=; by default SCENESAMPLE_MEMORY_LIMIT, in "
+            "bytes, or half this machine's memory): lower uv/st/ids_per_sample"
         )
 
 

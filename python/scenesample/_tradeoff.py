@@ -4,6 +4,7 @@ against a reference, its time and its memory, and mark the Pareto front."""
 from __future__ import annotations
 
 import itertools
+import math
 import time
 from concurrent.futures import Executor
 from typing import Any, Optional
@@ -26,6 +27,8 @@ from .errors import InputError
 __all__ = ["tradeoff", "KNOBS", "default_camera"]
 
 Camera = _core.Camera
+# Memory a setting of a sweep holds before and after it runs (its knobs, its row), in bytes.
+_ROW_BYTES = 4096
 
 # The accuracy knobs of each effect or method, and the values swept by default.
 KNOBS: dict[str, dict[str, list]] = {
@@ -340,6 +343,13 @@ def tradeoff(
     light = _light(scene, effect_or_method) if "shadows" in effect_or_method else None
     ref = _reference(effect_or_method, scene, cam, light, grid) if reference is None else reference
     names = list(grid)
+    count = math.prod(len(v) for v in grid.values())
+    # A setting's knobs and its row of results, before the grid is made.
+    _core.check_memory(
+        f"a tradeoff grid of {count} settings ({' x '.join(str(len(v)) for v in grid.values())})",
+        min(count, 2**127),
+        _ROW_BYTES,
+    )
     settings = [dict(zip(names, combo)) for combo in itertools.product(*grid.values())]
     state = _camera_state(cam)
     bar = Bar(progress, f"tradeoff {effect_or_method}", "settings", total=len(settings))

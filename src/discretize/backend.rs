@@ -13,12 +13,17 @@
 //! scene, the line through its two sizes gives the cost per pixel and per call; the two scenes
 //! give how those grow with the triangles. The probes run once per machine: their result is
 //! kept in a small calibration file ([`cache`]), keyed by the package version, the CPU, the
-//! worker threads and the adapter, and later processes read it (a millisecond) instead.
+//! worker threads and the adapter, and every process reads it (a millisecond) instead.
 //!
-//! A real scene differs from the probes (rays that miss are cheap; a machine may be busy), so
-//! once the model exists (the process's first `auto` call makes it), every call on a scene,
-//! whichever backend ran, records its measured / predicted ratio on the scene ([`Observed`]),
-//! and later `auto` calls on that scene scale that backend's prediction by it.
+//! Same call, same result: the two backends' images differ at a few edge pixels, so the choice
+//! must not depend on anything but the call and the machine. `auto` therefore decides from the
+//! calibration file alone, never from timings taken in the process: the first process to need
+//! the model measures it under a lock on the file and writes it, and every process (that one
+//! included) uses what the file holds. Where no file can be kept (`SCENESAMPLE_CACHE_DIR=""`, a
+//! read-only home) nothing is measured: `auto` uses the built-in model of [`CostModel::builtin`]
+//! for the adapter's kind. The decision also ignores what the process has prepared: it predicts
+//! a call once the scene's BVH and GPU copy exist (what a sweep or many views pay), whichever
+//! calls ran before.
 
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
@@ -31,7 +36,6 @@ use crate::error::{Error, Result};
 use crate::gpu;
 use crate::input_err;
 use crate::scene::Scene;
-use crate::trace::Bvh;
 use crate::types::DepthImages;
 
 /// Where conventional images are made.
@@ -92,13 +96,11 @@ pub struct Workload {
 }
 
 impl Workload {
+    /// The request `cameras` make of `scene`, as `auto` weighs it: once prepared (BVH built,
+    /// scene on the GPU), whatever this process has prepared already.
     pub fn of(scene: &Scene, cameras: &[Camera]) -> Self {
-        let ctx = gpu::context().ok();
-        let uploaded = ctx
-            .as_ref()
-            .is_some_and(|ctx| gpu::SceneBuffers::cached(ctx, scene));
-        let fits_gpu = match (&ctx, cameras.first()) {
-            (Some(ctx), Some(c)) => gpu::raster::check_image_size(ctx, c.width, c.height).is_ok(),
+        let fits_gpu = match (gpu::context(), cameras.first()) {
+            (Ok(ctx), Some(c)) => gpu::raster::check_image_size(&ctx, c.width, c.height).is_ok(),
             _ => true,
         };
         Self {
@@ -107,10 +109,8 @@ impl Workload {
                 .first()
                 .map_or(0, |c| c.width as u64 * c.height as u64),
             images: cameras.len() as u64,
-            bvh_built: super::conventional::TraceFrame::of(scene)
-                .map(|f| f.scene(scene).derived_if_built::<Bvh>().is_some())
-                .unwrap_or(false),
-            uploaded,
+            bvh_built: true,
+            uploaded: true,
             fits_gpu,
         }
     }
@@ -145,95 +145,149 @@ pub struct CostModel {
     pub source: String,
 }
 
-/// This process's cost model, once calibrated.
+/// This process's cost model, once read (or measured and written).
 /// Not a `OnceLock` of the result: a calibration that fails (Ctrl-C during the probes) is not
 /// kept, and the next `auto` call measures again.
 static MODEL: Mutex<Option<Arc<CostModel>>> = Mutex::new(None);
 
-/// Per scene, what its own calls measured against the model's prediction (measured /
-/// predicted, the latest call of each backend and [`Kind`]): a scene whose rays mostly miss,
-/// or a machine busy with other work, moves the predictions for that scene's later calls.
-#[derive(Default)]
-pub struct Observed(Mutex<[Option<f64>; 4]>);
-
-impl Observed {
-    fn scale(&self, kind: Kind, b: Backend) -> Option<f64> {
-        self.0.lock().unwrap_or_else(|e| e.into_inner())[kind.slot(b)]
-    }
-
-    fn record(&self, kind: Kind, b: Backend, ratio: f64) {
-        if ratio.is_finite() && ratio > 0.0 {
-            self.0.lock().unwrap_or_else(|e| e.into_inner())[kind.slot(b)] = Some(ratio);
-        }
-    }
-}
-
-/// What a backend makes: conventional images, or depth-peeling layers (the GPU draws one pass
-/// per layer; the CPU gathers every layer of a pixel in one k-nearest traversal). Both are
-/// predicted as `images` images of the model; each kind keeps its own measured scale.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Kind {
-    Conventional,
-    Peeling,
-}
-
-impl Kind {
-    fn slot(self, b: Backend) -> usize {
-        2 * (self as usize) + b as usize
-    }
-}
-
 impl CostModel {
-    /// The model if it has been calibrated already (nothing is measured here).
-    pub fn if_calibrated() -> Option<Arc<CostModel>> {
-        MODEL.lock().unwrap_or_else(|e| e.into_inner()).clone()
-    }
-
-    /// This process's model: read from this machine's calibration file, or measured by the
-    /// probes (and the file written) on first use. Calls run one at a time on the worker pool
-    /// (`process::take_turn`), so holding the lock while the probes run blocks no one.
+    /// This process's model: the one this machine's calibration file holds, measured by the
+    /// probes and written there on first use; the built-in one where no file can be kept.
+    /// Calls run one at a time on the worker pool (`process::take_turn`), so holding the lock
+    /// while the probes run blocks no one in this process; other processes wait on the file's.
     pub fn get() -> Result<Arc<CostModel>> {
         let mut slot = MODEL.lock().unwrap_or_else(|e| e.into_inner());
         if let Some(model) = slot.as_ref() {
             return Ok(model.clone());
         }
-        let adapter = gpu::context().map_err(|e| e.to_string());
+        let adapter = gpu::context();
+        let kind = adapter.as_ref().ok().map(|c| c.info.device_type);
         let machine = cache::machine(adapter.as_ref().ok().map(|c| &c.info));
-        let path = cache::path();
-        let cached = path.as_deref().and_then(|p| cache::read(p, &machine));
+        let has_gpu = adapter.as_ref().map(|_| ()).map_err(|e| e.to_string());
         // The file's model, when its GPU part matches whether there is an adapter now.
-        let from_file = match (cached, adapter) {
+        let usable = |cached: Option<(CpuCosts, Option<GpuCosts>)>| match (cached, &has_gpu) {
             (Some((cpu, Some(gpu))), Ok(_)) => Some((cpu, Ok(gpu))),
-            (Some((cpu, None)), Err(why)) => Some((cpu, Err(why))),
+            (Some((cpu, None)), Err(why)) => Some((cpu, Err(why.clone()))),
             _ => None,
         };
-        let model = match (from_file, path.as_deref()) {
-            (Some((cpu, gpu)), Some(p)) => CostModel {
-                gpu,
-                cpu,
-                calibration_seconds: 0.0,
-                source: cache::display(p),
-            },
-            _ => {
-                // Timing noise (another process on the machine) can flatten a slope to 0; such
-                // a model is measured once more, and only a plausible one is kept in the file.
-                let mut model = crate::counters::uncounted(calibrate)?;
-                if !model.plausible() {
-                    let first = model.calibration_seconds;
-                    model = crate::counters::uncounted(calibrate)?;
-                    model.calibration_seconds += first;
+        let model = match cache::path() {
+            None => Self::builtin(kind, has_gpu.clone(), "SCENESAMPLE_CACHE_DIR is empty"),
+            Some(path) => {
+                let from_file = |calibration_seconds| {
+                    usable(cache::read(&path, &machine)).map(|(cpu, gpu)| CostModel {
+                        gpu,
+                        cpu,
+                        calibration_seconds,
+                        source: cache::display(&path),
+                    })
+                };
+                match from_file(0.0) {
+                    Some(m) => m,
+                    None => {
+                        // Measured under the file's lock: a process that waited for another's
+                        // probes reads its model instead of measuring its own.
+                        let measured = cache::locked(&path, || {
+                            if from_file(0.0).is_some() {
+                                return Ok(0.0);
+                            }
+                            let model = Self::measure(kind, &has_gpu)?;
+                            // Unwritable: the built-in model below, as for every process.
+                            let _ = cache::write(&path, &machine, &model);
+                            Ok(model.calibration_seconds)
+                        });
+                        match measured? {
+                            Ok(seconds) => from_file(seconds).unwrap_or_else(|| {
+                                let why = "the probes' model could not be kept";
+                                Self::builtin(kind, has_gpu.clone(), why)
+                            }),
+                            Err(why) => Self::builtin(kind, has_gpu.clone(), &why),
+                        }
+                    }
                 }
-                if let (Some(p), true) = (&path, model.plausible()) {
-                    // A cache that cannot be written (read-only home) only costs the next
-                    // process the probes again.
-                    let _ = cache::write(p, &machine, &model);
-                }
-                model
             }
         };
         let model = Arc::new(model);
         *slot = Some(model.clone());
         Ok(model)
+    }
+
+    /// The probes' model, measured once more when the first looks implausible (timing noise
+    /// from another process can flatten a slope to 0), and a slope still flat then taken from
+    /// the built-in model: the file must hold a usable model, since every process uses it.
+    fn measure(
+        kind: Option<wgpu::DeviceType>,
+        gpu: &std::result::Result<(), String>,
+    ) -> Result<CostModel> {
+        let mut model = crate::counters::uncounted(calibrate)?;
+        if !model.plausible() {
+            let first = model.calibration_seconds;
+            model = crate::counters::uncounted(calibrate)?;
+            model.calibration_seconds += first;
+        }
+        if !model.plausible() {
+            model.mend(&Self::builtin(kind, gpu.clone(), "mending"));
+        }
+        Ok(model)
+    }
+
+    /// Replace each cost that does not grow with its work by `with`'s.
+    fn mend(&mut self, with: &CostModel) {
+        let c = &mut self.cpu;
+        if c.build_per_triangle <= 0.0 {
+            c.build_per_triangle = with.cpu.build_per_triangle;
+        }
+        if c.per_ray + c.per_ray_log2 * 100_000f64.log2() <= 0.0 {
+            (c.per_ray, c.per_ray_log2) = (with.cpu.per_ray, with.cpu.per_ray_log2);
+        }
+        if let (Ok(g), Ok(w)) = (self.gpu.as_mut(), with.gpu.as_ref()) {
+            if g.per_pixel <= 0.0 {
+                g.per_pixel = w.per_pixel;
+            }
+            if g.per_triangle <= 0.0 {
+                g.per_triangle = w.per_triangle;
+            }
+        }
+    }
+
+    /// The model `auto` uses where no calibration file can be kept (`why`): fixed
+    /// coefficients, so that every process on the machine decides alike. The CPU's and a
+    /// software rasterizer's (`wgpu::DeviceType::Cpu`: lavapipe) are the probes' on a 2-core
+    /// AMD EPYC with lavapipe (Mesa 22.3), the per-ray and per-pixel costs divided by the
+    /// worker threads / 2; a hardware GPU draws about a billion triangles and ten billion
+    /// pixels a second, behind a fixed cost per call.
+    pub fn builtin(
+        kind: Option<wgpu::DeviceType>,
+        gpu: std::result::Result<(), String>,
+        why: &str,
+    ) -> CostModel {
+        let cores = rayon::current_num_threads().max(1) as f64 / 2.0;
+        let cpu = CpuCosts {
+            per_call: 5e-4,
+            per_call_triangle: 4.5e-8,
+            per_ray: 0.0,
+            per_ray_log2: 6e-9 / cores,
+            build_per_triangle: 2.5e-7 / cores,
+        };
+        let gpu = gpu.map(|()| match kind {
+            Some(wgpu::DeviceType::Cpu) => GpuCosts {
+                per_call: 4e-4,
+                per_triangle: 2e-7 / cores,
+                per_pixel: 1.5e-9 / cores,
+                upload_per_triangle: 4e-9,
+            },
+            _ => GpuCosts {
+                per_call: 3e-4,
+                per_triangle: 1e-9,
+                per_pixel: 1e-10,
+                upload_per_triangle: 2e-9,
+            },
+        });
+        CostModel {
+            gpu,
+            cpu,
+            calibration_seconds: 0.0,
+            source: format!("built-in ({why})"),
+        }
     }
 
     /// Whether every cost grows with the work it stands for: each backend's per-pixel (per-ray)
@@ -285,22 +339,8 @@ impl CostModel {
 
     /// The faster predicted backend for `w`, and why.
     pub fn decide(&self, w: &Workload) -> Decision {
-        self.decide_scaled(w, [None, None])
-    }
-
-    /// As [`decide`](Self::decide), each prediction times the scene's measured / predicted
-    /// ratio of its backend (`[gpu, cpu]`) where there is one.
-    pub fn decide_scaled(&self, w: &Workload, scale: [Option<f64>; 2]) -> Decision {
-        let cpu = self.predict_cpu(w) * scale[Backend::Cpu as usize].unwrap_or(1.0);
-        let gpu = self
-            .predict_gpu(w)
-            .map(|g| g * scale[Backend::Gpu as usize].unwrap_or(1.0));
-        let measured = match scale {
-            [None, None] => "",
-            [Some(_), Some(_)] => "; both scaled by this scene's measured calls",
-            [Some(_), None] => "; gpu scaled by this scene's measured calls",
-            [None, Some(_)] => "; cpu scaled by this scene's measured calls",
-        };
+        let cpu = self.predict_cpu(w);
+        let gpu = self.predict_gpu(w);
         let (backend, reason) = match (&self.gpu, gpu) {
             (Err(why), _) => (Backend::Cpu, format!("no GPU adapter ({why})")),
             (Ok(_), _) if w.triangles >= crate::trace::MAX_TRIANGLES as u64 => (
@@ -327,12 +367,13 @@ impl CostModel {
                     backend,
                     format!(
                         "predicted gpu {:.1} ms vs cpu {:.1} ms ({} triangles, {} x {} pixels; \
-                         BVH {bvh}, scene {up}{measured})",
+                         BVH {bvh}, scene {up}; model: {})",
                         g * 1e3,
                         cpu * 1e3,
                         w.triangles,
                         w.images,
-                        w.pixels
+                        w.pixels,
+                        self.source
                     ),
                 )
             }
@@ -355,13 +396,17 @@ pub fn discretize_with(
     choice: BackendChoice,
 ) -> Result<(DepthImages, Decision)> {
     super::conventional::check_cameras(cameras)?;
-    run_on(scene, cameras, Kind::Conventional, choice, |b| match b {
+    let decision = decide(scene, cameras, choice)?;
+    let images = match decision.backend {
         Backend::Gpu => discretize_conventional(scene, cameras, cull_backfaces),
         Backend::Cpu => discretize_traced(scene, cameras, cull_backfaces),
-    })
+    }?;
+    Ok((images, decision))
 }
 
-/// `layers` depth-peeling layers from `camera` on the requested backend.
+/// `layers` depth-peeling layers from `camera` on the requested backend (the model counts
+/// them as `layers` images: the GPU draws a pass per layer, the CPU gathers a pixel's layers
+/// in one traversal, which costs about as much).
 pub fn peeling_with(
     scene: &Scene,
     camera: &Camera,
@@ -369,62 +414,32 @@ pub fn peeling_with(
     cull_backfaces: bool,
     choice: BackendChoice,
 ) -> Result<(DepthImages, Decision)> {
-    if layers == 0 {
-        return input_err!("peeling needs at least one layer, got layers=0");
-    }
+    super::nonredundant::check_layers(camera, layers)?;
     let cams = vec![camera.clone(); layers];
-    super::conventional::check_cameras(&cams)?;
-    run_on(scene, &cams, Kind::Peeling, choice, |b| match b {
+    let decision = decide(scene, &cams, choice)?;
+    let images = match decision.backend {
         Backend::Gpu => super::discretize_peeling(scene, camera, layers, cull_backfaces),
         Backend::Cpu => {
             super::nonredundant::discretize_peeling_traced(scene, camera, layers, cull_backfaces)
         }
-    })
+    }?;
+    Ok((images, decision))
 }
 
-/// Decide the backend for a request of `cameras` (as the model counts them), run `make` on
-/// it, and record the call's measured / predicted ratio on the scene.
-fn run_on(
-    scene: &Scene,
-    cameras: &[Camera],
-    kind: Kind,
-    choice: BackendChoice,
-    make: impl FnOnce(Backend) -> Result<DepthImages>,
-) -> Result<(DepthImages, Decision)> {
-    let observed = scene.derived(Observed::default);
-    let (decision, model, work) = match choice {
-        BackendChoice::Fixed(backend) => (
-            Decision {
-                backend,
-                reason: "requested".into(),
-                gpu_seconds: None,
-                cpu_seconds: f64::NAN,
-            },
-            CostModel::if_calibrated(),
-            None,
-        ),
-        BackendChoice::Auto => {
-            let model = CostModel::get()?;
-            let work = Workload::of(scene, cameras);
-            let scale = [Backend::Gpu, Backend::Cpu].map(|b| observed.scale(kind, b));
-            (model.decide_scaled(&work, scale), Some(model), Some(work))
-        }
-    };
-    // What the model would have predicted for this call, before it prepares anything.
-    let work = work.or_else(|| model.as_ref().map(|_| Workload::of(scene, cameras)));
-    let start = Instant::now();
-    let images = make(decision.backend)?;
-    let seconds = start.elapsed().as_secs_f64();
-    if let (Some(model), Some(work)) = (model, work) {
-        let predicted = match decision.backend {
-            Backend::Gpu => model.predict_gpu(&work),
-            Backend::Cpu => Some(model.predict_cpu(&work)),
-        };
-        if let Some(p) = predicted {
-            observed.record(kind, decision.backend, seconds / p);
-        }
-    }
-    Ok((images, decision))
+/// The backend for a request of `cameras`: the requested one, or the one the machine's model
+/// predicts is faster for this scene and these cameras. It depends on nothing else, so every
+/// method that makes "the conventional images of these cameras" (non-redundant rendering's
+/// image 0) makes the same ones.
+pub fn decide(scene: &Scene, cameras: &[Camera], choice: BackendChoice) -> Result<Decision> {
+    Ok(match choice {
+        BackendChoice::Fixed(backend) => Decision {
+            backend,
+            reason: "requested".into(),
+            gpu_seconds: None,
+            cpu_seconds: f64::NAN,
+        },
+        BackendChoice::Auto => CostModel::get()?.decide(&Workload::of(scene, cameras)),
+    })
 }
 
 /// A height field of `2·k²` triangles over the unit square, bumpy enough that rays and
@@ -551,6 +566,7 @@ fn calibrate() -> Result<CostModel> {
 /// thread count or adapter), or a file that does not parse, is measured anew and added.
 pub mod cache {
     use std::path::{Path, PathBuf};
+    use std::time::{Duration, Instant};
 
     use serde_json::{json, Value};
 
@@ -577,6 +593,48 @@ pub mod cache {
 
     pub fn display(p: &Path) -> String {
         p.display().to_string()
+    }
+
+    /// How long a process waits for another's probes before it gives up on the file.
+    const LOCK_WAIT: Duration = Duration::from_secs(60);
+
+    /// Run `f` holding an exclusive lock on `<file>.lock` beside the calibration file, waiting
+    /// (and polling for Ctrl-C) while another process holds it. `Ok(Err(why))` when no lock
+    /// can be had: no directory or lock file can be made, or another process held it for
+    /// [`LOCK_WAIT`]. The operating system releases the lock of a process that dies.
+    pub fn locked<T>(
+        path: &Path,
+        f: impl FnOnce() -> crate::error::Result<T>,
+    ) -> crate::error::Result<std::result::Result<T, String>> {
+        let lock = path.with_extension("lock");
+        let opened = path
+            .parent()
+            .map_or(Ok(()), std::fs::create_dir_all)
+            .and_then(|()| {
+                std::fs::OpenOptions::new()
+                    .create(true)
+                    .truncate(false)
+                    .write(true)
+                    .open(&lock)
+            });
+        let file = match opened {
+            Ok(f) => f,
+            Err(e) => return Ok(Err(format!("no lock file {}: {e}", lock.display()))),
+        };
+        let start = Instant::now();
+        loop {
+            match file.try_lock() {
+                Ok(()) => break,
+                Err(std::fs::TryLockError::WouldBlock) if start.elapsed() < LOCK_WAIT => {
+                    crate::process::check()?;
+                    std::thread::sleep(Duration::from_millis(10));
+                }
+                Err(e) => return Ok(Err(format!("{} not locked: {e}", lock.display()))),
+            }
+        }
+        let r = f();
+        let _ = file.unlock();
+        r.map(Ok)
     }
 
     /// What the coefficients depend on: the package, the CPU model, the worker threads, and
@@ -766,10 +824,30 @@ mod tests {
         let none = model(false).decide(&work(5_000_000, false));
         assert_eq!(none.backend, Backend::Cpu);
         assert!(none.reason.contains("no GPU adapter") && none.gpu_seconds.is_none());
-        // A scene whose calls ran 10x slower on the CPU than predicted moves to the GPU.
-        let scaled = m.decide_scaled(&work(5_000_000, true), [None, Some(10.0)]);
-        assert_eq!(scaled.backend, Backend::Gpu);
-        assert!(scaled.reason.contains("measured calls"));
+    }
+
+    #[test]
+    fn the_builtin_models_are_plausible_and_say_why_they_are_used() {
+        for kind in [
+            None,
+            Some(wgpu::DeviceType::Cpu),
+            Some(wgpu::DeviceType::DiscreteGpu),
+        ] {
+            let gpu = if kind.is_some() {
+                Ok(())
+            } else {
+                Err("none".into())
+            };
+            let m = CostModel::builtin(kind, gpu, "a test");
+            assert!(m.plausible() && m.source == "built-in (a test)", "{kind:?}");
+            assert_eq!(m.gpu.is_ok(), kind.is_some());
+        }
+        // A hardware GPU wins where lavapipe loses: a large scene's many pixels.
+        let big = work(5_000_000, true);
+        let soft = CostModel::builtin(Some(wgpu::DeviceType::Cpu), Ok(()), "t").decide(&big);
+        let hard = CostModel::builtin(Some(wgpu::DeviceType::DiscreteGpu), Ok(()), "t");
+        assert_eq!(soft.backend, Backend::Cpu);
+        assert_eq!(hard.decide(&big).backend, Backend::Gpu);
     }
 
     #[test]
@@ -794,9 +872,37 @@ mod tests {
         if let Ok(g) = flat.gpu.as_mut() {
             g.per_pixel = 0.0;
         }
+        (flat.cpu.per_ray, flat.cpu.per_ray_log2) = (0.0, -1e-9);
         assert!(!flat.plausible());
+        // Mended from another model, a flat slope takes that model's; the others stay.
+        let with = CostModel::builtin(Some(wgpu::DeviceType::Cpu), Ok(()), "t");
+        flat.mend(&with);
+        assert!(flat.plausible());
+        assert_eq!(flat.cpu.per_ray_log2, with.cpu.per_ray_log2);
+        assert_eq!(
+            flat.cpu.build_per_triangle,
+            model(true).cpu.build_per_triangle
+        );
         let key = cache::machine(None);
         assert!(key.contains(env!("CARGO_PKG_VERSION")) && key.ends_with("gpu none"));
+    }
+
+    #[test]
+    fn the_lock_runs_its_work_and_refuses_a_place_it_cannot_make() {
+        let dir = std::env::temp_dir().join(format!("scenesample-lock-{}", std::process::id()));
+        let path = dir.join("cost-model.json");
+        assert_eq!(cache::locked(&path, || Ok(7)).unwrap(), Ok(7));
+        assert_eq!(
+            cache::locked(&path, || Ok(8)).unwrap(),
+            Ok(8),
+            "released after use"
+        );
+        // A lock file under a regular file cannot be made: the work is not run.
+        let blocked = path.join("below-a-file.json");
+        std::fs::write(&path, "{}").unwrap();
+        let r = cache::locked(&blocked, || -> Result<()> { panic!("not to run") });
+        assert!(r.unwrap().is_err());
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

@@ -437,7 +437,7 @@ pub(crate) fn check_cameras(cameras: &[Camera]) -> Result<()> {
             c.height
         );
     }
-    Ok(())
+    crate::limits::check_views("the depth images", cameras, crate::limits::IMAGE_BYTES)
 }
 
 /// Depth images from per-pixel triangle ids (row-major, image after image, −1 where empty):

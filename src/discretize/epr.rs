@@ -70,6 +70,7 @@ pub fn cube_views(reflectors: &[Reflector], resolutions: &[u32]) -> Result<Vec<C
     for (r, &res) in reflectors.iter().zip(resolutions) {
         out.extend(Camera::cube(r.center, res, Some(r.radius.max(1e-9)), None)?);
     }
+    crate::limits::check_views("the reflectors' cube maps", &out, 16)?;
     Ok(out)
 }
 
@@ -179,6 +180,19 @@ pub fn generate(
 /// The six cube-map views of each omnidirectional light sample (§5), in `Camera::cube` order,
 /// sample after sample, with the near plane at `near`.
 pub fn shadow_views(samples: &[DVec3], resolution: u32, near: f64) -> Result<Vec<Camera>> {
+    crate::limits::check(
+        || {
+            let n = samples.len();
+            format!("the shadow cube maps of {n} light samples at {resolution}x{resolution}")
+        },
+        crate::limits::product(&[
+            6,
+            samples.len() as u64,
+            resolution as u64,
+            resolution as u64,
+        ]),
+        16,
+    )?;
     let mut out = Vec::with_capacity(6 * samples.len());
     for &l in samples {
         out.extend(Camera::cube(l, resolution, Some(near), None)?);

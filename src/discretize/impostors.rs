@@ -29,9 +29,6 @@ use crate::shading::{self, Prelit};
 use crate::trace::cast_rays;
 use crate::types::Timings;
 
-/// The most memory the uncropped images (colour and depth) may take.
-pub const MAX_BYTES: u64 = 6 << 30;
-
 /// Unit vertex normals for shading: the scene's own, or else the area-weighted mean of the
 /// faces around each vertex (so that a finely tessellated surface shades smoothly rather than
 /// flickering from facet to facet).
@@ -503,15 +500,15 @@ pub fn build(scene: &Scene, opts: &ImpostorOptions) -> Result<Impostors> {
 
     let res = opts.resolution as usize;
     let d_count = directions.len();
-    let bytes = (cells.len() * d_count * res * res * 8) as u64;
-    if bytes > MAX_BYTES {
-        return input_err!(
-            "{} cells x {d_count} views x {res}^2 texels need {bytes} bytes of images before \
-             cropping, more than the {MAX_BYTES} allowed: lower depth, subdivisions or \
-             resolution",
-            cells.len()
-        );
-    }
+    // Colour and depth of every uncropped image.
+    crate::limits::check(
+        || {
+            let c = cells.len();
+            format!("{c} cells x {d_count} views x {res}x{res} texels of impostor images")
+        },
+        crate::limits::product(&[cells.len() as u64, d_count as u64, res as u64, res as u64]),
+        8,
+    )?;
     let start = Instant::now();
     let mut full_color = vec![[0u8; 4]; cells.len() * d_count * res * res];
     let mut full_depth = vec![f32::INFINITY; cells.len() * d_count * res * res];

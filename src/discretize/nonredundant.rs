@@ -1,10 +1,14 @@
 //! Non-redundant rendering and depth peeling (non-redundant-rendering.txt §3.2, §6.1.1).
 //!
+//! Image 0 is a conventional image (§3), made by the backend that conventional images of the
+//! same cameras get (`backend::decide`), so the two are equal bit for bit.
+//!
 //! - Pixel redundancy: Algorithm 1 with Algorithm 3 on the GPU (`gpu::layered`): one raster pass
 //!   per image, whose fragment stage discards a fragment that an earlier image already holds
-//!   (same triangle at the pixel it reprojects to) before it reaches the depth test.
-//! - Visibility redundancy: Algorithm 1 with Algorithm 2, exactly, on the CPU. Image 0 is a
-//!   conventional image (GPU). For image i > 0 every pixel-centre ray is walked front to back
+//!   (same triangle at the pixel it reprojects to) before it reaches the depth test. An image 0
+//!   traced on the CPU is handed to the passes, which test against it as against their own.
+//! - Visibility redundancy: Algorithm 1 with Algorithm 2, exactly, on the CPU. For image i > 0
+//!   every pixel-centre ray is walked front to back
 //!   through the surfaces it crosses (BVH ray casts, each resuming just beyond the previous
 //!   hit); each surface point met is a candidate sample, tested against every earlier image's
 //!   viewpoint with a visibility ray (`redundancy::visible_from`); the first candidate visible
@@ -24,9 +28,10 @@ use std::time::Instant;
 
 use glam::DVec3;
 
+use super::backend::{self, Backend, BackendChoice, Decision};
 use super::conventional::{
-    check_cameras, discretize_conventional, pixel_rays_f32, resolve_ids, resolve_streamed, walk,
-    PixelRays, SurfacePlane, TraceFrame, Walk,
+    check_cameras, discretize_conventional, discretize_traced, pixel_rays_f32, resolve_ids,
+    resolve_streamed, walk, PixelRays, SurfacePlane, TraceFrame, Walk,
 };
 use super::redundancy::{self, Redundancy, Sample};
 use crate::camera::Camera;
@@ -38,24 +43,46 @@ use crate::trace::{nearest_hits_facing, Query, SAME_HIT};
 use crate::types::{DepthImages, Timings};
 
 /// Non-redundant depth images, one per camera (shared resolution), image i free of samples
-/// redundant with images 0..i under `redundancy`.
+/// redundant with images 0..i under `redundancy`. Image 0 is the conventional image that
+/// `backend::discretize_with(scene, cameras, ..)` makes with `image0` (§3: the first image
+/// is a conventional one), so the two agree bit for bit whichever backend that picks; the
+/// later images are rendered on the GPU (pixel redundancy) or traced (visibility).
 pub fn discretize_nonredundant(
     scene: &Scene,
     cameras: &[Camera],
     redundancy: Redundancy,
     cull_backfaces: bool,
-) -> Result<DepthImages> {
+    image0: BackendChoice,
+) -> Result<(DepthImages, Decision)> {
     check_cameras(cameras)?;
-    match redundancy {
-        Redundancy::Pixel => layered_images(
+    let decision = backend::decide(scene, cameras, image0)?;
+    let first = |b: Backend| match b {
+        Backend::Gpu => discretize_conventional(scene, &cameras[..1], cull_backfaces),
+        Backend::Cpu => discretize_traced(scene, &cameras[..1], cull_backfaces),
+    };
+    let images = match (redundancy, decision.backend) {
+        (Redundancy::Pixel, Backend::Gpu) => layered_images(
             scene,
             cameras,
             layered::LayerTest::PixelRedundancy,
             cull_backfaces,
+            None,
             "nonredundant",
         ),
-        Redundancy::Visibility => visibility_images(scene, cameras, cull_backfaces),
-    }
+        (Redundancy::Pixel, Backend::Cpu) => {
+            let image0 = first(Backend::Cpu)?;
+            layered_images(
+                scene,
+                cameras,
+                layered::LayerTest::PixelRedundancy,
+                cull_backfaces,
+                Some(image0),
+                "nonredundant",
+            )
+        }
+        (Redundancy::Visibility, b) => visibility_images(scene, cameras, cull_backfaces, first(b)?),
+    }?;
+    Ok((images, decision))
 }
 
 /// `layers` depth-peeling layers from `camera`.
@@ -65,19 +92,32 @@ pub fn discretize_peeling(
     layers: usize,
     cull_backfaces: bool,
 ) -> Result<DepthImages> {
-    if layers == 0 {
-        return input_err!("peeling needs at least one layer, got layers=0");
-    }
+    check_layers(camera, layers)?;
     let cams = vec![camera.clone(); layers];
     let mut img = layered_images(
         scene,
         &cams,
         layered::LayerTest::Peel,
         cull_backfaces,
+        None,
         "peeling",
     )?;
     merge_same_surfaces(&mut img);
     Ok(img)
+}
+
+/// `layers` peeling layers of `camera`'s images: at least one, and within the memory limit
+/// (checked before the layers' cameras are made).
+pub(crate) fn check_layers(camera: &Camera, layers: usize) -> Result<()> {
+    if layers == 0 {
+        return input_err!("peeling needs at least one layer, got layers=0");
+    }
+    let (w, h) = (camera.width as u64, camera.height as u64);
+    crate::limits::check(
+        || format!("{layers} peeling layers of {w}x{h} pixels"),
+        crate::limits::product(&[layers as u64, w, h]),
+        crate::limits::IMAGE_BYTES,
+    )
 }
 
 /// Depth peeling without the GPU (the `"cpu"` backend): each pixel-centre ray of `camera`
@@ -95,11 +135,8 @@ pub fn discretize_peeling_traced(
     cull_backfaces: bool,
 ) -> Result<DepthImages> {
     let total = Instant::now();
-    if layers == 0 {
-        return input_err!("peeling needs at least one layer, got layers=0");
-    }
+    check_layers(camera, layers)?;
     let cams = vec![camera.clone(); layers];
-    check_cameras(&cams)?;
     let npx = camera.width as usize * camera.height as usize;
     if npx
         .checked_mul(layers)
@@ -245,16 +282,26 @@ pub fn centroid_camera(cameras: &[Camera]) -> Result<Camera> {
     Camera::blend(cameras, &vec![1.0; cameras.len()])
 }
 
+/// Layered passes (`gpu::layered`), image 0 drawn by the first pass or given (`first`, the
+/// CPU backend's conventional image, whose seconds join the timings as `image0`).
 fn layered_images(
     scene: &Scene,
     cameras: &[Camera],
     test: layered::LayerTest,
     cull_backfaces: bool,
+    first: Option<DepthImages>,
     method: &str,
 ) -> Result<DepthImages> {
-    let mut img = resolve_streamed(scene, cameras, Instant::now(), |ctx, on_image| {
-        layered::render(ctx, scene, cameras, test, cull_backfaces, on_image)
+    let start = Instant::now();
+    let ids0 = first.as_ref().map(|f| f.triangle.as_slice());
+    let mut img = resolve_streamed(scene, cameras, start, |ctx, on_image| {
+        layered::render(ctx, scene, cameras, test, cull_backfaces, ids0, on_image)
     })?;
+    if let Some(f) = &first {
+        let seconds = f.timings.get("total").unwrap_or(0.0);
+        img.timings.add("image0", seconds);
+        img.timings.add("total", seconds);
+    }
     if test == layered::LayerTest::PixelRedundancy {
         img = coincident_samples(scene, cameras, img, cull_backfaces)?;
     }
@@ -341,13 +388,14 @@ fn coincident_samples(
 }
 
 /// Algorithm 1 with Algorithm 2, exactly (see the module docs).
+/// Algorithm 1 with Algorithm 2 after the conventional image 0 (`first`).
 fn visibility_images(
     scene: &Scene,
     cameras: &[Camera],
     cull_backfaces: bool,
+    first: DepthImages,
 ) -> Result<DepthImages> {
     let total = Instant::now();
-    let first = discretize_conventional(scene, &cameras[..1], cull_backfaces)?;
     let raster_seconds = first.timings.get("total").unwrap_or(0.0);
     let start = Instant::now();
     let npx = cameras[0].width as usize * cameras[0].height as usize;

@@ -510,6 +510,17 @@ pub fn sample(
     }
     let samples: u64 = dims.iter().map(|&d| d as u64).product();
     let per_sample = (per_axis as u64).pow(4);
+    // Ids as i32 and an overflow flag per sample; one uv sample's rays at a time.
+    crate::limits::check(
+        || {
+            format!(
+                "a field of {} slabs x {dims:?} samples x {n} ids",
+                slabs.len()
+            )
+        },
+        crate::limits::product(&[slabs.len() as u64, samples, n as u64]),
+        5,
+    )?;
     if samples * n as u64 > 1 << 31 || samples * per_sample > 1 << 36 {
         return input_err!(
             "{samples} samples x {n} ids ({per_sample} rays each) is too large a field"

@@ -88,20 +88,26 @@ pub struct OmniResult {
 }
 
 /// `n` samples of a spherical light: its centre for one sample, otherwise a Fibonacci lattice
-/// on its surface (near-uniform, deterministic).
-pub fn light_samples(center: DVec3, radius: f64, n: u32) -> Vec<DVec3> {
+/// on its surface (near-uniform, deterministic). Checked against the memory limit with the six
+/// shadow views each sample gets (their maps are checked with their resolution later).
+pub fn light_samples(center: DVec3, radius: f64, n: u32) -> Result<Vec<DVec3>> {
+    crate::limits::check(
+        || format!("{n} light samples"),
+        n as u128,
+        (std::mem::size_of::<DVec3>() + 6 * std::mem::size_of::<Camera>()) as u64,
+    )?;
     if n == 1 {
-        return vec![center];
+        return Ok(vec![center]);
     }
     let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
-    (0..n)
+    Ok((0..n)
         .map(|i| {
             let z = 1.0 - (2.0 * i as f64 + 1.0) / n as f64;
             let r = (1.0 - z * z).max(0.0).sqrt();
             let phi = golden * i as f64;
             center + DVec3::new(r * phi.cos(), r * phi.sin(), z) * radius
         })
-        .collect()
+        .collect())
 }
 
 /// Eq. 6: the face resolution at which a shadow-map texel, where it lands on a receiver the eye
@@ -176,7 +182,7 @@ pub fn omni_shadows(
     let (points, normals, mask) = eye_points(&seen, eye);
     timings.add("eye", start.elapsed().as_secs_f64());
 
-    let samples = light_samples(center, radius, opts.samples);
+    let samples = light_samples(center, radius, opts.samples)?;
     let s_count = samples.len();
     let diagonal = scene.diagonal();
     let start = Instant::now();
@@ -423,14 +429,14 @@ mod tests {
     #[test]
     fn light_samples_lie_on_the_sphere_and_spread() {
         let c = DVec3::new(1.0, 2.0, 3.0);
-        let s = light_samples(c, 0.5, 20);
+        let s = light_samples(c, 0.5, 20).unwrap();
         assert_eq!(s.len(), 20);
         for p in &s {
             assert!(((*p - c).length() - 0.5).abs() < 1e-12);
         }
         let mean = s.iter().copied().sum::<DVec3>() / 20.0;
         assert!((mean - c).length() < 0.05, "{mean}");
-        assert_eq!(light_samples(c, 0.5, 1), vec![c]);
+        assert_eq!(light_samples(c, 0.5, 1).unwrap(), vec![c]);
     }
 
     #[test]

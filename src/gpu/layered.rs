@@ -168,19 +168,26 @@ impl LayeredPipeline {
 
 /// Render one image per camera (all of one resolution), image i tested against images 0..i.
 /// `on_image(i, ids)` receives image i's triangle ids (row-major, −1 where empty) while the GPU
-/// already renders image i + 1.
+/// already renders image i + 1. A non-redundant render may be given image 0's ids (`first`,
+/// made by the CPU backend): they are not drawn again, and the later passes test against them.
 pub fn render(
     ctx: &GpuContext,
     scene: &Scene,
     cameras: &[Camera],
     test: LayerTest,
     cull_backfaces: bool,
+    first: Option<&[i32]>,
     mut on_image: impl FnMut(usize, &[i32]),
 ) -> Result<RasterStats> {
     let (w, h) = (cameras[0].width, cameras[0].height);
     let n = cameras.len() as u64;
     check_image_size(ctx, w, h)?;
     let nonredundant = test == LayerTest::PixelRedundancy;
+    debug_assert!(
+        first.is_none() || nonredundant,
+        "peeling draws its own first layer"
+    );
+    debug_assert!(first.is_none_or(|ids| ids.len() == w as usize * h as usize));
     let layers = earlier_layers(ctx, n, nonredundant)?;
     let row = align(w as u64 * 4, wgpu::COPY_BYTES_PER_ROW_ALIGNMENT as u64);
     let _guard = ctx
@@ -192,10 +199,6 @@ pub fn render(
     // Duplicated faces are drawn once; the passes see kept faces' indices, which are mapped
     // back to triangle ids as each image comes back.
     let distinct = buffers.distinct(ctx, scene);
-    let mut on_image = |i: usize, ids: &[i32]| match distinct {
-        Some(d) => on_image(i, &d.triangle_ids(ids)),
-        None => on_image(i, ids),
-    };
     let mut stats = RasterStats {
         upload_seconds: if cached { 0.0 } else { buffers.upload_seconds },
         gpu_seconds: ctx.timestamps.then_some(0.0),
@@ -220,12 +223,26 @@ pub fn render(
         layers,
         cull_backfaces,
     );
+    // Image 0 made elsewhere: the later passes read it, as the kept faces a pass would write.
+    let drawn_from = match first {
+        Some(ids) => {
+            let slots = distinct.map(|d| d.slots(ids));
+            res.write_earlier(ctx, 0, slots.as_deref().unwrap_or(ids));
+            on_image(0, ids);
+            1
+        }
+        None => 0,
+    };
+    let mut on_drawn = |i: usize, ids: &[i32]| match distinct {
+        Some(d) => on_image(i, &d.triangle_ids(ids)),
+        None => on_image(i, ids),
+    };
     stats.raster_seconds = start.elapsed().as_secs_f64();
     // One submission per image, so that the caller consumes image i while the GPU renders
     // image i + 1 (as `depth::rasterize` does with its chunks); the passes still see each other's
     // ids through `earlier`, in submission order.
     let mut in_flight: Option<Pending> = None;
-    for i in 0..n {
+    for i in drawn_from..n {
         let start = Instant::now();
         let next = res.submit(
             ctx,
@@ -240,11 +257,11 @@ pub fn render(
         );
         stats.raster_seconds += start.elapsed().as_secs_f64();
         if let Some(done) = in_flight.replace(next) {
-            finish_chunk(ctx, done, &mut stats, &mut on_image)?;
+            finish_chunk(ctx, done, &mut stats, &mut on_drawn)?;
         }
     }
     if let Some(done) = in_flight {
-        finish_chunk(ctx, done, &mut stats, &mut on_image)?;
+        finish_chunk(ctx, done, &mut stats, &mut on_drawn)?;
     }
     Ok(stats)
 }
@@ -393,6 +410,31 @@ struct ImageStep {
 }
 
 impl Resources {
+    /// Put image `i`'s ids (row-major, as a pass writes them) into the earlier images' layer
+    /// `i`, where the passes after it read them.
+    fn write_earlier(&self, ctx: &GpuContext, i: u32, ids: &[i32]) {
+        let (w, h) = (self.tri.width(), self.tri.height());
+        ctx.queue.write_texture(
+            wgpu::TexelCopyTextureInfo {
+                texture: &self.earlier,
+                mip_level: 0,
+                origin: wgpu::Origin3d { x: 0, y: 0, z: i },
+                aspect: wgpu::TextureAspect::All,
+            },
+            bytemuck::cast_slice(ids),
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(4 * w),
+                rows_per_image: Some(h),
+            },
+            wgpu::Extent3d {
+                width: w,
+                height: h,
+                depth_or_array_layers: 1,
+            },
+        );
+    }
+
     /// Encodes and submits image `step.i`'s pass and the readback of its ids.
     fn submit(
         &self,

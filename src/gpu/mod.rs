@@ -227,6 +227,8 @@ pub struct Distinct {
     pub faces: wgpu::Buffer,
     /// Triangle id of each kept face (index into the scene's faces).
     pub triangles: Vec<u32>,
+    /// The kept face that stands for each triangle (itself or the first of its duplicates).
+    pub slot_of: Vec<u32>,
 }
 
 impl Distinct {
@@ -239,6 +241,20 @@ impl Distinct {
                     t
                 } else {
                     self.triangles[t as usize] as i32
+                }
+            })
+            .collect()
+    }
+
+    /// The inverse: triangle ids (an image made elsewhere: the CPU backend's) to the kept
+    /// faces an id pass would have written for them.
+    pub fn slots(&self, ids: &[i32]) -> Vec<i32> {
+        ids.iter()
+            .map(|&t| {
+                if t < 0 {
+                    t
+                } else {
+                    self.slot_of[t as usize] as i32
                 }
             })
             .collect()
@@ -284,7 +300,7 @@ impl SceneBuffers {
         self.distinct
             .get_or_init(|| {
                 use wgpu::util::DeviceExt;
-                let keep = distinct_faces(scene.vertices(), scene.faces())?;
+                let (keep, slot_of) = distinct_faces(scene.vertices(), scene.faces())?;
                 let faces: Vec<u32> = keep
                     .iter()
                     .flat_map(|&t| scene.faces()[t as usize])
@@ -299,6 +315,7 @@ impl SceneBuffers {
                 Some(Distinct {
                     faces,
                     triangles: keep,
+                    slot_of,
                 })
             })
             .as_ref()
@@ -396,18 +413,25 @@ mod tests {
 }
 
 /// The ids of the faces that are not duplicates of an earlier face (same three vertex
-/// positions, bit for bit, in any order); `None` when no face is a duplicate.
-pub fn distinct_faces(vertices: &[[f32; 3]], faces: &[[u32; 3]]) -> Option<Vec<u32>> {
+/// positions, bit for bit, in any order), and for every face the index among those of the one
+/// it duplicates (or of itself); `None` when no face is a duplicate.
+pub fn distinct_faces(vertices: &[[f32; 3]], faces: &[[u32; 3]]) -> Option<(Vec<u32>, Vec<u32>)> {
     let key = |f: &[u32; 3]| {
         let mut c = f.map(|i| vertices[i as usize].map(f32::to_bits));
         c.sort_unstable();
         c
     };
-    let mut seen = std::collections::HashSet::with_capacity(faces.len());
-    let keep: Vec<u32> = (0..faces.len() as u32)
-        .filter(|&t| seen.insert(key(&faces[t as usize])))
+    let mut first = std::collections::HashMap::with_capacity(faces.len());
+    let mut keep = Vec::new();
+    let slot_of: Vec<u32> = (0..faces.len() as u32)
+        .map(|t| {
+            *first.entry(key(&faces[t as usize])).or_insert_with(|| {
+                keep.push(t);
+                keep.len() as u32 - 1
+            })
+        })
         .collect();
-    (keep.len() < faces.len()).then_some(keep)
+    (keep.len() < faces.len()).then_some((keep, slot_of))
 }
 
 #[cfg(test)]
@@ -425,7 +449,7 @@ mod distinct_tests {
         ];
         // Face 1 repeats face 0 reversed; face 2 names the same corner through vertex 3.
         let f = [[0, 1, 2], [2, 1, 0], [0, 3, 2], [0, 1, 4]];
-        assert_eq!(distinct_faces(&v, &f), Some(vec![0, 3]));
+        assert_eq!(distinct_faces(&v, &f), Some((vec![0, 3], vec![0, 0, 0, 1])));
         assert_eq!(distinct_faces(&v, &[[0, 1, 2], [0, 1, 4]]), None);
     }
 }

@@ -318,6 +318,12 @@ impl PyCamera {
         normalize: bool,
     ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
         let (w, h) = (self.inner.width as usize, self.inner.height as usize);
+        crate::limits::check(
+            || format!("the pixel rays of a {w}x{h} camera"),
+            crate::limits::product(&[w as u64, h as u64]),
+            24,
+        )
+        .py_err(py)?;
         let mut o = Vec::with_capacity(w * h * 3);
         let mut d = Vec::with_capacity(w * h * 3);
         for y in 0..h {

@@ -149,6 +149,15 @@ impl Watch {
     }
 }
 
+/// `InputError` when `count` items of `each` bytes (`what`: the request in the caller's terms)
+/// would exceed the memory limit (`limits::check`, for checks made on the Python side); the
+/// limit in bytes otherwise.
+#[pyfunction]
+fn check_memory(py: Python<'_>, what: &str, count: u128, each: u64) -> PyResult<u64> {
+    crate::limits::check(|| what.to_string(), count, each).py_err(py)?;
+    Ok(crate::limits::memory_limit())
+}
+
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<scene::PyScene>()?;
@@ -180,6 +189,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(impostors::impostor_directions, m)?)?;
     m.add_function(wrap_pyfunction!(render::device_info, m)?)?;
     m.add_function(wrap_pyfunction!(render::choose_backend, m)?)?;
+    m.add_function(wrap_pyfunction!(check_memory, m)?)?;
     m.add_function(wrap_pyfunction!(render::write_exr, m)?)?;
     m.add_function(wrap_pyfunction!(render::read_exr, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

@@ -52,9 +52,10 @@ pub fn discretize_conventional<'py>(
 }
 
 /// What `backend="auto"` would choose for a request of this size (see
-/// `discretize::backend`); calibrates the cost model on first use.
+/// `discretize::backend`; `auto` itself weighs every request prepared, as the defaults do);
+/// calibrates the cost model on first use.
 #[pyfunction]
-#[pyo3(signature = (triangles, pixels, images=1, bvh_built=false, uploaded=true))]
+#[pyo3(signature = (triangles, pixels, images=1, bvh_built=true, uploaded=true))]
 pub fn choose_backend<'py>(
     py: Python<'py>,
     triangles: u64,
@@ -101,21 +102,39 @@ pub fn choose_backend<'py>(
 }
 
 #[pyfunction]
-#[pyo3(signature = (scene, cameras, redundancy="pixel", cull_backfaces=false))]
+#[pyo3(signature = (scene, cameras, redundancy="pixel", cull_backfaces=false, backend="auto"))]
 pub fn discretize_nonredundant<'py>(
     py: Python<'py>,
     scene: &PyScene,
     cameras: Vec<PyCamera>,
     redundancy: &str,
     cull_backfaces: bool,
+    backend: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
     let r = super::convert::redundancy(py, redundancy)?;
+    let choice: BackendChoice = backend
+        .parse()
+        .map_err(|e| super::errors::to_pyerr(py, e))?;
     let cams: Vec<_> = cameras.into_iter().map(|c| c.inner).collect();
     let s = scene.inner.clone();
-    let img = super::run(py, || {
-        crate::discretize::discretize_nonredundant(&s, &cams, r, cull_backfaces)
+    let (img, decision) = super::run(py, || {
+        crate::discretize::discretize_nonredundant(&s, &cams, r, cull_backfaces, choice)
     })?;
-    images_dict(py, img)
+    let rest = match r {
+        crate::discretize::Redundancy::Pixel => "rendered on the gpu",
+        crate::discretize::Redundancy::Visibility => "traced on the cpu",
+    };
+    let d = images_dict(py, img)?;
+    d.set_item("backend", decision.backend.name())?;
+    d.set_item(
+        "backend_reason",
+        format!(
+            "image 0 on the {} ({}); the later images {rest}",
+            decision.backend.name(),
+            decision.reason
+        ),
+    )?;
+    Ok(d)
 }
 
 #[pyfunction]

@@ -72,7 +72,7 @@ pub fn epr_shadow_points<'py>(
             ),
         ));
     }
-    let lights = light_samples(center, radius, samples);
+    let lights = light_samples(center, radius, samples).py_err(py)?;
     let near = NEAR * scene.inner.diagonal();
     let s = scene.inner.clone();
     let cam = eye.inner.clone();

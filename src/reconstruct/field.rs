@@ -209,6 +209,12 @@ pub fn resample(
     if how.subsample == 0 {
         return input_err!("subsample must be at least 1");
     }
+    // The view's image, and per pixel what the field answered.
+    crate::limits::check_views(
+        "the field's view",
+        std::slice::from_ref(camera),
+        2 * crate::limits::IMAGE_BYTES,
+    )?;
     for (_, f) in fields {
         let samples: usize = f.dims.iter().map(|&d| d as usize).product::<usize>();
         if f.ids.len() != samples * f.n as usize || f.hits.len() != samples {

@@ -83,6 +83,12 @@ pub fn reconstruct(
 ) -> Result<ImpostorView> {
     let total = Instant::now();
     check_inputs(imp, sorted, triangle_budget, screen_threshold)?;
+    // Colour and depth of the impostors and of the triangles drawn, and the composite.
+    crate::limits::check_views(
+        "the impostor view",
+        std::slice::from_ref(camera),
+        2 * crate::limits::IMAGE_BYTES,
+    )?;
     let (w, h) = (camera.width as usize, camera.height as usize);
 
     let start = Instant::now();

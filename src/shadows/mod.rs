@@ -10,6 +10,7 @@ use std::time::Instant;
 use glam::{DVec2, DVec3};
 
 use crate::camera::Camera;
+use crate::discretize::backend::{Backend, BackendChoice};
 use crate::discretize::{
     discretize_conventional, discretize_nonredundant, discretize_peeling, Redundancy,
 };
@@ -192,6 +193,19 @@ pub fn soft_shadows(
     if opts.resolution == 0 || opts.shadow_resolution == 0 {
         return input_err!("resolution and shadow_resolution must be positive");
     }
+    // A visibility bit per eye pixel and light sample, and one shadow map at a time.
+    let (w, h) = (eye.width as u64, eye.height as u64);
+    crate::limits::check(
+        || format!("{nu}x{nv} light samples for {w}x{h} eye pixels"),
+        crate::limits::product(&[w, h, nu as u64, nv as u64]).div_ceil(8),
+        1,
+    )?;
+    let side = opts.shadow_resolution as u64;
+    crate::limits::check(
+        || format!("a shadow map of {side}x{side}"),
+        crate::limits::product(&[side, side]),
+        8,
+    )?;
     let mut timings = Timings::new();
 
     // The output image's surface points, with normals facing the eye.
@@ -340,7 +354,8 @@ fn discretize_light(
     let render = |cams: &[Camera]| -> Result<DepthImages> {
         match d {
             Discretization::Nonredundant => {
-                discretize_nonredundant(scene, cams, Redundancy::Pixel, false)
+                let gpu = BackendChoice::Fixed(Backend::Gpu);
+                discretize_nonredundant(scene, cams, Redundancy::Pixel, false, gpu).map(|r| r.0)
             }
             Discretization::Conventional => discretize_conventional(scene, cams, false),
             _ => discretize_peeling(scene, &cams[0], opts.layers as usize, false),

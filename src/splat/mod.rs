@@ -107,6 +107,8 @@ pub fn splat_views(
     if cameras.is_empty() {
         return input_err!("splat needs at least one view");
     }
+    // The packed keys, then depth and index per texel.
+    crate::limits::check_views("the splat buffers", cameras, 16)?;
     if points.view_count != cameras.len() {
         return input_err!(
             "the points' visibility strings describe {} views, but {} views were given",

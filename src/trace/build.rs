@@ -107,7 +107,8 @@ pub fn padded_box(t: &Tri) -> Aabb {
 /// Build the tree over `tris` (at most `4 · MAX_BLOCKS` of them; the caller checks).
 pub fn build(tris: &[Tri], params: BuildParams) -> Bvh8 {
     assert!(
-        params.max_leaf % 4 == 0 && (4..=4 * MAX_LEAF_BLOCKS as usize).contains(&params.max_leaf)
+        params.max_leaf.is_multiple_of(4)
+            && (4..=4 * MAX_LEAF_BLOCKS as usize).contains(&params.max_leaf)
     );
     if tris.is_empty() {
         return Bvh8 {
@@ -721,7 +722,7 @@ mod tests {
                 }
                 if c & LEAF == 0 {
                     assert!(
-                        (c as usize) % NODE_UNITS == 0
+                        (c as usize).is_multiple_of(NODE_UNITS)
                             && (c as usize) < bvh.nodes.len() * NODE_UNITS
                     );
                     stack.push((c, depth + 1));

@@ -58,7 +58,9 @@ pub fn node_index(r: u32) -> usize {
 /// The node an inner reference names.
 #[inline(always)]
 pub(crate) fn node_at(nodes: &[Node8], r: u32) -> &Node8 {
-    debug_assert!((r as usize) < nodes.len() * NODE_UNITS && r as usize % NODE_UNITS == 0);
+    debug_assert!(
+        (r as usize) < nodes.len() * NODE_UNITS && (r as usize).is_multiple_of(NODE_UNITS)
+    );
     // SAFETY: inner references name nodes of `nodes` (checked by the builder's tests).
     unsafe { &*((nodes.as_ptr() as *const u8).add(node_offset(r)) as *const Node8) }
 }
@@ -115,7 +117,7 @@ impl Node8 {
     /// `off` is `ROW_BYTES * i` for a row `i < 6`, as `Ray::new` makes them.
     #[inline(always)]
     pub(crate) unsafe fn row(&self, off: usize) -> &[f32; 8] {
-        debug_assert!(off % ROW_BYTES == 0 && off < std::mem::size_of_val(&self.b));
+        debug_assert!(off.is_multiple_of(ROW_BYTES) && off < std::mem::size_of_val(&self.b));
         // SAFETY: `b` is the first field (repr(C)); the caller keeps `off` within it.
         unsafe { &*((self as *const Node8 as *const u8).add(off) as *const [f32; 8]) }
     }

@@ -234,6 +234,13 @@ pub fn nearest_hits_facing(
     if k == 0 {
         return input_err!("max_hits must be at least 1, got 0");
     }
+    let n = origins.len();
+    // t, triangle and barycentric per hit.
+    crate::limits::check(
+        || format!("{n} rays x max_hits={k}"),
+        crate::limits::product(&[n as u64, k as u64]),
+        16,
+    )?;
     on_threads(q.threads, || {
         nearest_hits_here(scene, origins, directions, k, q, front_only)
     })?
@@ -250,9 +257,7 @@ fn nearest_hits_here(
     let (bvh, built) = prepare(scene, origins, directions, q)?;
     let start = Instant::now();
     let n = origins.len();
-    let Some(len) = n.checked_mul(k) else {
-        return input_err!("{n} rays x max_hits={k} hits is too many");
-    };
+    let len = n * k; // checked against the memory limit by `nearest_hits_facing`
     let mut t = vec![f32::INFINITY; len];
     let mut triangle = vec![-1i32; len];
     let mut barycentric = vec![[0.0f32; 2]; len];
