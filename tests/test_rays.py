@@ -120,12 +120,14 @@ def test_t_is_in_units_of_the_direction_and_limits_apply() -> None:
     o = np.array([[0, 0, 2.0]] * 3)
     d = np.array([[0, 0, -1.0], [0, 0, -4.0], [0, 0, -0.5]])
     np.testing.assert_allclose(ss.cast_rays(s, o, d).t, [2.0, 0.5, 4.0])
-    assert ss.cast_rays(s, o[0], d[0], t_max=1.5).triangle[0] == -1
-    assert ss.cast_rays(s, o[0], d[0], t_min=2.5).triangle[0] == -1
+    # One ray of shape (3,): results of shape ().
+    assert ss.cast_rays(s, o[0], d[0], t_max=1.5).triangle == -1
+    assert ss.cast_rays(s, o[0], d[0], t_min=2.5).triangle == -1
     back = ss.cast_rays(s, [0, 0, -2.0], [0, 0, 1.0])  # back faces count
-    assert back.triangle[0] == 0 and back.t[0] == pytest.approx(2.0)
+    assert back.triangle.shape == () and back.barycentric.shape == (2,)
+    assert back.triangle == 0 and back.t == pytest.approx(2.0)
     miss = ss.cast_rays(s, [5, 5, 2.0], [0, 0, -1.0])
-    assert miss.t[0] == np.inf and miss.triangle[0] == -1 and (miss.barycentric == 0).all()
+    assert miss.t == np.inf and miss.triangle == -1 and (miss.barycentric == 0).all()
 
 
 def test_bvh_is_cached_and_concurrent_calls_agree() -> None:
@@ -151,8 +153,21 @@ def test_bvh_is_cached_and_concurrent_calls_agree() -> None:
         ([[0, 0, 0]], [[np.inf, 0, 1]], {}, r"directions\[0\] must be finite and non-zero"),
         # Finite components whose squared length overflows float32.
         ([[0, 0, 0]], [[3e19, 0, 1]], {}, r"directions\[0\] must be finite and non-zero"),
-        ([[0, 0, 0], [1, 1, 1]], [[0, 0, 1]], {}, "origins has 2 rows but directions has 1"),
-        ([[0, 0]], [[0, 0, 1]], {}, r"origins must have shape \(n, 3\), got \(1, 2\)"),
+        (
+            [[0, 0, 0], [1, 1, 1]],
+            [[0, 0, 1]] * 3,
+            {},
+            r"origins of shape \(2, 3\) and directions of shape \(3, 3\) do not broadcast",
+        ),
+        ([[0, 0]], [[0, 0, 1]], {}, r"origins must have shape \(\.\.\., 3\), got \(1, 2\)"),
+        (5.0, [[0, 0, 1]], {}, r"origins must have shape \(\.\.\., 3\), got \(\)"),
+        # A bad ray of a (2, 2, 3) batch is named by its index in the batch.
+        (
+            np.zeros((2, 2, 3)),
+            [[[0, 0, 1], [0, 0, 1]], [[0, 0, 1], [0, 0, 0]]],
+            {},
+            r"directions\[1, 1\] must be finite and non-zero",
+        ),
         ([[0, 0, 0]], [[0, 0, 1]], {"t_min": 2.0, "t_max": 1.0}, "t_min <= t_max"),
         ([[0, 0, 0]], [[0, 0, 1]], {"t_min": -1.0}, "0 <= t_min"),
         ([["x", 0, 0]], [[0, 0, 1]], {}, "origins must be an array of real numbers"),
@@ -314,3 +329,39 @@ def test_occluded_rejects_bad_rays_like_cast_rays() -> None:
     with pytest.raises(ss.InputError, match=r"directions\[1\] must be finite and non-zero"):
         ss.occluded(s, [[0, 0, 3]] * 2, [[0, 0, -1], [0, np.nan, 0]])
     assert ss.occluded(s, np.zeros((0, 3)), np.zeros((0, 3))).shape == (0,)
+
+
+@pytest.mark.parametrize("batch", [(7,), (5, 6), (2, 3, 4)], ids=["N", "HxW", "AxBxC"])
+@pytest.mark.parametrize("k", [1, 3])
+def test_rays_of_any_batch_shape_give_hits_of_that_shape(batch, k) -> None:
+    """(..., 3) origins and directions give (...) results, (..., 2) barycentrics, and with
+    max_hits=k a hit axis after the batch; the hits are those of the same rays as (N, 3)."""
+    s = ss.scenes.shapes(seed=2, detail=1)
+    n = int(np.prod(batch))
+    o, d = random_rays(s, n, seed=4)
+    flat = ss.cast_rays(s, o, d, max_hits=k)
+    hits = ss.cast_rays(s, o.reshape(*batch, 3), d.reshape(*batch, 3), max_hits=k)
+    extra = () if k == 1 else (k,)
+    assert hits.t.shape == hits.triangle.shape == (*batch, *extra)
+    assert hits.barycentric.shape == (*batch, *extra, 2)
+    assert hits.shape == batch and len(hits) == n and hits.hit.shape == batch
+    np.testing.assert_array_equal(hits.triangle.reshape(n, *extra), flat.triangle)
+    np.testing.assert_array_equal(hits.t.reshape(n, *extra), flat.t)
+    np.testing.assert_array_equal(hits.count.reshape(n), flat.count)
+    occ = ss.occluded(s, o.reshape(*batch, 3), d.reshape(*batch, 3))
+    assert occ.shape == batch
+    np.testing.assert_array_equal(occ.reshape(n), ss.occluded(s, o, d))
+
+
+def test_one_origin_broadcasts_against_a_camera_s_pixel_rays() -> None:
+    s = ss.scenes.shapes(seed=3, detail=1)
+    cam = ss.Camera.look_at((3, 2, 3), (0, 0, 0), yfov=0.8, width=40, height=30)
+    origins, dirs = cam.pixel_rays()
+    direct = ss.cast_rays(s, origins, dirs)  # (H, W, 3) straight from the camera
+    assert direct.t.shape == (30, 40) and direct.barycentric.shape == (30, 40, 2)
+    one = ss.cast_rays(s, origins[0, 0], dirs)  # a pinhole: every ray leaves one point
+    np.testing.assert_array_equal(one.triangle, direct.triangle)
+    # Directions broadcast too: one direction from many origins.
+    down = ss.cast_rays(s, origins.reshape(-1, 3), [0.0, -1.0, 0.0])
+    assert down.t.shape == (1200,)
+    assert ss.occluded(s, origins[0, 0], dirs, t_max=1e9).shape == (30, 40)

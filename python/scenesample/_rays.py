@@ -3,22 +3,53 @@
 
 from __future__ import annotations
 
-from typing import Any, Optional
+import math
+import re
+from typing import Any, Callable, Optional
 
 import numpy as np
 
 from . import _core
 from ._progress import Bar, Progress
 from ._scene import Scene, core_of
-from .errors import check_integer
+from .errors import InputError, check_integer
 from .results import RayHits
 
 __all__ = ["cast_rays", "occluded", "bvh_stats"]
 
 
-def _rows(a: Any) -> np.ndarray:
-    a = np.asarray(a)
-    return a[None] if a.ndim == 1 and a.shape[:1] == (3,) else a
+def _rays(origins: Any, directions: Any) -> tuple[np.ndarray, np.ndarray, tuple[int, ...]]:
+    """Origins and directions of shape (..., 3), broadcast against each other (numpy's rules),
+    as (N, 3) rows in C order, and the batch shape ``...``. Rows already of the full shape and
+    C-contiguous stay views (float32 ones are then read in place)."""
+    o, d = np.asarray(origins), np.asarray(directions)
+    for name, a in (("origins", o), ("directions", d)):
+        if a.ndim == 0 or a.shape[-1] != 3:
+            raise InputError(f"{name} must have shape (..., 3), got {a.shape}")
+    try:
+        shape = np.broadcast_shapes(o.shape[:-1], d.shape[:-1])
+    except ValueError:
+        raise InputError(
+            f"origins of shape {o.shape} and directions of shape {d.shape} do not broadcast"
+        ) from None
+    n = math.prod(shape)
+    return (*(np.broadcast_to(a, (*shape, 3)).reshape(n, 3) for a in (o, d)), shape)
+
+
+def _indexed(shape: tuple[int, ...], call: Callable[[], Any]) -> Any:
+    """``call()``, with a bad ray's flat row number in an InputError turned into its index in
+    the batch (``origins[2, 17]`` for a (H, W, 3) array)."""
+    try:
+        return call()
+    except InputError as e:
+        if len(shape) == 1:
+            raise
+
+        def where(m: re.Match) -> str:
+            at = np.unravel_index(int(m.group(2)), shape) if shape else ()
+            return f"{m.group(1)}[{', '.join(str(int(i)) for i in at)}]"
+
+        raise InputError(re.sub(r"(origins|directions)\[(\d+)\]", where, str(e))) from None
 
 
 def _threads(threads: Optional[int]) -> Optional[int]:
@@ -48,9 +79,11 @@ def cast_rays(
     Parameters
     ----------
     scene : Scene
-    origins : (N, 3) array_like of float
-    directions : (N, 3) array_like of float
-        Finite and non-zero; need not be unit length.
+    origins : (..., 3) array_like of float
+    directions : (..., 3) array_like of float
+        Finite and non-zero; need not be unit length. The two broadcast against each other
+        (one origin for many directions, say), and ``...`` is the batch shape they make:
+        ``Camera.pixel_rays()``'s (H, W, 3) arrays go straight in.
     t_min, t_max : float
         Accept hits with ``t_min <= t < t_max``, in units of each direction's length.
     max_hits : int
@@ -69,30 +102,38 @@ def cast_rays(
     Returns
     -------
     RayHits
-        For ``max_hits=1``: ``t`` (N,) float32 (+inf on a miss), ``triangle`` (N,) int32 (-1),
-        ``barycentric`` (N, 2) float32. For k > 1: ``t`` (N, k) padded with +inf,
-        ``triangle`` (N, k) padded with -1, ``barycentric`` (N, k, 2). ``timings``:
-        ``bvh_build`` (0 when the BVH was cached) and ``trace`` seconds.
+        For ``max_hits=1``: ``t`` (...) float32 (+inf on a miss), ``triangle`` (...) int32
+        (-1), ``barycentric`` (..., 2) float32. For k > 1: ``t`` (..., k) padded with +inf,
+        ``triangle`` (..., k) padded with -1, ``barycentric`` (..., k, 2); the rays x k hits
+        must fit in the memory limit (``SCENESAMPLE_MEMORY_LIMIT``, else half the machine's
+        memory), checked before anything is allocated. ``timings``: ``bvh_build`` (0 when
+        the BVH was cached) and ``trace`` seconds.
 
     Raises
     ------
     InputError
-        Mismatched or non-finite rays, zero directions, a bad range, ``max_hits`` or
-        ``threads`` below 1 or not an integer.
+        Shapes that are not (..., 3) or do not broadcast, non-finite rays (named by their
+        index in the batch), zero directions, a bad range, ``max_hits`` or ``threads`` below
+        1 or not an integer, rays x ``max_hits`` over the memory limit.
     """
     k = check_integer("max_hits", max_hits)
+    o, d, shape = _rays(origins, directions)
     with Bar(progress, "rays", "rays") as bar:
-        r = _core.cast_rays(
-            core_of(scene),
-            _rows(origins),
-            _rows(directions),
-            float(t_min),
-            float(t_max),
-            k,
-            _threads(threads),
-            bar.callback,
-        )
-    return RayHits(**r)
+        r = _indexed(
+            shape,
+            lambda: _core.cast_rays(
+                core_of(scene), o, d, float(t_min), float(t_max), k, _threads(threads),
+                bar.callback,
+            ),
+        )  # fmt: skip
+    hits = () if k == 1 else (k,)
+    return RayHits(
+        t=r["t"].reshape((*shape, *hits)),
+        triangle=r["triangle"].reshape((*shape, *hits)),
+        barycentric=r["barycentric"].reshape((*shape, *hits, 2)),
+        timings=r["timings"],
+        max_hits=k,
+    )
 
 
 def occluded(
@@ -114,7 +155,8 @@ def occluded(
     Parameters
     ----------
     scene : Scene
-    origins, directions : (N, 3) array_like of float
+    origins, directions : (..., 3) array_like of float
+        Broadcast against each other, as for :func:`cast_rays`.
     t_min, t_max : float
         In units of each direction's length: with ``directions = targets - origins`` and
         ``t_max = 1``, only what lies between each origin and its target counts.
@@ -125,20 +167,19 @@ def occluded(
 
     Returns
     -------
-    (N,) bool
+    (...) bool
         True where the ray hits a triangle in range.
     """
+    o, d, shape = _rays(origins, directions)
     with Bar(progress, "occlusion rays", "rays") as bar:
-        r = _core.occluded(
-            core_of(scene),
-            _rows(origins),
-            _rows(directions),
-            float(t_min),
-            float(t_max),
-            _threads(threads),
-            bar.callback,
-        )
-    return r["hit"]
+        r = _indexed(
+            shape,
+            lambda: _core.occluded(
+                core_of(scene), o, d, float(t_min), float(t_max), _threads(threads),
+                bar.callback,
+            ),
+        )  # fmt: skip
+    return r["hit"].reshape(shape)
 
 
 def bvh_stats(scene: Scene) -> dict[str, Any]:

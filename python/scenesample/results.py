@@ -156,47 +156,57 @@ class DepthImages:
 
 @dataclass(eq=False, repr=False)
 class RayHits:
-    """Hits of a batch of rays (see :func:`scenesample.cast_rays`).
+    """Hits of a batch of rays (see :func:`scenesample.cast_rays`), shaped like the rays:
+    ``...`` below is the batch shape the origins and directions broadcast to.
 
     Attributes
     ----------
-    t : (N,) float32, or (N, k) with ``max_hits=k > 1``
+    t : (...) float32, or (..., k) with ``max_hits=k > 1``
         Hit distance in units of each direction's length; ``+inf`` on a miss (and past the
         last hit of a ray with fewer than k).
-    triangle : (N,) or (N, k) int32
+    triangle : (...) or (..., k) int32
         Scene face index; -1 on a miss.
-    barycentric : (N, 2) or (N, k, 2) float32
+    barycentric : (..., 2) or (..., k, 2) float32
         (u, v) with hit point = (1-u-v)*v0 + u*v1 + v*v2 (Embree's convention); 0 on a miss.
     timings : dict of str to float
         ``bvh_build`` (0 when the scene's BVH was cached) and ``trace`` seconds.
+    max_hits : int
+        k: 1 for the closest hit (no hit axis), else the length of the hit axis.
     """
 
     t: np.ndarray
     triangle: np.ndarray
     barycentric: np.ndarray
     timings: dict[str, float] = field(default_factory=dict)
+    max_hits: int = 1
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        """The batch shape: one entry per ray."""
+        return self.t.shape if self.max_hits == 1 else self.t.shape[:-1]
 
     @property
     def hit(self) -> np.ndarray:
-        """(N,) bool: rays that hit a triangle."""
-        first = self.triangle if self.triangle.ndim == 1 else self.triangle[:, 0]
+        """(...) bool: rays that hit a triangle."""
+        first = self.triangle if self.max_hits == 1 else self.triangle[..., 0]
         return first >= 0
 
     @property
     def count(self) -> np.ndarray:
-        """(N,) int: hits reported per ray (at most 1, or k with ``max_hits=k``)."""
-        per_ray = self.triangle.reshape(len(self), -1)
-        return (per_ray >= 0).sum(axis=1)
+        """(...) int: hits reported per ray (at most 1, or k with ``max_hits=k``)."""
+        per_ray = self.triangle.reshape((*self.shape, -1))
+        return (per_ray >= 0).sum(axis=-1)
 
     def __len__(self) -> int:
-        return int(self.t.shape[0])
+        """The number of rays."""
+        return int(np.prod(self.shape, dtype=np.int64))
 
     def as_dict(self) -> dict[str, Any]:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
     def __repr__(self) -> str:
         trace = self.timings.get("trace", float("nan"))
-        return f"RayHits(n={len(self)}, hit={int(self.hit.sum())}, trace={trace:.4f}s)"
+        return f"RayHits(shape={self.shape}, hit={int(self.hit.sum())}, trace={trace:.4f}s)"
 
 
 @dataclass(eq=False, repr=False)
