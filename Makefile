@@ -2,7 +2,9 @@
 PY ?= python3
 export PYOPENGL_PLATFORM ?= egl
 
-.PHONY: help setup demo test check test-rust test-python wheel bench lint fmt
+.PHONY: help setup demo test check test-rust test-python wheel bench lint fmt fuzz
+FUZZ_CASES ?= 20000
+FUZZ_SEED ?= 1
 
 help: ## list the targets
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-12s %s\n", $$1, $$2}'
@@ -24,6 +26,9 @@ test-rust: ## cargo tests of the Rust core, with debug assertions and overflow c
 
 test-python: ## pytest against the editable install (`make setup`), on both cores
 	$(PY) -m pytest -n 2 --dist worksteal
+
+fuzz: setup ## a longer loader fuzzing run: FUZZ_CASES (20000) mutated glTF/GLB/OBJ/MTL files, seed FUZZ_SEED
+	$(PY) tests/fuzz_loaders.py --cases $(FUZZ_CASES) --seed $(FUZZ_SEED)
 
 wheel: ## the abi3 manylinux2014 wheel (CPython >= 3.9, glibc >= 2.17) and the sdist, into dist/
 	CARGO_TARGET_DIR=target/manylinux $(PY) -m maturin build --release --zig --compatibility manylinux2014 --out dist
