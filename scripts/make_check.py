@@ -63,6 +63,7 @@ ROOMS: dict[str, tuple[str, ...]] = {
     "src/process.rs": ("test_process.py", "test_progress.py"),
     "_progress.py": ("test_progress.py",),
     "src/counters.rs": ("test_plan.py",),
+    "src/limits.rs": ("test_limits.py",),
     "src/error.rs": ("test_api.py",),
     "src/py/": ("test_api.py", "test_stub_keys.py"),
     "_core.pyi": ("test_api.py", "test_stub_keys.py"),
@@ -104,8 +105,15 @@ def tests_for(paths: list[str]) -> tuple[list[str], list[str]]:
             name = p.removeprefix("tests/")
             if name.startswith("test_") and name.endswith(".py"):
                 tests.add(name)
-            elif name.endswith(".py"):  # conftest.py, helpers: everything may use them
+            elif name == "conftest.py":  # every test may use it
                 unmapped.append(p)
+            elif name.endswith(".py"):  # a helper: the tests that import it
+                users = [t.name for t in (ROOT / "tests").glob("test_*.py")
+                         if f"import {name[:-3]}" in t.read_text()]  # fmt: skip
+                if users:
+                    tests.update(users)
+                else:
+                    unmapped.append(p)
             continue
         if p.startswith(QUIET) or p.endswith(".md"):
             continue
