@@ -57,3 +57,21 @@ def test_errors_form_one_hierarchy() -> None:
         assert issubclass(cls, ss.ScenesampleError) or name == "SceneWarning"
     assert issubclass(ss.SceneFileError, OSError) and issubclass(ss.SceneFileError, ValueError)
     assert issubclass(ss.GpuUnavailableError, RuntimeError)
+
+
+def test_the_namespace_is_the_public_api_and_the_stubs_declare_what_it_takes_from_core():
+    import ast
+
+    assert dir(ss) == sorted(ss.__all__)
+    assert "annotations" not in dir(ss) and not any(n.startswith("_") for n in dir(ss))
+    assert len(set(ss.__all__)) == len(ss.__all__)
+    tree = ast.parse((PACKAGE / "_core.pyi").read_text())
+    stub_all = next(
+        ast.literal_eval(n.value)
+        for n in tree.body
+        if isinstance(n, ast.Assign) and any(getattr(t, "id", "") == "__all__" for t in n.targets)
+    )
+    from_core = [
+        n for n in ss.__all__ if getattr(getattr(ss, n), "__module__", "") == "scenesample._core"
+    ]
+    assert from_core and set(from_core) <= set(stub_all), from_core

@@ -281,3 +281,17 @@ def test_a_surface_facing_away_from_the_light_is_dark(gpu):
     for d in ss._shadows.DISCRETIZATIONS:
         r = ss.soft_shadows(scene, cam, light, samples=(2, 2), discretization=d, resolution=32)
         assert r.mask.any() and (r.visibility[r.mask] == 0).all(), d
+
+
+def test_reconstruction_experiment_reports_surface_metrics(gpu, tmp_path):
+    from scenesample.experiments import reconstruction
+
+    reconstruction.main(
+        ["--scenes", "urban", "--resolution", "64", "--samples", "2000", "--out", str(tmp_path)]
+    )
+    md = (tmp_path / "reconstruction.md").read_text()
+    for d in ("conventional", "nonredundant"):
+        for r in ("mesh", "hybrid", "points"):
+            assert f"| urban | {d} | {r} |" in md, (d, r)
+    rows = (tmp_path / "reconstruction.csv").read_text().splitlines()
+    assert len(rows) == 1 + 6 and "fscore" in rows[0]

@@ -112,6 +112,8 @@ def test_every_returned_dict_matches_its_stub(recorded, gpu, tmp_path):
     o, d = (a.reshape(-1, 3) for a in eye.pixel_rays())
     ss.cast_rays(scene, o, d)
     ss.occluded(scene, o, d)
+    ss.all_hits(scene, o, d)
+    ss.closest_points(scene, o)
     ss.bvh_stats(scene)
     ss.device_info(triangles=1000, pixels=64 * 64)
     typed = {n for n, a in returns.items() if a.startswith("_") or a.startswith("tuple[")}

@@ -11,8 +11,6 @@ Conventions (shared by every function):
 - Every result carries ``timings`` (seconds per stage).
 """
 
-from __future__ import annotations
-
 from . import errors, methods, plot, references, scenes
 from ._api import device_info, discretize, reconstruct
 from ._core import Camera
@@ -23,7 +21,8 @@ from ._field import FieldView, Slab, VisibilityField
 from ._impostors import Impostors, ImpostorView
 from ._omni import OmniShadowResult, omni_shadows
 from ._plan import Effect, Frame, plan, render
-from ._rays import bvh_stats, cast_rays, occluded
+from ._points import closest_points, occupancy, signed_distance, winding_number
+from ._rays import all_hits, bvh_stats, cast_rays, count_hits, occluded
 from ._reflections import ReflectionResult, reflection_reference, reflections
 from ._scene import Scene
 from ._shadows import AreaLight, ShadowResult, soft_shadows
@@ -39,11 +38,13 @@ from .errors import (
     ScenesampleError,
     SceneWarning,
 )
-from .results import DepthImages, Mesh, RayHits
+from .results import AllHits, ClosestPoints, DepthImages, Mesh, RayHits
 
 __all__ = [
+    "AllHits",
     "AreaLight",
     "Camera",
+    "ClosestPoints",
     "DepthImages",
     "Effect",
     "ExrError",
@@ -70,8 +71,11 @@ __all__ = [
     "SplatBuffers",
     "VisibilityField",
     "ScenesampleError",
+    "all_hits",
     "bvh_stats",
     "cast_rays",
+    "closest_points",
+    "count_hits",
     "cube_resolution",
     "device_info",
     "discretize",
@@ -80,6 +84,7 @@ __all__ = [
     "intermediate_cameras",
     "methods",
     "occluded",
+    "occupancy",
     "omni_shadows",
     "plan",
     "plot",
@@ -90,6 +95,14 @@ __all__ = [
     "render",
     "splat",
     "scenes",
+    "signed_distance",
     "soft_shadows",
     "tradeoff",
+    "winding_number",
 ]
+
+
+def __dir__() -> list[str]:
+    """The public API only: the private modules the façade imports from (``_core``, ``_api``,
+    ...) become attributes of the package, but are not for users."""
+    return sorted(__all__)

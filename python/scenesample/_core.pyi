@@ -11,10 +11,13 @@ __all__ = [
     "Camera",
     "Impostors",
     "Scene",
+    "__version__",
+    "all_hits",
     "bvh_stats",
     "cast_rays",
     "check_memory",
     "choose_backend",
+    "closest_points",
     "default_slab",
     "device_info",
     "discretize_conventional",
@@ -29,8 +32,8 @@ __all__ = [
     "occluded",
     "omni_shadows",
     "read_exr",
-    "reflections",
     "reconstruct",
+    "reflections",
     "render_cells",
     "render_lit",
     "sampling_metrics",
@@ -39,8 +42,8 @@ __all__ = [
     "soft_shadows",
     "splat",
     "visibility_field",
+    "winding_numbers",
     "write_exr",
-    "__version__",
 ]
 __version__: str
 
@@ -355,6 +358,20 @@ class _OcclusionDict(TypedDict):
     hit: np.ndarray
     timings: dict[str, float]
 
+class _AllHitsDict(TypedDict):
+    ray_splits: np.ndarray
+    t: np.ndarray
+    triangle: np.ndarray
+    barycentric: np.ndarray
+    timings: dict[str, float]
+
+class _ClosestDict(TypedDict):
+    point: np.ndarray
+    distance: np.ndarray
+    triangle: np.ndarray
+    barycentric: np.ndarray
+    timings: dict[str, float]
+
 class _BvhStatsDict(TypedDict):
     triangles: int
     nodes: int
@@ -363,6 +380,7 @@ class _BvhStatsDict(TypedDict):
     depth: int
     sah: float
     build_seconds: float
+    winding_bytes: int
 
 class _DeviceInfo(TypedDict):
     name: str
@@ -563,6 +581,28 @@ def occluded(
     threads: Optional[int] = None,
     progress: Optional[Callable[[int, int], object]] = None,
 ) -> _OcclusionDict: ...
+def all_hits(
+    scene: Scene,
+    origins: ArrayLike,
+    directions: ArrayLike,
+    t_min: float = 0.0,
+    t_max: float = ...,
+    threads: Optional[int] = None,
+    progress: Optional[Callable[[int, int], object]] = None,
+) -> _AllHitsDict: ...
+def closest_points(
+    scene: Scene,
+    points: ArrayLike,
+    max_distance: float = ...,
+    threads: Optional[int] = None,
+    progress: Optional[Callable[[int, int], object]] = None,
+) -> _ClosestDict: ...
+def winding_numbers(
+    scene: Scene,
+    points: ArrayLike,
+    threads: Optional[int] = None,
+    progress: Optional[Callable[[int, int], object]] = None,
+) -> np.ndarray: ...
 def bvh_stats(scene: Scene) -> _BvhStatsDict: ...
 def device_info() -> _DeviceInfo: ...
 def check_memory(what: str, count: int, each: int) -> int: ...

@@ -17,13 +17,18 @@ from ._omni import OmniShadowResult
 from ._reflections import ReflectionResult
 from ._scene import Scene
 from ._shadows import ShadowResult
+from ._surface import surface_metrics
 from .errors import InputError
 from .results import DepthImages, Mesh
 
 __all__ = ["evaluate", "intermediate_cameras"]
 
-METRICS = ("sampling", "shadow", "geometry", "image", "reflection", "impostor", "cells")
-Metric = Literal["sampling", "shadow", "geometry", "image", "reflection", "impostor", "cells"]
+METRICS = (
+    "sampling", "shadow", "geometry", "surface", "image", "reflection", "impostor", "cells"
+)  # fmt: skip
+Metric = Literal[
+    "sampling", "shadow", "geometry", "surface", "image", "reflection", "impostor", "cells"
+]
 
 
 def default_metric(result: Any, reference: Any) -> str:
@@ -87,6 +92,8 @@ def evaluate(
     cameras: Optional[Sequence[Any]] = None,
     tolerance: float = 0.01,
     camera: Optional[Any] = None,
+    samples: int = 100_000,
+    threshold: Optional[float] = None,
 ) -> dict[str, Any]:
     """Measure a result's accuracy against a reference or the scene. Without ``metric``, it
     follows from the two arguments (see :func:`default_metric`): ``DepthImages`` + Scene ->
@@ -132,6 +139,21 @@ def evaluate(
     as a fraction of the true surface's pixels), ``mean_depth_error`` and ``max_depth_error``
     (world units, where both have a surface), and ``timings``. The tolerance at depth d is
     ``tolerance * d`` plus one pixel footprint.
+
+    ``evaluate(result, scene, "surface", samples=100_000, threshold=None, seed=0)`` measures
+    how far a reconstruction lies from the scene's surface and how much of it it covers, in
+    world units (the definitions of Tanks and Temples). ``result`` is a ``Mesh``, a trimesh mesh
+    (anything with ``vertices`` and ``faces``), a :class:`Points` result (its centres) or an
+    (N, 3) array of points. Meshes and the scene are sampled by area (``samples`` points each,
+    seeded by ``seed``); a point set is taken whole. ``accuracy_mean``, ``accuracy_median``,
+    ``accuracy_max``: distances from the result's samples to the scene's surface (their max is
+    one half of the Hausdorff distance); ``completeness_mean``, ``_median``, ``_max``: from the
+    scene's samples to the result (to its nearest point, for a point set); ``chamfer`` (the
+    mean of the two means), ``hausdorff`` (the larger max); ``precision`` and ``recall``: the
+    fractions of those distances below ``threshold`` (default 0.5% of the scene's bounding-box
+    diagonal), and ``fscore`` their harmonic mean; ``threshold``, the two distance arrays
+    (``accuracy_distances``, ``completeness_distances``) and ``timings``. Distances come from
+    :func:`scenesample.closest_points` (float64 exact).
 
     ``evaluate(view, scene, "cells", camera=None)`` measures a :class:`FieldView`
     (visibility-field.txt §6) against a full rasterization of ``scene`` from its camera (or
@@ -215,6 +237,8 @@ def evaluate(
         return cells_metric(images, scene, camera)
     if metric == "geometry":
         return _geometry_error(images, scene, cameras, tolerance)
+    if metric == "surface":
+        return surface_metrics(images, scene, samples, threshold, seed)
     return _sampling(images, scene, region, intermediate, redundancy, seed)
 
 

@@ -13,9 +13,9 @@ from . import _core
 from ._progress import Bar, Progress
 from ._scene import Scene, core_of
 from .errors import InputError, check_integer
-from .results import RayHits
+from .results import AllHits, RayHits
 
-__all__ = ["cast_rays", "occluded", "bvh_stats"]
+__all__ = ["cast_rays", "occluded", "all_hits", "count_hits", "bvh_stats"]
 
 
 def _rays(origins: Any, directions: Any) -> tuple[np.ndarray, np.ndarray, tuple[int, ...]]:
@@ -182,6 +182,84 @@ def occluded(
     return r["hit"].reshape(shape)
 
 
+def all_hits(
+    scene: Scene,
+    origins: Any,
+    directions: Any,
+    *,
+    t_min: float = 0.0,
+    t_max: float = float("inf"),
+    threads: Optional[int] = None,
+    progress: Progress = None,
+) -> AllHits:
+    """Every hit along each ray, nearest first, with no ``max_hits`` to guess: a ragged list in
+    Open3D's layout (``RaycastingScene.list_intersections``), whose memory is that of the hits
+    found.
+
+    Same BVH, watertight test, ``t`` units, barycentrics and input rules as
+    :func:`cast_rays`. Hits whose ``t`` agree within a relative 1e-5 (coincident or
+    duplicated triangles) count once, as with ``max_hits``, so ray ``i``'s hits are exactly
+    ``cast_rays(..., max_hits=k)``'s for any ``k`` at least its count.
+
+    Parameters
+    ----------
+    scene : Scene
+    origins, directions : (..., 3) array_like of float
+        Broadcast against each other; rays are numbered in C order over the batch.
+    t_min, t_max : float
+    threads : int, optional
+    progress : bool, callable or None
+
+    Returns
+    -------
+    AllHits
+        ``ray_splits`` (N + 1,) int64, ``t`` (H,) float32, ``triangle`` (H,) int32,
+        ``barycentric`` (H, 2) float32, ``ray_ids`` and ``count`` (per ray, batch shape).
+    """
+    o, d, shape = _rays(origins, directions)
+    with Bar(progress, "rays", "rays") as bar:
+        r = _indexed(
+            shape,
+            lambda: _core.all_hits(
+                core_of(scene), o, d, float(t_min), float(t_max), _threads(threads),
+                bar.callback,
+            ),
+        )  # fmt: skip
+    return AllHits(
+        ray_splits=r["ray_splits"],
+        t=r["t"],
+        triangle=r["triangle"],
+        barycentric=r["barycentric"],
+        shape=tuple(shape),
+        timings=r["timings"],
+    )
+
+
+def count_hits(
+    scene: Scene,
+    origins: Any,
+    directions: Any,
+    *,
+    t_min: float = 0.0,
+    t_max: float = float("inf"),
+    threads: Optional[int] = None,
+    progress: Progress = None,
+) -> np.ndarray:
+    """How many distinct surfaces each ray crosses in ``t_min <= t < t_max``
+    (``RaycastingScene.count_intersections``; coincident hits count once, as in
+    :func:`all_hits`).
+
+    Returns
+    -------
+    (...) int64
+        In the rays' batch shape.
+    """
+    hits = all_hits(
+        scene, origins, directions, t_min=t_min, t_max=t_max, threads=threads, progress=progress
+    )
+    return hits.count
+
+
 def bvh_stats(scene: Scene) -> dict[str, Any]:
     """What the scene's ray-casting BVH holds (building it if needed).
 
@@ -190,7 +268,8 @@ def bvh_stats(scene: Scene) -> dict[str, Any]:
     dict
         ``triangles``, ``nodes`` (8-wide), ``blocks`` (leaf blocks of 4 triangles), ``bytes``
         (everything the queries read besides the rays: nodes, blocks and triangle ids),
-        ``depth``, ``sah`` (surface area heuristic cost relative to the root, Embree's measure)
-        and ``build_seconds``.
+        ``depth``, ``sah`` (surface area heuristic cost relative to the root, Embree's measure),
+        ``build_seconds`` and ``winding_bytes`` (the per-node records of
+        :func:`scenesample.winding_number`, 0 until it first runs on the scene).
     """
     return dict(_core.bvh_stats(core_of(scene)))

@@ -29,7 +29,7 @@ import numpy as np
 
 import scenesample as ss
 
-from . import _bench_backends, _bench_rays
+from . import _bench_backends, _bench_points, _bench_rays
 
 DEPTH_TARGET = 1.5
 
@@ -443,7 +443,7 @@ def main(argv: Optional[list[str]] = None) -> None:
         "which",
         nargs="?",
         default="all",
-        choices=["all", "rays", "peers", "nonredundant", "epr", "field", "backends"],
+        choices=["all", "rays", "points", "peers", "nonredundant", "epr", "field", "backends"],
         help="benchmark set",
     )
     p.add_argument(
@@ -463,6 +463,10 @@ def main(argv: Optional[list[str]] = None) -> None:
         only = a.scenes.split(",") if a.scenes else None
         r = _bench_rays.run(a.quick, a.rounds, only)
         _emit(_bench_rays.report(r), a.out or "docs/bench/rays.md", r, a.json)
+        return
+    if a.which == "points":
+        r = _bench_points.run(a.quick, a.rounds)
+        _emit(_bench_points.report(r), a.out or "docs/bench/points.md", r, a.json)
         return
     if a.which == "backends":
         r = _bench_backends.run(a.quick, a.repeats)

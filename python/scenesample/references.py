@@ -257,6 +257,25 @@ class Open3DReference:
         """Build the BVH now (Open3D builds it on the first query)."""
         self.cast(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32))
 
+    def closest_points(self, points: np.ndarray) -> dict[str, np.ndarray]:
+        """``compute_closest_points``: ``point`` (N, 3), ``distance`` (N,) float32 (measured
+        here from the point Open3D returns), ``triangle`` (N,) int32."""
+        r = self._scene.compute_closest_points(self._o3d.core.Tensor(points))
+        p = r["points"].numpy()
+        return {
+            "point": p,
+            "distance": np.linalg.norm(p - points, axis=1).astype(np.float32),
+            "triangle": r["primitive_ids"].numpy().astype(np.int64).astype(np.int32),
+        }
+
+    def signed_distance(self, points: np.ndarray) -> np.ndarray:
+        """``compute_signed_distance`` (N,) float32: negative inside (by ray parity)."""
+        return self._scene.compute_signed_distance(self._o3d.core.Tensor(points)).numpy()
+
+    def occupancy(self, points: np.ndarray) -> np.ndarray:
+        """``compute_occupancy`` (N,) float32: 1 inside, 0 outside (by ray parity)."""
+        return self._scene.compute_occupancy(self._o3d.core.Tensor(points)).numpy()
+
 
 def embree_memory(scene: Scene) -> int:
     """Bytes Embree holds for the BVH it builds over ``scene`` with embreex's settings (robust

@@ -12,7 +12,7 @@ from . import _core
 from ._scene import Scene
 from .errors import InputError
 
-__all__ = ["DepthImages", "Mesh", "RayHits"]
+__all__ = ["AllHits", "ClosestPoints", "DepthImages", "Mesh", "RayHits"]
 
 
 @dataclass(eq=False, repr=False)
@@ -207,6 +207,88 @@ class RayHits:
     def __repr__(self) -> str:
         trace = self.timings.get("trace", float("nan"))
         return f"RayHits(shape={self.shape}, hit={int(self.hit.sum())}, trace={trace:.4f}s)"
+
+
+@dataclass(eq=False, repr=False)
+class AllHits:
+    """Every hit of a batch of rays (see :func:`scenesample.all_hits`), ragged: ray ``i`` (in
+    C order over the batch) has the hits ``ray_splits[i]:ray_splits[i + 1]``, nearest first.
+
+    Attributes
+    ----------
+    ray_splits : (N + 1,) int64
+        Offsets of each ray's hits; ``np.diff(ray_splits)`` is each ray's count.
+    t : (H,) float32
+        Hit distances in units of the ray's direction.
+    triangle : (H,) int32
+        Scene face index of each hit.
+    barycentric : (H, 2) float32
+        (u, v) of each hit (Embree's convention).
+    shape : tuple of int
+        The rays' batch shape (N is its product).
+    timings : dict of str to float
+        ``bvh_build`` and ``trace`` seconds.
+    """
+
+    ray_splits: np.ndarray
+    t: np.ndarray
+    triangle: np.ndarray
+    barycentric: np.ndarray
+    shape: tuple[int, ...] = ()
+    timings: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def ray_ids(self) -> np.ndarray:
+        """(H,) int64: the (flat) ray of each hit."""
+        return np.repeat(np.arange(len(self.ray_splits) - 1), np.diff(self.ray_splits))
+
+    @property
+    def count(self) -> np.ndarray:
+        """(...) int64: hits per ray, in the rays' batch shape."""
+        return np.diff(self.ray_splits).reshape(self.shape)
+
+    def __len__(self) -> int:
+        """The number of hits."""
+        return int(self.t.shape[0])
+
+    def as_dict(self) -> dict[str, Any]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    def __repr__(self) -> str:
+        return f"AllHits(shape={self.shape}, hits={len(self)})"
+
+
+@dataclass(eq=False, repr=False)
+class ClosestPoints:
+    """The closest surface point of each query point (see :func:`scenesample.closest_points`),
+    in the points' batch shape ``...``.
+
+    Attributes
+    ----------
+    point : (..., 3) float32
+        The closest point of the scene's surface; NaN where none lies within ``max_distance``.
+    distance : (...) float32
+        Its distance (computed in float64); ``+inf`` where none lies within ``max_distance``.
+    triangle : (...) int32
+        The face it lies on (the smaller id where faces tie); -1 where none.
+    barycentric : (..., 2) float32
+        (u, v) on that face, point = (1-u-v)*v0 + u*v1 + v*v2; 0 where none.
+    timings : dict of str to float
+        ``bvh_build`` (0 when the scene's BVH was cached) and ``query`` seconds.
+    """
+
+    point: np.ndarray
+    distance: np.ndarray
+    triangle: np.ndarray
+    barycentric: np.ndarray
+    timings: dict[str, float] = field(default_factory=dict)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    def __repr__(self) -> str:
+        q = self.timings.get("query", float("nan"))
+        return f"ClosestPoints(shape={self.distance.shape}, query={q:.4f}s)"
 
 
 @dataclass(eq=False, repr=False)

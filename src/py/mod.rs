@@ -9,6 +9,7 @@ mod errors;
 mod evaluate;
 mod field;
 mod impostors;
+mod points;
 mod rays;
 mod reconstruct;
 mod render;
@@ -169,6 +170,9 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(rays::cast_rays, m)?)?;
     m.add_function(wrap_pyfunction!(rays::occluded, m)?)?;
     m.add_function(wrap_pyfunction!(rays::bvh_stats, m)?)?;
+    m.add_function(wrap_pyfunction!(rays::all_hits, m)?)?;
+    m.add_function(wrap_pyfunction!(points::closest_points, m)?)?;
+    m.add_function(wrap_pyfunction!(points::winding_numbers, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate::sampling_metrics, m)?)?;
     m.add_function(wrap_pyfunction!(reconstruct::reconstruct, m)?)?;
     m.add_function(wrap_pyfunction!(shadows::soft_shadows, m)?)?;

@@ -29,15 +29,15 @@ fn query(py: Python<'_>, t_min: f32, t_max: f32, threads: Option<usize>) -> PyRe
     })
 }
 
-/// Run a ray query where `q.threads` says: `threads=1` on the calling thread, else on the pool;
-/// `progress(done, total)` hears the rays traced.
-fn on_threads<T: Send>(
+/// Run a ray or point query where `threads` says: `threads=1` on the calling thread, else on
+/// the pool; `progress(done, total)` hears the rays or points done.
+pub(crate) fn on_threads<T: Send>(
     py: Python<'_>,
-    q: &trace::Query,
+    threads: Threads,
     progress: Option<Py<PyAny>>,
     work: impl Fn() -> crate::error::Result<T> + Sync,
 ) -> PyResult<T> {
-    if q.threads == trace::Threads::One {
+    if threads == Threads::One {
         super::run_here(py, progress, work)
     } else {
         super::run_with(py, progress, work)
@@ -68,7 +68,7 @@ pub fn cast_rays<'py>(
     rays!(origins, directions);
     let q = query(py, t_min, t_max, threads)?;
     let s = scene.inner.clone();
-    let hits = on_threads(py, &q, progress, || {
+    let hits = on_threads(py, q.threads, progress, || {
         trace::nearest_hits(&s, origins, directions, max_hits, &q)
     })?;
     let n = origins.len();
@@ -105,12 +105,47 @@ pub fn occluded<'py>(
     rays!(origins, directions);
     let q = query(py, t_min, t_max, threads)?;
     let s = scene.inner.clone();
-    let r = on_threads(py, &q, progress, || {
+    let r = on_threads(py, q.threads, progress, || {
         trace::occluded(&s, origins, directions, &q)
     })?;
     let n = r.hit.len();
     let d = PyDict::new(py);
     d.set_item("hit", array(py, r.hit, &[n])?)?;
+    d.set_item(
+        "timings",
+        timings(py, r.bvh_build_seconds, r.trace_seconds)?,
+    )?;
+    Ok(d)
+}
+
+/// Every hit of each ray, ragged: `ray_splits` (N + 1,) offsets into `t`, `triangle`,
+/// `barycentric`.
+#[pyfunction]
+#[pyo3(signature = (scene, origins, directions, t_min=0.0, t_max=f32::INFINITY, threads=None, progress=None))]
+#[allow(clippy::too_many_arguments)]
+pub fn all_hits<'py>(
+    py: Python<'py>,
+    scene: &PyScene,
+    origins: &Bound<'py, PyAny>,
+    directions: &Bound<'py, PyAny>,
+    t_min: f32,
+    t_max: f32,
+    threads: Option<usize>,
+    progress: Option<Py<PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    rays!(origins, directions);
+    let q = query(py, t_min, t_max, threads)?;
+    let s = scene.inner.clone();
+    let r = on_threads(py, q.threads, progress, || {
+        trace::all_hits(&s, origins, directions, &q)
+    })?;
+    let (n, h) = (r.splits.len(), r.t.len());
+    let splits: Vec<i64> = r.splits.into_iter().map(|x| x as i64).collect();
+    let d = PyDict::new(py);
+    d.set_item("ray_splits", array(py, splits, &[n])?)?;
+    d.set_item("t", array(py, r.t, &[h])?)?;
+    d.set_item("triangle", array(py, r.triangle, &[h])?)?;
+    d.set_item("barycentric", rows_owned(py, r.barycentric, &[h, 2])?)?;
     d.set_item(
         "timings",
         timings(py, r.bvh_build_seconds, r.trace_seconds)?,
@@ -130,5 +165,6 @@ pub fn bvh_stats<'py>(py: Python<'py>, scene: &PyScene) -> PyResult<Bound<'py, P
     d.set_item("depth", st.depth)?;
     d.set_item("sah", st.sah)?;
     d.set_item("build_seconds", st.build_seconds)?;
+    d.set_item("winding_bytes", trace::points::winding_bytes(&s))?;
     Ok(d)
 }

@@ -14,6 +14,7 @@ pub mod bvh8;
 pub mod interleave;
 #[cfg(target_arch = "x86_64")]
 mod packet;
+pub mod points;
 pub mod refine;
 pub mod watertight;
 
@@ -323,14 +324,21 @@ fn prepare(
 ) -> Result<(Arc<Bvh>, f64)> {
     check_rays(origins, directions, q.t_min, q.t_max, q.threads)?;
     crate::counters::add(crate::counters::Op::RaysCast, origins.len() as u64);
+    bvh_for(scene, q.threads)
+}
+
+/// The scene's BVH (built on `threads` if not cached yet) and the seconds spent building it now
+/// (0 when it was cached).
+fn bvh_for(scene: &Scene, threads: Threads) -> Result<(Arc<Bvh>, f64)> {
     if scene.triangle_count() >= MAX_TRIANGLES as usize {
         return input_err!(
-            "cast_rays handles scenes of fewer than {MAX_TRIANGLES} triangles; this one has {}",
+            "the ray and point queries handle scenes of fewer than {MAX_TRIANGLES} triangles; \
+             this one has {}",
             scene.triangle_count()
         );
     }
     let had = scene.derived_if_built::<Bvh>().is_some();
-    let bvh = Bvh::of_with(scene, q.threads);
+    let bvh = Bvh::of_with(scene, threads);
     let built = if had { 0.0 } else { bvh.build_seconds };
     Ok((bvh, built))
 }
@@ -728,7 +736,8 @@ impl Job for NearestJob<'_> {
     #[inline(always)]
     fn chunk<K: Kernel>(&self, k: K, base: usize, (t, tri, bary): HitSlices<'_>) {
         let want = self.1;
-        let mut found = Vec::with_capacity(want + 1);
+        // Memory for the hits found, not for `want` (which may be far larger).
+        let mut found = Vec::with_capacity(want.min(64) + 1);
         let mut stack = Stack::new();
         for j in 0..t.len() / want {
             let r = self.0.ray(base + j);
@@ -749,6 +758,109 @@ impl Job for NearestJob<'_> {
             }
         }
     }
+}
+
+/// Every distinct hit of each ray of a chunk (the k-nearest sink without a k): how many per
+/// ray, appended to the first vector, and the hits, nearest first, to the second.
+struct AllJob<'a>(&'a Rays<'a>, usize);
+
+impl Job for AllJob<'_> {
+    type Out<'o> = (&'o mut Vec<u32>, &'o mut Vec<Hit>);
+
+    #[inline(always)]
+    fn chunk<K: Kernel>(&self, k: K, base: usize, (counts, hits): Self::Out<'_>) {
+        let mut found = Vec::new();
+        let mut stack = Stack::new();
+        for j in 0..self.1 {
+            let r = self.0.ray(base + j);
+            found.clear();
+            let mut sink = Nearest {
+                rays: self.0,
+                r: &r,
+                want: usize::MAX,
+                found: &mut found,
+                t_far: r.t_far,
+                front_only: false,
+            };
+            traverse(k, self.0.bvh, &r.ray, &mut sink, &mut stack);
+            counts.push(found.len() as u32);
+            hits.extend_from_slice(&found);
+        }
+    }
+}
+
+/// Every hit of every ray, ragged: ray i's hits are `splits[i]..splits[i + 1]`.
+#[derive(Debug, Default)]
+pub struct AllHits {
+    /// Offsets of each ray's hits (one more than there are rays).
+    pub splits: Vec<u64>,
+    pub t: Vec<f32>,
+    pub triangle: Vec<i32>,
+    pub barycentric: Vec<[f32; 2]>,
+    pub bvh_build_seconds: f64,
+    pub trace_seconds: f64,
+}
+
+/// Every hit along each ray in `[t_min, t_max)`, nearest first, with memory for the hits found
+/// only. Hits within [`SAME_HIT`] of each other count once, as in [`nearest_hits`].
+pub fn all_hits(
+    scene: &Scene,
+    origins: &[[f32; 3]],
+    directions: &[[f32; 3]],
+    q: &Query,
+) -> Result<AllHits> {
+    on_threads(q.threads, || {
+        let (bvh, built) = prepare(scene, origins, directions, q)?;
+        let start = Instant::now();
+        let job = Rays::new(&bvh.tree, origins, directions, q);
+        let n = origins.len();
+        let progress = q.report.then(crate::process::counter).flatten();
+        if let Some(p) = &progress {
+            p.add_total(n as u64);
+        }
+        let each = |c: usize| -> Result<(Vec<u32>, Vec<Hit>)> {
+            crate::process::check()?;
+            let len = CHUNK.min(n - c * CHUNK);
+            let (mut counts, mut hits) = (Vec::with_capacity(len), Vec::new());
+            dispatch(&AllJob(&job, len), c * CHUNK, (&mut counts, &mut hits));
+            if let Some(p) = &progress {
+                p.advance(len as u64);
+            }
+            Ok((counts, hits))
+        };
+        let chunks = n.div_ceil(CHUNK);
+        let parts: Vec<(Vec<u32>, Vec<Hit>)> = if q.threads == Threads::One {
+            (0..chunks).map(each).collect::<Result<_>>()?
+        } else {
+            (0..chunks)
+                .into_par_iter()
+                .map(each)
+                .collect::<Result<_>>()?
+        };
+        let total: usize = parts.iter().map(|p| p.1.len()).sum();
+        let mut out = AllHits {
+            splits: Vec::with_capacity(n + 1),
+            t: Vec::with_capacity(total),
+            triangle: Vec::with_capacity(total),
+            barycentric: Vec::with_capacity(total),
+            bvh_build_seconds: built,
+            trace_seconds: 0.0,
+        };
+        out.splits.push(0);
+        for (counts, hits) in parts {
+            for c in counts {
+                let last = *out.splits.last().expect("starts at 0");
+                out.splits.push(last + c as u64);
+            }
+            for h in hits {
+                out.t.push(h.t);
+                out.triangle.push(h.triangle as i32);
+                out.barycentric.push(h.bary);
+            }
+        }
+        out.trace_seconds = start.elapsed().as_secs_f64();
+        Ok(out)
+    })?
 }
 
 /// The k-nearest-hits sink: up to `want` distinct hits, refined as they are found, nearest
@@ -1246,6 +1358,35 @@ pub(crate) mod tests {
                         assert_eq!(tri, wtri as i32, "ray {i} hit {m}");
                     }
                 }
+            }
+        }
+    }
+
+    #[test]
+    fn all_hits_are_the_nearest_hits_without_a_k() {
+        let s = soup(1500, 23);
+        let (o, d) = random_rays(3000, 24);
+        for threads in [Threads::All, Threads::One] {
+            let q = Query {
+                threads,
+                ..Query::new(0.0, f32::INFINITY)
+            };
+            let all = all_hits(&s, &o, &d, &q).unwrap();
+            assert_eq!(all.splits.len(), o.len() + 1);
+            let k = all.splits.windows(2).map(|w| w[1] - w[0]).max().unwrap() as usize;
+            assert!(k >= 2, "the soup must give some rays several hits");
+            let h = nearest_hits(&s, &o, &d, k, &q).unwrap();
+            for i in 0..o.len() {
+                let (a, b) = (all.splits[i] as usize, all.splits[i + 1] as usize);
+                assert_eq!(
+                    &all.triangle[a..b],
+                    &h.triangle[i * k..i * k + b - a],
+                    "ray {i}"
+                );
+                assert_eq!(&all.t[a..b], &h.t[i * k..i * k + b - a], "ray {i}");
+                assert!(h.triangle[i * k + b - a..(i + 1) * k]
+                    .iter()
+                    .all(|&t| t == -1));
             }
         }
     }

@@ -1,16 +1,18 @@
-"""``python -m scenesample.experiments {sampling,shadows,epr,visibility_field,impostors}
-[options]``; see each module."""
+"""``python -m scenesample.experiments
+{sampling,shadows,reconstruction,epr,visibility_field,impostors} [options]``; see each
+module."""
 
 from __future__ import annotations
 
 import argparse
 from typing import Optional
 
-from . import epr, impostors, sampling, shadows, visibility_field
+from . import epr, impostors, reconstruction, sampling, shadows, visibility_field
 
 EXPERIMENTS = {
     "sampling": sampling,
     "shadows": shadows,
+    "reconstruction": reconstruction,
     "epr": epr,
     "visibility_field": visibility_field,
     "impostors": impostors,

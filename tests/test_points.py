@@ -1,0 +1,255 @@
+"""Point queries (closest points, winding numbers, signed distance, occupancy) and every-hit ray
+queries, against a float64 brute force written here in numpy, against Open3D's
+RaycastingScene, and on Open3D's own documented example."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scenesample as ss
+from conftest import SHARED, load_quiet
+
+
+def closest_on_triangles(p: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """Squared distances (T,) from point p (3,) to triangles (T, 3, 3), float64, by projecting
+    onto the plane when inside and onto the three edges otherwise (an implementation unlike
+    the package's Voronoi-region one)."""
+    a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]
+
+    def seg(x, y):
+        e = y - x
+        l2 = (e * e).sum(1)
+        t = np.clip(((p - x) * e).sum(1) / np.where(l2 > 0, l2, 1), 0, 1)
+        q = x + e * t[:, None]
+        return ((q - p) ** 2).sum(1)
+
+    edges = np.minimum(np.minimum(seg(a, b), seg(b, c)), seg(c, a))
+    n = np.cross(b - a, c - a)
+    nl = np.linalg.norm(n, axis=1)
+    ok = nl > 0
+    n = n / np.where(ok, nl, 1)[:, None]
+    h = ((p - a) * n).sum(1)
+    r = p - n * h[:, None]
+    inside = ok.copy()
+    for x, y in ((a, b), (b, c), (c, a)):
+        inside &= (np.cross(y - x, r - x) * n).sum(1) >= 0
+    return np.where(inside, np.minimum(h * h, edges), edges)
+
+
+def brute(scene: ss.Scene, pts: np.ndarray) -> np.ndarray:
+    tris = scene.vertices.astype(np.float64)[scene.faces.astype(np.int64)]
+    return np.array([np.sqrt(closest_on_triangles(p, tris).min()) for p in pts])
+
+
+def unit_box() -> ss.Scene:
+    trimesh = pytest.importorskip("trimesh")
+    box = trimesh.creation.box(extents=(1, 1, 1))
+    box.apply_translation((0.5, 0.5, 0.5))
+    return ss.Scene.from_trimesh(box)
+
+
+def test_open3d_s_documented_example():
+    """Open3D's RaycastingScene tutorial: a unit box queried at its centre, outside a corner and
+    on a corner."""
+    box = unit_box()
+    q = np.array([[0.5, 0.5, 0.5], [-0.5, -0.5, -0.5], [0, 0, 0]], np.float32)
+    np.testing.assert_allclose(ss.closest_points(box, q).distance, [0.5, np.sqrt(0.75), 0], 1e-6)
+    np.testing.assert_allclose(ss.signed_distance(box, q), [-0.5, np.sqrt(0.75), 0], 1e-6)
+    np.testing.assert_array_equal(ss.occupancy(box, q), [1, 0, 0])
+    # The winding number at a corner of a cube is 1/8: on the surface, not inside.
+    np.testing.assert_allclose(ss.winding_number(box, q), [1, 0, 0.125], atol=1e-6)
+
+
+def test_hard_points_match_a_float64_brute_force():
+    """Points on vertices, on edges, exactly on faces (vertex means), far away and inside a
+    closed mesh: distances within 1e-6 relative of the brute force (or 1e-7 of the scene's
+    size for points on the surface), and the reported point lies that far away on the face
+    reported."""
+    scene = ss.scenes.icosphere(2)
+    v = scene.vertices.astype(np.float64)
+    f = scene.faces.astype(np.int64)
+    rng = np.random.default_rng(3)
+    pts = np.concatenate(
+        [
+            v[:40],  # on vertices
+            (v[f[:40, 0]] + v[f[:40, 1]]) / 2,  # on edges
+            v[f[:40]].mean(1),  # on faces
+            rng.normal(size=(40, 3)) * 50,  # far
+            rng.normal(size=(40, 3)) * 0.3,  # inside
+            rng.uniform(-1.2, 1.2, (200, 3)),  # anywhere near
+        ]
+    ).astype(np.float32)
+    got = ss.closest_points(scene, pts)
+    want = brute(scene, pts.astype(np.float64))
+    np.testing.assert_allclose(got.distance, want, rtol=1e-6, atol=1e-7)
+    reached = np.linalg.norm(got.point.astype(np.float64) - pts, axis=1)
+    np.testing.assert_allclose(reached, want, rtol=1e-5, atol=1e-6)
+    # The point is on the face reported, at the barycentrics reported.
+    corners = v[f[got.triangle]]
+    u, w = got.barycentric[:, :1].astype(np.float64), got.barycentric[:, 1:].astype(np.float64)
+    at = corners[:, 0] * (1 - u - w) + corners[:, 1] * u + corners[:, 2] * w
+    np.testing.assert_allclose(at, got.point, atol=1e-5)
+    # max_distance cuts off the far points only.
+    capped = ss.closest_points(scene, pts, max_distance=2.0)
+    far = want > 2.0
+    assert (capped.triangle[far] == -1).all() and np.isinf(capped.distance[far]).all()
+    np.testing.assert_array_equal(capped.triangle[~far], got.triangle[~far])
+
+
+def test_inside_is_the_winding_number_and_agrees_with_ray_parity_on_a_closed_mesh():
+    scene = ss.scenes.icosphere(3)
+    rng = np.random.default_rng(5)
+    pts = rng.uniform(-1.3, 1.3, (4000, 3)).astype(np.float32)
+    r = np.linalg.norm(pts, axis=1)
+    clear = np.abs(r - 1) > 0.02  # away from the faceted surface
+    w = ss.winding_number(scene, pts)
+    np.testing.assert_allclose(w[clear], (r[clear] < 1).astype(float), atol=3e-2)
+    occ = ss.occupancy(scene, pts)
+    assert occ.dtype == np.float32
+    # Ray parity: count crossings along +x.
+    crossings = ss.count_hits(scene, pts, [1.0, 0.0, 0.0])
+    np.testing.assert_array_equal(occ[clear], (crossings[clear] % 2).astype(np.float32))
+    sd = ss.signed_distance(scene, pts)
+    np.testing.assert_array_equal(np.sign(sd[clear]), np.where(occ[clear] > 0, -1, 1))
+    np.testing.assert_allclose(np.abs(sd), ss.closest_points(scene, pts).distance)
+
+
+def test_an_open_mesh_keeps_its_inside_where_ray_parity_loses_it():
+    """A sphere with a cap cut off: the winding number inside stays above 0.5 away from the
+    hole (ray parity through the hole says outside); far outside it stays near 0."""
+    scene = ss.scenes.icosphere(3)
+    v, f = scene.vertices, scene.faces
+    keep = v[f].mean(1)[:, 2] < 0.8
+    cut = ss.Scene.from_arrays(v, f[keep])
+    inside = np.array([[0, 0, 0], [0.3, 0.2, -0.4], [0, 0, 0.5]], np.float32)
+    np.testing.assert_array_equal(ss.occupancy(cut, inside), [1, 1, 1])
+    up = ss.count_hits(cut, inside, [0.0, 0.0, 1.0])
+    assert (up == 0).all(), "ray parity upward through the hole says outside"
+    assert ss.occupancy(cut, [[0, 0, 3.0], [2.0, 0, 0]]).sum() == 0
+
+
+@pytest.mark.parametrize("name", ["khr_clearcoat_car_paint", "khr_simple_instancing"])
+def test_open3d_agrees_on_watertight_shared_scenes(name):
+    o3d = pytest.importorskip("open3d")
+    if name not in SHARED:
+        pytest.skip("shared scenes not present")
+    scene = load_quiet(SHARED[name])
+    rc = o3d.t.geometry.RaycastingScene()
+    rc.add_triangles(
+        o3d.core.Tensor(scene.vertices.astype(np.float32)),
+        o3d.core.Tensor(scene.faces.astype(np.uint32)),
+    )
+    lo, hi = scene.bounds.astype(np.float64)
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(lo - 0.1 * (hi - lo), hi + 0.1 * (hi - lo), (20000, 3)).astype(np.float32)
+    q = o3d.core.Tensor(pts)
+    theirs = np.linalg.norm(rc.compute_closest_points(q)["points"].numpy() - pts, axis=1)
+    ours = ss.closest_points(scene, pts).distance
+    diag = float(np.linalg.norm(hi - lo))
+    np.testing.assert_allclose(ours, theirs, rtol=1e-4, atol=1e-5 * diag)
+    agree = (ss.occupancy(scene, pts) == rc.compute_occupancy(q).numpy()).mean()
+    assert agree >= 0.999, agree
+    sd = rc.compute_signed_distance(q).numpy()
+    assert (np.sign(ss.signed_distance(scene, pts)) == np.sign(sd)).mean() >= 0.999
+
+
+def test_all_hits_are_the_k_nearest_with_no_k_and_count_them():
+    scene = ss.scenes.shapes(seed=4, detail=1)
+    cam = ss.Camera.look_at((3, 2, 3), (0, 0, 0), yfov=0.8, width=24, height=18)
+    o, d = cam.pixel_rays()
+    every = ss.all_hits(scene, o, d)
+    counts = every.count
+    assert counts.shape == (18, 24) and every.ray_splits.dtype == np.int64
+    assert every.ray_splits[0] == 0 and every.ray_splits[-1] == len(every)
+    k = int(counts.max())
+    dense = ss.cast_rays(scene, o, d, max_hits=k)
+    np.testing.assert_array_equal(dense.count, counts)
+    flat_t = dense.t.reshape(-1, k)
+    flat_tri = dense.triangle.reshape(-1, k)
+    for i in range(counts.size):
+        a, b = every.ray_splits[i], every.ray_splits[i + 1]
+        np.testing.assert_array_equal(every.t[a:b], flat_t[i, : b - a])
+        np.testing.assert_array_equal(every.triangle[a:b], flat_tri[i, : b - a])
+    np.testing.assert_array_equal(every.ray_ids, np.repeat(np.arange(counts.size), counts.ravel()))
+    np.testing.assert_array_equal(ss.count_hits(scene, o, d), counts)
+
+
+def test_a_duplicated_surface_is_hit_once():
+    scene = ss.scenes.icosphere(1)
+    doubled = ss.Scene.from_arrays(
+        np.concatenate([scene.vertices, scene.vertices]),
+        np.concatenate([scene.faces, scene.faces + len(scene.vertices)]),
+    )
+    n = ss.count_hits(doubled, [[0, 0, 5.0]], [[0, 0, -1.0]])
+    assert n.tolist() == [2]
+
+
+def test_shapes_and_bad_input():
+    scene = ss.scenes.icosphere(1)
+    grid = np.zeros((2, 3, 4, 3), np.float32)
+    r = ss.closest_points(scene, grid)
+    assert r.distance.shape == r.triangle.shape == (2, 3, 4)
+    assert r.point.shape == (2, 3, 4, 3) and r.barycentric.shape == (2, 3, 4, 2)
+    assert ss.winding_number(scene, grid).shape == (2, 3, 4)
+    assert ss.signed_distance(scene, [0.0, 0.0, 0.0]).shape == ()
+    with pytest.raises(ss.InputError, match=r"points must have shape \(\.\.\., 3\)"):
+        ss.closest_points(scene, np.zeros((4, 2)))
+    bad = grid.copy()
+    bad[1, 2, 3, 0] = np.nan
+    with pytest.raises(ss.InputError, match=r"points\[1, 2, 3\] is not finite"):
+        ss.closest_points(scene, bad)
+    with pytest.raises(ss.InputError, match=r"points\[1, 2, 3\] is not finite"):
+        ss.occupancy(scene, bad)
+    with pytest.raises(ss.InputError, match="max_distance"):
+        ss.closest_points(scene, grid, max_distance=-1.0)
+    with pytest.raises(ss.InputError, match="threads"):
+        ss.closest_points(scene, grid, threads=0)
+    empty = ss.closest_points(scene, np.zeros((0, 3)))
+    assert empty.distance.shape == (0,)
+
+
+def test_surface_metrics_of_a_mesh_against_itself_and_a_grown_copy():
+    scene = ss.scenes.icosphere(3)
+    same = ss.evaluate(scene, scene, "surface", samples=20_000)
+    assert same["accuracy_max"] < 1e-6 and same["completeness_max"] < 1e-6
+    assert same["precision"] == same["recall"] == same["fscore"] == 1.0
+    # Every vertex pushed out by 2% of the radius: every distance about 0.02 (the faceted
+    # surface moves by 2% of its own distance from the centre, 0.98-1 here).
+    grown = ss.Scene.from_arrays(scene.vertices * 1.02, scene.faces)
+    m = ss.evaluate(grown, scene, "surface", samples=20_000, threshold=0.01)
+    for k in ("accuracy", "completeness"):
+        assert 0.019 < m[f"{k}_median"] < 0.0205, (k, m[f"{k}_median"])
+    assert m["precision"] == m["recall"] == m["fscore"] == 0.0
+    assert m["chamfer"] == pytest.approx((m["accuracy_mean"] + m["completeness_mean"]) / 2)
+    assert m["hausdorff"] == max(m["accuracy_max"], m["completeness_max"])
+    assert m["accuracy_distances"].shape == (20_000,)
+
+
+def test_surface_metrics_take_points_meshes_and_trimesh_and_follow_the_seed():
+    trimesh = pytest.importorskip("trimesh")
+    scene = ss.scenes.shapes(seed=1, detail=1)
+    cams = ss.scenes.reference_cameras(scene, 96)
+    nr = ss.discretize(scene, cams, "nonredundant")
+    mesh = ss.reconstruct(nr, "hybrid")
+    points = nr.position[nr.mask]
+    a = ss.evaluate(mesh, scene, "surface", samples=5000, seed=1)
+    b = ss.evaluate(mesh.to_trimesh(), scene, "surface", samples=5000, seed=1)
+    assert a["accuracy_mean"] == b["accuracy_mean"] and a["recall"] == b["recall"]
+    c = ss.evaluate(mesh, scene, "surface", samples=5000, seed=2)
+    assert c["accuracy_mean"] != a["accuracy_mean"]
+    p = ss.evaluate(points, scene, "surface", samples=5000)
+    # A point set's samples are the points themselves, which lie on the surface.
+    assert p["accuracy_max"] < 1e-3 * np.linalg.norm(np.ptp(scene.bounds, axis=0))
+    assert len(p["accuracy_distances"]) == len(points)
+    epr = ss.scenes.reflective_room(spheres=2)
+    pts = ss.discretize(epr, method="epr", eye=ss.scenes.reflective_room_eye(64), resolution=16)
+    # EPR points lie in their triangle's plane, within their square's side of the triangle.
+    assert ss.evaluate(pts, epr, "surface", samples=2000)["accuracy_max"] <= pts.length.max()
+    box = trimesh.creation.box()
+    assert ss.evaluate(box, ss.Scene.from_trimesh(box), "surface", samples=500)["fscore"] == 1
+    with pytest.raises(ss.InputError, match="metric='surface' measures"):
+        ss.evaluate(np.zeros((4, 2)), scene, "surface")
+    with pytest.raises(ss.InputError, match="samples"):
+        ss.evaluate(mesh, scene, "surface", samples=0)
+    with pytest.raises(ss.InputError, match="threshold"):
+        ss.evaluate(mesh, scene, "surface", threshold=-1.0)
