@@ -153,8 +153,12 @@ def bench_scene(
 
             tm = trimesh.Trimesh(scene.vertices, scene.faces, process=False)
             few = pts[:trimesh_n]
-            t_tm = _seconds(lambda m=tm, f=few: trimesh.proximity.closest_point(m, f))
-            # Per point: trimesh on the subset against our best round on the whole set.
+            t_tm = min(
+                _seconds(lambda m=tm, f=few: trimesh.proximity.closest_point(m, f))
+                for _ in range(2)
+            )
+            # Per point: trimesh's best of two rounds on the subset against our best round on
+            # the whole set.
             row["trimesh"] = float((t_tm / len(few)) / (t["ours"].min() / len(pts)))
         if watertight:
             row["occupancy_agreement"] = float(
