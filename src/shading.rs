@@ -20,6 +20,12 @@ use crate::types::DepthImages;
 /// Ambient radiance as a fraction of the albedo.
 pub const AMBIENT: f64 = 0.08;
 
+/// A frame's lights leave its view dark when fewer than this share of the pixels that see a
+/// surface get direct light at least as bright as their ambient light: [`frame`] then adds the
+/// default light, as for a scene with no light at all (the toy car's only light, a small
+/// emissive part inside it, lights 0.4% of a view of it).
+pub const DARK_VIEW: f64 = 0.1;
+
 /// Radiance of the default light, arriving when a scene has no light.
 pub const DEFAULT_RADIANCE: f64 = 3.0;
 
@@ -171,6 +177,16 @@ pub fn shade(s: &Surface, viewer: DVec3, lights: &[ShadeLight]) -> DVec3 {
     shade_visible(s, viewer, lights, |_| 1.0)
 }
 
+/// The light every surface gets without any light: [`AMBIENT`] of its albedo.
+fn ambient(s: &Surface) -> DVec3 {
+    s.albedo * AMBIENT
+}
+
+/// Rec. 709 luminance of linear RGB.
+fn luminance(c: DVec3) -> f64 {
+    0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
+}
+
 /// [`shade`] with light `i`'s contribution scaled by `visibility(i)` (the fraction of it that
 /// reaches the point: shadows).
 pub fn shade_visible(
@@ -187,7 +203,7 @@ pub fn shade_visible(
     let alpha = (s.roughness.clamp(0.03, 1.0)).powi(2);
     let f0 = DVec3::splat(0.04).lerp(s.albedo, s.metallic);
     let diffuse = s.albedo * (1.0 - s.metallic) / std::f64::consts::PI;
-    let mut out = s.albedo * AMBIENT;
+    let mut out = ambient(s);
     for (i, l) in lights.iter().enumerate() {
         let (to_light, e) = arriving(l, s.position);
         let nl = n.dot(to_light);
@@ -257,14 +273,16 @@ pub fn diffuse(s: &Surface, env: &Prelit) -> DVec3 {
 
 /// A frame: the lit colour of every pixel of `gbuffer` (one image from `camera`), black where it
 /// has no surface. `lights` are shaded in order, light i scaled at each pixel by
-/// `visibility[i]` when given (row-major, one value per pixel).
+/// `visibility[i]` when given (row-major, one value per pixel). With no lights, or where they
+/// leave the view dark ([`DARK_VIEW`]), the default light is added; the flag says whether it
+/// was.
 pub fn frame(
     scene: &Scene,
     camera: &Camera,
     gbuffer: &DepthImages,
     lights: &[ShadeLight],
     visibility: &[Option<Vec<f32>>],
-) -> Result<Vec<[f32; 3]>> {
+) -> Result<(Vec<[f32; 3]>, bool)> {
     use rayon::prelude::*;
     let pixels = camera.width as usize * camera.height as usize;
     if gbuffer.n != 1 || gbuffer.triangle.len() != pixels {
@@ -290,19 +308,42 @@ pub fn frame(
         );
     }
     let eye = camera.eye();
-    Ok((0..pixels)
-        .into_par_iter()
-        .map(|px| {
-            let t = gbuffer.triangle[px];
-            if t < 0 {
-                return [0.0; 3];
-            }
-            let p = DVec3::from_array(gbuffer.position[px].map(f64::from));
-            let s = surface(scene, t as usize, p);
-            let seen = |i: usize| visibility[i].as_ref().map_or(1.0, |v| v[px] as f64);
-            shade_visible(&s, eye, lights, seen).as_vec3().to_array()
-        })
-        .collect())
+    let shaded = |lights: &[ShadeLight], visibility: &[Option<Vec<f32>>]| {
+        (0..pixels)
+            .into_par_iter()
+            .map(|px| {
+                let t = gbuffer.triangle[px];
+                if t < 0 {
+                    return ([0.0; 3], false);
+                }
+                let p = DVec3::from_array(gbuffer.position[px].map(f64::from));
+                let s = surface(scene, t as usize, p);
+                let seen = |i: usize| visibility[i].as_ref().map_or(1.0, |v| v[px] as f64);
+                let c = shade_visible(&s, eye, lights, seen);
+                let a = luminance(ambient(&s));
+                (c.as_vec3().to_array(), a > 0.0 && luminance(c) >= 2.0 * a)
+            })
+            .collect::<Vec<_>>()
+    };
+    if lights.is_empty() {
+        let out = shaded(&[default_light(camera)], &[None]);
+        return Ok((out.into_iter().map(|(c, _)| c).collect(), true));
+    }
+    let out = shaded(lights, visibility);
+    let seen = gbuffer.triangle.iter().filter(|&&t| t >= 0).count();
+    let lit = out.iter().filter(|(_, lit)| *lit).count();
+    let dark = seen > 0 && (lit as f64) < DARK_VIEW * seen as f64;
+    if !dark {
+        return Ok((out.into_iter().map(|(c, _)| c).collect(), false));
+    }
+    let mut more = lights.to_vec();
+    more.push(default_light(camera));
+    let mut vis = visibility.to_vec();
+    vis.push(None);
+    Ok((
+        shaded(&more, &vis).into_iter().map(|(c, _)| c).collect(),
+        true,
+    ))
 }
 
 /// The surface of triangle `t` at `p`: interpolated vertex normal (geometric when the scene has

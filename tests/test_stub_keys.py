@@ -114,6 +114,7 @@ def test_every_returned_dict_matches_its_stub(recorded, gpu, tmp_path):
     ss.occluded(scene, o, d)
     ss.all_hits(scene, o, d)
     ss.closest_points(scene, o)
+    ss.render(scene, eye, effects=[])
     ss.bvh_stats(scene)
     ss.device_info(triangles=1000, pixels=64 * 64)
     typed = {n for n, a in returns.items() if a.startswith("_") or a.startswith("tuple[")}

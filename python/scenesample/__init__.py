@@ -11,7 +11,8 @@ Conventions (shared by every function):
 - Every result carries ``timings`` (seconds per stage).
 """
 
-from . import errors, methods, plot, references, scenes
+# `_env` first: on a headless machine it quiets Mesa's device-selection layer (see its notes).
+from . import _env, errors, methods, plot, references, scenes  # noqa: F401
 from ._api import device_info, discretize, reconstruct
 from ._core import Camera
 from ._core import __version__ as __version__

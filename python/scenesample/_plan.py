@@ -19,7 +19,7 @@ from ._reflections import reflections
 from ._scene import Scene
 from ._shadows import AreaLight, soft_shadows
 from .errors import GpuError, InputError
-from .imageio import linear_to_srgb
+from .imageio import auto_exposure, linear_to_srgb
 
 __all__ = ["Effect", "Frame", "plan", "render", "rates", "QUALITY", "THROUGHPUT"]
 
@@ -122,9 +122,11 @@ class Frame:
         material's metallic and roughness, under the scene's punctual lights (colour x
         intensity, inverse-square falloff, glTF range and spot cones) and its area lights
         (emissive objects and ``area_lights``: a unit-radiance source toward each centre), each
-        scaled by its shadow effect's visibility where one ran; with no light at all, a default
-        light from the camera's upper left; plus 0.08 ambient. Where a reflections effect ran,
-        its reflective pixels are that effect's image.
+        scaled by its shadow effect's visibility where one ran; plus 0.08 ambient. With no
+        light at all, or lights that leave the view dark (fewer than 10% of the visible pixels
+        get direct light as bright as their ambient light: the toy car's one emissive part),
+        the default light from the camera's upper left joins them (``stats["default_light"]``).
+        Where a reflections effect ran, its reflective pixels are that effect's image.
     effects : dict of str to result
         Each effect run, by :attr:`Effect.name`: a ShadowResult, OmniShadowResult or
         ReflectionResult.
@@ -133,7 +135,8 @@ class Frame:
     mask : (H, W) bool
         Pixels that see a surface.
     stats : dict
-        ``effects_run``, ``reflectors``, ``lights``, the operations counted while rendering
+        ``effects_run``, ``reflectors``, ``lights``, ``default_light``, the operations counted
+        while rendering
         (``cube_maps``, ``splat_passes``, ``shadow_views``, ``rays_cast``), and per effect
         ``estimated_seconds`` and ``seconds``.
     timings : dict of str to float
@@ -147,8 +150,17 @@ class Frame:
     stats: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
 
-    def to_srgb8(self) -> np.ndarray:
-        return linear_to_srgb(self.image)
+    def to_srgb8(self, exposure: Union[float, str] = 1.0) -> np.ndarray:
+        """(H, W, 3) uint8 sRGB of :attr:`image` times ``exposure``: a number (1: the image as
+        shaded, what the image metrics compare), or ``"auto"``, which meters the view as a
+        camera does: the log-average luminance of the pixels that see a surface becomes 0.18
+        (mid grey; Reinhard et al., "Photographic Tone Reproduction", 2002), the scale kept
+        within 1/16..16 (:func:`scenesample.imageio.auto_exposure`)."""
+        if exposure == "auto":
+            exposure = auto_exposure(self.image, self.mask)
+        if isinstance(exposure, str) or not np.isfinite(exposure) or exposure <= 0:
+            raise InputError(f"exposure must be a positive number or 'auto', got {exposure!r}")
+        return linear_to_srgb(self.image * np.float32(exposure))
 
     def __repr__(self) -> str:
         h, w, _ = self.image.shape
@@ -462,7 +474,7 @@ def render(
         results[e.name] = _run_effect(e, scene, camera, seed)
         timings[e.name] = time.perf_counter() - t
     t = time.perf_counter()
-    image, lights = _compose(scene, camera, g, chosen, results, area_lights)
+    image, lights, rig = _compose(scene, camera, g, chosen, results, area_lights)
     timings["compose"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - total
     # What this call ran: the sum of its effects' own counts (never process-wide differences,
@@ -473,6 +485,7 @@ def render(
         len(e.params["reflectors"]) for e in chosen if e.kind == "reflections"
     )
     stats["lights"] = lights
+    stats["default_light"] = rig
     stats["effects"] = {
         e.name: {"estimated_seconds": e.estimate["seconds"], "seconds": timings[e.name]}
         for e in chosen
@@ -527,7 +540,8 @@ def _compose(
 ) -> tuple[np.ndarray, int]:
     """The frame's image, shaded in Rust by the package's one model (``shading::frame``):
     each light scaled by its shadow effect's visibility; the reflective pixels are the
-    reflections effect's image. Also returns how many lights lit it."""
+    reflections effect's image. Also returns how many lights lit it, and whether the default
+    light was added because the scene's left the view dark."""
     point_vis: dict[int, np.ndarray] = {}
     area_vis: dict[str, np.ndarray] = {}
     reflected = None
@@ -540,7 +554,7 @@ def _compose(
         else:
             reflected = r
     areas = emissive_lights(scene) + [(f"area light {k}", a) for k, a in enumerate(area_lights)]
-    image = _core.shade_frame(
+    image, rig = _core.shade_frame(
         scene._core,
         camera,
         g.triangle[0],
@@ -550,4 +564,4 @@ def _compose(
     )
     if reflected is not None:
         image[reflected.reflective] = reflected.image[reflected.reflective]
-    return image, len(scene.lights) + len(areas)
+    return image, len(scene.lights) + len(areas), rig

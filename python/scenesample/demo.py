@@ -1,7 +1,7 @@
 """The main job: load a scene, discretize it from a few views on the GPU, cross-check the
 triangle ids with CPU ray casts, write EXR and PNG images, and print what each stage cost.
 
-    python -m scenesample.demo [--scene PATH] [--out DIR] [--views N] [--size W H]
+    python -m scenesample.demo [--scene PATH] [--out DIR] [--views N] [--size W H] [--quick]
 
 Without --scene it uses a real scene from ../shared/scenes when that folder is present (the toy
 car, else the bunny), otherwise a procedural one.
@@ -18,7 +18,15 @@ from typing import Optional
 import numpy as np
 
 import scenesample as ss
-from scenesample.imageio import depth_to_rgb, ids_to_rgb, linear_to_srgb, normal_to_rgb, write_png
+from scenesample import gallery
+from scenesample.imageio import (
+    depth_to_rgb,
+    ids_to_rgb,
+    labelled_sheet,
+    linear_to_srgb,
+    normal_to_rgb,
+    write_png,
+)
 
 PREFERRED = ("khr_toy_car", "stanford_bunny", "cornell_box")
 
@@ -63,7 +71,12 @@ def main(argv: Optional[list[str]] = None) -> None:
     p.add_argument("--out", default="out", help="output folder (default: out)")
     p.add_argument("--views", type=int, default=4)
     p.add_argument("--size", type=int, nargs=2, default=(640, 480), metavar=("W", "H"))
+    p.add_argument(
+        "--quick", action="store_true", help="two small views and a small gallery (the test)"
+    )
     a = p.parse_args(argv)
+    if a.quick:
+        a.views, a.size = 2, (160, 120)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
 
@@ -93,9 +106,10 @@ def main(argv: Optional[list[str]] = None) -> None:
     start = time.perf_counter()
     images.save_exr(out / "views.exr")
     rows = []
+    columns = ["lit (auto exposure)", "base colour", "normal", "depth", "triangle id"]
     for i in range(images.n):
         tiles = {
-            "lit": frames[i].to_srgb8(),
+            "lit": frames[i].to_srgb8("auto"),
             "color": linear_to_srgb(images.color[i]),
             "normal": normal_to_rgb(images.normal[i]),
             "depth": depth_to_rgb(images.depth[i]),
@@ -103,9 +117,15 @@ def main(argv: Optional[list[str]] = None) -> None:
         }
         for name, tile in tiles.items():
             write_png(out / f"view{i}_{name}.png", tile)
-        rows.append(np.concatenate(list(tiles.values()), axis=1))
-    write_png(out / "contact_sheet.png", np.concatenate(rows, axis=0))
+        rows.append(list(tiles.values()))
+    labels = [f"view {i}" for i in range(images.n)]
+    write_png(out / "contact_sheet.png", labelled_sheet(rows, columns, labels))
     write_s = time.perf_counter() - start
+
+    # One panel per paper, on one shared scene each (python -m scenesample.gallery).
+    start = time.perf_counter()
+    gallery_path = gallery.make(out, gallery.QUICK if a.quick else gallery.SIZE)
+    gallery_s = time.perf_counter() - start
 
     w, h = a.size
     print(f"\n{images.n} views at {w}x{h}: {images.mask.mean():.1%} of pixels see a surface")
@@ -121,8 +141,11 @@ def main(argv: Optional[list[str]] = None) -> None:
     print(f"| cast_rays: trace {len(hits):,} rays | {hits.timings['trace']:.4f} |")
     print(f"| render {len(frames)} lit frames | {render_s:.4f} |")
     print(f"| write EXR + PNG | {write_s:.4f} |")
+    print(f"| gallery: one panel per paper | {gallery_s:.4f} |")
+    lit = "the scene's lights" if not frames[0].stats["default_light"] else "the default light"
+    print(f"\nlit frames: {lit}, shown with auto exposure (Frame.to_srgb8('auto'))")
     sheet = out / "contact_sheet.png"
-    print(f"\nwrote {out / 'views.exr'} and {sheet} (+ one PNG per view and field)")
+    print(f"wrote {out / 'views.exr'}, {sheet} (+ one PNG per view and field) and {gallery_path}")
 
 
 if __name__ == "__main__":

@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import struct
 import zlib
+from typing import Optional
 
 import numpy as np
 
@@ -41,6 +42,22 @@ def linear_to_srgb(rgb: np.ndarray) -> np.ndarray:
     return _u8(np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055))
 
 
+#: Where :func:`auto_exposure` puts the log-average luminance (mid grey).
+KEY = 0.18
+
+
+def auto_exposure(rgb: np.ndarray, mask: Optional[np.ndarray] = None) -> float:
+    """The scale that brings the log-average Rec. 709 luminance of the (H, W, 3) linear image's
+    ``mask`` pixels (all by default) to :data:`KEY`, within 1/16..16; 1 where nothing is lit."""
+    lum = np.nan_to_num(rgb.astype(np.float64)) @ np.array([0.2126, 0.7152, 0.0722])
+    values = lum[mask] if mask is not None else lum.ravel()
+    values = values[values > 0]
+    if values.size == 0:
+        return 1.0
+    key = float(np.exp(np.mean(np.log(values + 1e-6))))
+    return float(np.clip(KEY / key, 1 / 16, 16.0))
+
+
 def depth_to_rgb(depth: np.ndarray) -> np.ndarray:
     """(H, W) depth -> (H, W, 3) uint8: near bright, far dark, empty black."""
     finite = np.isfinite(depth)
@@ -67,3 +84,38 @@ def ids_to_rgb(ids: np.ndarray) -> np.ndarray:
     rgb = np.stack([(h >> np.uint64(s)) & np.uint64(255) for s in (16, 8, 0)], -1).astype(np.uint8)
     rgb[ids < 0] = 0
     return rgb
+
+
+def labelled_sheet(
+    rows: list[list[np.ndarray]], columns: list[str], row_labels: list[str]
+) -> np.ndarray:
+    """(H, W, 3) uint8: the tiles of ``rows`` (each (h, w, 3) uint8, all of one size) in a grid,
+    each column's name above it and each row's at its left, in white on a dark margin.
+
+    The labels are drawn with Pillow (a test extra, which ``make demo`` installs); without it,
+    :class:`ImportError` says so."""
+    try:
+        from PIL import Image, ImageDraw, ImageFont
+    except ImportError as e:  # pragma: no cover - Pillow is installed by `make setup`
+        raise ImportError("labelled_sheet needs Pillow: pip install pillow") from e
+    if not rows or any(len(r) != len(columns) for r in rows) or len(row_labels) != len(rows):
+        raise ValueError("labelled_sheet: one label per row and per column, rows of equal length")
+    h, w = rows[0][0].shape[:2]
+    size = max(12, min(24, w // 14))
+    font = ImageFont.load_default(size=size)
+    probe = ImageDraw.Draw(Image.new("RGB", (1, 1)))
+    left = 12 + max(int(probe.textlength(s, font=font)) for s in row_labels)
+    top = size * 2
+    sheet = Image.new("RGB", (left + w * len(columns), top + h * len(rows)), (24, 24, 24))
+    draw = ImageDraw.Draw(sheet)
+    for j, name in enumerate(columns):
+        x = left + j * w + (w - probe.textlength(name, font=font)) / 2
+        draw.text((x, size // 2), name, fill=(235, 235, 235), font=font)
+    for i, (label, tiles) in enumerate(zip(row_labels, rows)):
+        y = top + i * h
+        draw.text((6, y + (h - size) / 2), label, fill=(235, 235, 235), font=font)
+        for j, tile in enumerate(tiles):
+            sheet.paste(
+                Image.fromarray(np.ascontiguousarray(tile, dtype=np.uint8)), (left + j * w, y)
+            )
+    return np.asarray(sheet)

@@ -238,7 +238,8 @@ pub fn read_exr<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyDi
 /// A lit frame from a one-image G-buffer (`shading::frame`): the scene's punctual lights in
 /// order, each scaled by its entry of `light_visibility` ((H, W) float32, or None for fully
 /// visible), then one area light per `(center, visibility or None)` of `areas`; the default
-/// light when there are none. Returns (H, W, 3) float32 linear RGB.
+/// light joins them when there are none, or when they leave the view dark. Returns (H, W, 3) float32
+/// linear RGB, and whether the default light was added to the scene's.
 #[pyfunction]
 pub fn shade_frame<'py>(
     py: Python<'py>,
@@ -248,7 +249,7 @@ pub fn shade_frame<'py>(
     position: &Bound<'py, PyAny>,
     light_visibility: Vec<Option<Bound<'py, PyAny>>>,
     areas: Vec<(Bound<'py, PyAny>, Option<Bound<'py, PyAny>>)>,
-) -> PyResult<Bound<'py, PyAny>> {
+) -> PyResult<(Bound<'py, PyAny>, bool)> {
     use crate::shading::{self, ShadeLight};
     let s = scene.inner.clone();
     let cam = camera.inner.clone();
@@ -280,10 +281,6 @@ pub fn shade_frame<'py>(
         )?));
         visibility.push(vis(v)?);
     }
-    if lights.is_empty() {
-        lights.push(shading::default_light(&cam));
-        visibility.push(None);
-    }
     let gbuffer = DepthImages {
         n: 1,
         width: cam.width,
@@ -292,8 +289,8 @@ pub fn shade_frame<'py>(
         position: rows_f32(position, "position")?,
         ..Default::default()
     };
-    let image = super::run(py, || {
+    let (image, rig) = super::run(py, || {
         shading::frame(&s, &cam, &gbuffer, &lights, &visibility)
     })?;
-    Ok(rows_owned(py, image, &[h, w, 3])?.into_any())
+    Ok((rows_owned(py, image, &[h, w, 3])?.into_any(), rig))
 }
