@@ -575,19 +575,63 @@ fn resolve_into(
             let row = first_row + r;
             let cam = &rays[row / h];
             for x in 0..w {
-                let Ok(t) = usize::try_from(ids[r * w + x]) else {
-                    depth[x] = f32::INFINITY;
-                    pos[x] = [f32::NAN; 3];
-                    continue;
-                };
-                let (o, d) = cam.ray(x, row % h);
-                let s = planes[t].intersect(o, d, cam.forward);
-                depth[x] = s.depth as f32;
-                pos[x] = s.point.as_vec3().to_array();
-                nrm[x] = planes[t].normal.as_vec3().to_array();
-                col[x] = s.color;
+                let px = (&mut depth[x], &mut pos[x], &mut nrm[x], &mut col[x]);
+                resolve_one(ids[r * w + x], cam, x, row % h, planes, px);
             }
         });
+}
+
+/// Pixel (x, y) of one image, seeing triangle `id` (−1: nothing).
+#[inline(always)]
+fn resolve_one(
+    id: i32,
+    cam: &PixelRays,
+    x: usize,
+    y: usize,
+    planes: &[SurfacePlane],
+    (depth, pos, nrm, col): (&mut f32, &mut [f32; 3], &mut [f32; 3], &mut [f32; 3]),
+) {
+    let Ok(t) = usize::try_from(id) else {
+        *depth = f32::INFINITY;
+        *pos = [f32::NAN; 3];
+        *nrm = [0.0; 3];
+        *col = [0.0; 3];
+        return;
+    };
+    let (o, d) = cam.ray(x, y);
+    let s = planes[t].intersect(o, d, cam.forward);
+    *depth = s.depth as f32;
+    *pos = s.point.as_vec3().to_array();
+    *nrm = planes[t].normal.as_vec3().to_array();
+    *col = s.color;
+}
+
+/// Give the pixels `changed` (flat indices over all images) of resolved images `img` the
+/// triangle ids `ids` holds for them, and resolve those pixels again; every other pixel is
+/// kept. The same values as [`resolve_ids`] over everything, at the cost of the few pixels.
+pub(crate) fn resolve_pixels(
+    scene: &Scene,
+    cameras: &[Camera],
+    img: &mut DepthImages,
+    ids: &[i32],
+    changed: &[usize],
+) -> f64 {
+    let start = Instant::now();
+    let planes = SurfacePlane::of(scene);
+    let rays: Vec<PixelRays> = cameras.iter().map(PixelRays::new).collect();
+    let (w, h) = (img.width as usize, img.height as usize);
+    for &p in changed {
+        img.triangle[p] = ids[p];
+        let (i, y, x) = (p / (w * h), p / w % h, p % w);
+        let px = (
+            &mut img.depth[p],
+            &mut img.position[p],
+            &mut img.normal[p],
+            &mut img.color[p],
+        );
+        resolve_one(ids[p], &rays[i], x, y, &planes, px);
+    }
+    start.elapsed().as_secs_f64()
 }
 
 /// Per-triangle data for resolving pixels, in f64: a corner, the unit normal, the gradients of

@@ -31,7 +31,7 @@ use glam::DVec3;
 use super::backend::{self, Backend, BackendChoice, Decision};
 use super::conventional::{
     check_cameras, discretize_conventional, discretize_traced, pixel_rays_f32, resolve_ids,
-    resolve_streamed, walk, PixelRays, SurfacePlane, TraceFrame, Walk,
+    resolve_pixels, resolve_streamed, walk, PixelRays, SurfacePlane, TraceFrame, Walk,
 };
 use super::redundancy::{self, Redundancy, Sample};
 use crate::camera::Camera;
@@ -375,15 +375,19 @@ fn coincident_samples(
     if fixed == 0 {
         return Ok(img);
     }
-    let mut timings = img.timings;
-    let (mut out, resolve_seconds) = resolve_ids(scene, cameras, ids)?;
-    timings.add(
+    // Only the pixels whose triangle changed are resolved again (a few thousand at most, not
+    // every pixel of every image).
+    let changed: Vec<usize> = (0..ids.len())
+        .filter(|&p| ids[p] != img.triangle[p])
+        .collect();
+    let mut out = img;
+    let resolve_seconds = resolve_pixels(scene, cameras, &mut out, &ids, &changed);
+    out.timings.add(
         "coincident",
         start.elapsed().as_secs_f64() - resolve_seconds,
     );
-    timings.add("coincident_resolve", resolve_seconds);
-    timings.add("total", start.elapsed().as_secs_f64());
-    out.timings = timings;
+    out.timings.add("coincident_resolve", resolve_seconds);
+    out.timings.add("total", start.elapsed().as_secs_f64());
     Ok(out)
 }
 
