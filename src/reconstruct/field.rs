@@ -124,15 +124,34 @@ fn sample_index([_, dv, ds, dt]: [u32; 4], [iu, iv, is, it]: [u32; 4]) -> usize 
     ((d(iu) * d(dv) + d(iv)) * d(ds) + d(is)) * d(dt) + d(it)
 }
 
+/// The samples one line read from a slab's field (per axis, the indices and how many), and the
+/// most cells any of them hit: neighbouring pixels' lines mostly read the same samples (the
+/// field is far coarser than the image), and a row of pixels then adds their cells once.
+type SampleSet = ([([u32; 2], usize); 4], u16);
+
 /// The cells stored at the samples around the line `q` (the one holding it and, per
-/// `interpolate`, its neighbours), appended to `hit`; returns the most cells any of those
-/// samples' rays hit.
-fn read_samples(f: &Field, q: [f64; 4], (do_uv, do_st): (bool, bool), hit: &mut Vec<u32>) -> u16 {
+/// `interpolate`, its neighbours), appended to `hit` unless `last` (this slab's previous line
+/// in the row) read the same samples; returns the most cells any of those samples' rays hit.
+fn read_samples(
+    f: &Field,
+    q: [f64; 4],
+    (do_uv, do_st): (bool, bool),
+    hit: &mut Vec<u32>,
+    last: &mut Option<SampleSet>,
+) -> u16 {
     let [du, dv, ds, dt] = f.dims;
-    let (us, nu) = around(q[0], du, do_uv);
-    let (vs, nv) = around(q[1], dv, do_uv);
-    let (ss, ns) = around(q[2], ds, do_st);
-    let (ts, nt) = around(q[3], dt, do_st);
+    let axes = [
+        around(q[0], du, do_uv),
+        around(q[1], dv, do_uv),
+        around(q[2], ds, do_st),
+        around(q[3], dt, do_st),
+    ];
+    if let Some((seen, most)) = last {
+        if *seen == axes {
+            return *most;
+        }
+    }
+    let [(us, nu), (vs, nv), (ss, ns), (ts, nt)] = axes;
     let n = f.n as usize;
     let mut most = 0u16;
     for &iu in &us[..nu] {
@@ -147,16 +166,19 @@ fn read_samples(f: &Field, q: [f64; 4], (do_uv, do_st): (bool, bool), hit: &mut 
             }
         }
     }
+    *last = Some((axes, most));
     most
 }
 
-/// Answer the line `o + λ·d` from the fields, appending the cells read to `hit`.
+/// Answer the line `o + λ·d` from the fields, appending the cells read to `hit` (`last`: per
+/// slab, the samples the row's previous line read from it).
 fn answer(
     fields: &[(Slab, &Field)],
     (o, d): (DVec3, DVec3),
     how: &Resampling,
     range: (f64, f64),
     hit: &mut Vec<u32>,
+    last: &mut [Option<SampleSet>],
 ) -> Answer {
     let interp = match how.interpolate {
         Interpolate::None => (false, false),
@@ -166,10 +188,10 @@ fn answer(
     };
     let Some(bounds) = how.conservative else {
         let mut any = false;
-        for (slab, f) in fields {
+        for ((slab, f), last) in fields.iter().zip(last.iter_mut()) {
             if let Some(q) = slab.line(o, d) {
                 any = true;
-                read_samples(f, q, interp, hit);
+                read_samples(f, q, interp, hit, last);
             }
         }
         return if any { Answer::Field } else { Answer::Outside };
@@ -183,10 +205,10 @@ fn answer(
         return Answer::Field;
     }
     let (mut held, mut answered) = (false, false);
-    for (slab, f) in fields {
+    for ((slab, f), last) in fields.iter().zip(last.iter_mut()) {
         if let Some(q) = slab.answers(o, d, seen, box_from) {
             held = true;
-            answered |= u32::from(read_samples(f, q, interp, hit)) <= how.trust;
+            answered |= u32::from(read_samples(f, q, interp, hit, last)) <= how.trust;
         }
     }
     match (answered, held) {
@@ -242,11 +264,12 @@ pub fn resample(
         .map(|r| {
             let mut hit = Vec::new();
             let mut missed = Vec::new();
+            let mut last = vec![None; fields.len()];
             let y = (r * k + k / 2).min(h - 1);
             for c in 0..cols {
                 let x = (c * k + k / 2).min(w - 1);
                 let line = camera.ray_z1(DVec2::new(x as f64 + 0.5, y as f64 + 0.5));
-                let a = answer(fields, line, &how, range, &mut hit);
+                let a = answer(fields, line, &how, range, &mut hit, &mut last);
                 if a != Answer::Field {
                     missed.push((y * w + x, a));
                 }
