@@ -247,11 +247,11 @@ fn closest(bvh: &Bvh8, s: &mut Scratch, q: [f32; 3], limit2: f64) -> Option<Near
             for b in leaf_blocks(r) {
                 let block = &bvh.blocks[b];
                 let near = lane_bounds(&block.v, q);
-                for lane in 0..4 {
+                for (lane, &box_d2) in near.iter().enumerate() {
                     let id = block.id[lane];
                     // The triangle's box is a lower bound of its distance: most triangles of
                     // a leaf are farther than the best so far, and skip the exact test.
-                    if id == u32::MAX || f64::from(near[lane]) * (1.0 - 1e-5) > bound {
+                    if id == u32::MAX || f64::from(box_d2) * (1.0 - 1e-5) > bound {
                         continue;
                     }
                     let [a, bb, c] = block.corners(lane).map(|v| DVec3::from(v.map(f64::from)));
