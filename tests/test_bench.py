@@ -25,6 +25,8 @@ def test_bench_all_quick_writes_a_summary(tmp_path, capsys):
         "iVIR / EPR points",
         "field speedup over drawing everything, default (balanced) (turtles",
         "field speedup over drawing everything, paper, 1 slab, 1 id (turtles",
+        "methods: field view / conventional, GPU",
+        "methods: non-redundant / conventional, GPU",
     ):
         assert row in md, row
     assert md.count("| met |") + md.count("| NOT met |") >= 14
@@ -61,3 +63,39 @@ def test_bench_backends_quick_compares_gpu_cpu_and_auto(tmp_path, gpu):
     assert md.count("(gpu) |") + md.count("(cpu) |") >= 2  # conventional and peeling rows
     assert "Worst scene:" in md and ("met." in md)
     assert "Depth peeling, 4 layers" in md and "first difference not a tie |" in md
+
+
+def test_bench_methods_quick_writes_every_row(tmp_path, gpu):
+    """`bench methods --quick` measures every method against its brute force on small shared
+    scenes and writes the summary and one table per method."""
+    from scenesample import bench
+
+    out = tmp_path / "methods.md"
+    bench.main(["methods", "--quick", "--out", str(out)])
+    md = out.read_text()
+    for label in (
+        "field view / conventional, GPU (>= 1M triangles)",
+        "field view / conventional, CPU (>= 1M triangles)",
+        "field: resampling share of the view's time",
+        "field: cells drawn / cells visible",
+        "field: hole pixels",
+        "field: missed visible cells",
+        "non-redundant / conventional, GPU",
+        "impostors / triangles at 3x the size",
+        "impostors / triangles at 8x the size",
+        "EPR speedup over MVR",
+    ):
+        assert f"| {label} |" in md, label
+    for section in (
+        "## Visibility field",
+        "## Non-redundant rendering",
+        "## EPR against MVR",
+        "## Impostors against their triangles",
+        "## Soft shadows",
+    ):
+        assert section in md, section
+    # The two field speed rows need a scene of >= 1M triangles; every other row has a verdict.
+    assert md.count("| no scene fits |") == 2
+    assert md.count("| met |") + md.count("| NOT met |") == 8
+    assert md.count("| khr_simple_instancing |") >= 4  # field, NR, impostors, shadows
+    assert md.count("| reflective_room |") >= 5  # and EPR

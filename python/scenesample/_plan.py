@@ -314,7 +314,10 @@ def plan(
     else:
 
     - an area light (an object with an emissive material, or one of ``area_lights``) calls for
-      soft shadows (non-redundant-rendering.txt Algorithm 5);
+      soft shadows: by Algorithm 5 of non-redundant-rendering.txt or by ray tracing (exact),
+      whichever the cost model, calibrated once per machine, finds cheaper
+      (``params["discretization"]``; the reason gives both estimates). On a machine without
+      a fast GPU that is ray tracing;
     - a ``KHR_lights_punctual`` point light calls for omnidirectional shadows
       (eye-based-point-rendering.txt §5), a spot light for spot shadows (a cube map of its
       position, the lighting restricted to its cone); a directional light lights the frame
@@ -348,22 +351,45 @@ def plan(
     for name, light, why in lights:
         nu, nv = q["soft_samples"]
         res = q["soft_resolution"]
-        # Four corner images and their offset images; each light sample shadow-maps the
-        # reconstruction (about two triangles per covered pixel of the four images).
+        # Non-redundant (Algorithm 5): four corner images and their offset images; each light
+        # sample shadow-maps the reconstruction (about two triangles per covered pixel of the
+        # four images).
         recon = 2 * 4 * res * res * 0.5
-        work = {
-            "raster_triangles": 8 * tris,
-            "shadow_triangles": nu * nv * recon,
-            "pixels": 8 * res * res + nu * nv * res * res,
-            "shadow_tests": nu * nv * px,
-        }
+        nonredundant = _estimate(
+            {
+                "raster_triangles": 8 * tris,
+                "shadow_triangles": nu * nv * recon,
+                "pixels": 8 * res * res + nu * nv * res * res,
+                "shadow_tests": nu * nv * px,
+            },
+            rate,
+        )
+        # Ray traced: one occlusion ray per pixel and light sample, exact. Without a fast GPU
+        # it is the cheaper one by far (docs/bench/methods.md: 30-50x on lavapipe), and the
+        # cheaper of the two is run, never a method that loses.
+        raytraced = _estimate({"rays": nu * nv * px}, rate)
+        if raytraced["seconds"] <= nonredundant["seconds"]:
+            method, estimate, other = "raytraced", raytraced, nonredundant
+        else:
+            method, estimate, other = "nonredundant", nonredundant, raytraced
         out.append(
             Effect(
                 "soft_shadows",
                 name,
-                f"{why} {name!r} emits light over an area: its shadows are soft",
-                {"light": light, "samples": (nu, nv), "resolution": res},
-                _estimate(work, rate),
+                f"{why} {name!r} emits light over an area: its shadows are soft; {method} "
+                f"(estimated {estimate['seconds']:.3g} s on this machine, against "
+                f"{other['seconds']:.3g} s the other way)",
+                {
+                    "light": light,
+                    "samples": (nu, nv),
+                    "resolution": res,
+                    "discretization": method,
+                    "estimated_seconds": {
+                        "raytraced": raytraced["seconds"],
+                        "nonredundant": nonredundant["seconds"],
+                    },
+                },
+                estimate,
             )
         )
     for k, light in enumerate(scene.lights):
@@ -509,6 +535,7 @@ def _run_effect(e: Effect, scene: Scene, camera: Camera, seed: int) -> Any:
             e.params["light"],
             samples=e.params["samples"],
             resolution=e.params["resolution"],
+            discretization=e.params.get("discretization", "nonredundant"),
         )
     if e.kind in ("omni_shadows", "spot_shadows"):
         return omni_shadows(

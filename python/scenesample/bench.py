@@ -6,6 +6,7 @@
     python -m scenesample.bench epr           # EPR reflections vs MVR and iVIR
     python -m scenesample.bench field         # visibility-field culling vs drawing everything
     python -m scenesample.bench backends      # conventional images: GPU vs CPU vs auto
+    python -m scenesample.bench methods       # each paper's method vs its brute force, real scenes
     python -m scenesample.bench all           # every one of them, and a markdown summary table
     python -m scenesample.bench all --quick   # smaller problems, for a smoke test
 
@@ -29,7 +30,7 @@ import numpy as np
 
 import scenesample as ss
 
-from . import _bench_backends, _bench_points, _bench_rays
+from . import _bench_backends, _bench_methods, _bench_points, _bench_rays
 
 DEPTH_TARGET = 1.5
 
@@ -400,6 +401,9 @@ def summary(results: dict[str, Any], device: str) -> str:
                     x["win"],
                 )
             )
+    if results.get("methods"):
+        for label, v, where, target, ok in _bench_methods.summary_rows(results["methods"]):
+            rows.append((f"methods: {label} (worst: {where})", f"{v:.3g}", target, ok))
     lines = [
         f"`python -m scenesample.bench all`, {datetime.date.today().isoformat()}, "
         f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, {device}",
@@ -443,7 +447,17 @@ def main(argv: Optional[list[str]] = None) -> None:
         "which",
         nargs="?",
         default="all",
-        choices=["all", "rays", "points", "peers", "nonredundant", "epr", "field", "backends"],
+        choices=[
+            "all",
+            "rays",
+            "points",
+            "methods",
+            "peers",
+            "nonredundant",
+            "epr",
+            "field",
+            "backends",
+        ],
         help="benchmark set",
     )
     p.add_argument(
@@ -467,6 +481,12 @@ def main(argv: Optional[list[str]] = None) -> None:
     if a.which == "points":
         r = _bench_points.run(a.quick, a.rounds)
         _emit(_bench_points.report(r), a.out or "docs/bench/points.md", r, a.json)
+        return
+    if a.which == "methods":
+        info = ss.device_info()
+        r = _bench_methods.run(a.quick, a.rounds)
+        md = _bench_methods.report(r, f"{info['name']} ({info['backend']})")
+        _emit(md, a.out or "docs/bench/methods.md", r, a.json)
         return
     if a.which == "backends":
         r = _bench_backends.run(a.quick, a.repeats)
@@ -501,6 +521,8 @@ def main(argv: Optional[list[str]] = None) -> None:
         print(report_epr(results["epr"], device), flush=True)
         results["field"] = bench_field(128 if a.quick else 256, a.repeats, real=not a.quick)
         print(report_field(results["field"], device), flush=True)
+        results["methods"] = _bench_methods.run(a.quick, a.rounds)
+        print(_bench_methods.report(results["methods"], device), flush=True)
         _emit(summary(results, device), a.out or "out/bench/all.md", results, a.json)
         return
     if a.which == "nonredundant":
