@@ -375,8 +375,8 @@ fn coincident_samples(
     if fixed == 0 {
         return Ok(img);
     }
-    // Only the pixels whose triangle changed are resolved again (a few thousand at most, not
-    // every pixel of every image).
+    // Only the pixels whose triangle changed are resolved again (samples of coincident
+    // triangles: few), not every pixel of every image.
     let changed: Vec<usize> = (0..ids.len())
         .filter(|&p| ids[p] != img.triangle[p])
         .collect();

@@ -238,8 +238,8 @@ pub fn read_exr<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyDi
 /// A lit frame from a one-image G-buffer (`shading::frame`): the scene's punctual lights in
 /// order, each scaled by its entry of `light_visibility` ((H, W) float32, or None for fully
 /// visible), then one area light per `(center, visibility or None)` of `areas`; the default
-/// light joins them when there are none, or when they leave the view dark. Returns (H, W, 3) float32
-/// linear RGB, and whether the default light was added to the scene's.
+/// light joins them when there are none, or when they leave the view dark. Returns (H, W, 3)
+/// float32 linear RGB, and whether the default light was added.
 #[pyfunction]
 pub fn shade_frame<'py>(
     py: Python<'py>,
