@@ -1,5 +1,5 @@
 """Point queries (closest points, winding numbers, signed distance, occupancy) and every-hit ray
-queries, against a float64 brute force written here in numpy, against Open3D's
+queries, against a float64 brute force in numpy (`_bench_points.brute_distances`), against Open3D's
 RaycastingScene, and on Open3D's own documented example."""
 
 from __future__ import annotations
@@ -8,37 +8,14 @@ import numpy as np
 import pytest
 import scenesample as ss
 from conftest import SHARED, load_quiet
-
-
-def closest_on_triangles(p: np.ndarray, tris: np.ndarray) -> np.ndarray:
-    """Squared distances (T,) from point p (3,) to triangles (T, 3, 3), float64, by projecting
-    onto the plane when inside and onto the three edges otherwise (an implementation unlike
-    the package's Voronoi-region one)."""
-    a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]
-
-    def seg(x, y):
-        e = y - x
-        l2 = (e * e).sum(1)
-        t = np.clip(((p - x) * e).sum(1) / np.where(l2 > 0, l2, 1), 0, 1)
-        q = x + e * t[:, None]
-        return ((q - p) ** 2).sum(1)
-
-    edges = np.minimum(np.minimum(seg(a, b), seg(b, c)), seg(c, a))
-    n = np.cross(b - a, c - a)
-    nl = np.linalg.norm(n, axis=1)
-    ok = nl > 0
-    n = n / np.where(ok, nl, 1)[:, None]
-    h = ((p - a) * n).sum(1)
-    r = p - n * h[:, None]
-    inside = ok.copy()
-    for x, y in ((a, b), (b, c), (c, a)):
-        inside &= (np.cross(y - x, r - x) * n).sum(1) >= 0
-    return np.where(inside, np.minimum(h * h, edges), edges)
+from scenesample._bench_points import brute_distances
 
 
 def brute(scene: ss.Scene, pts: np.ndarray) -> np.ndarray:
-    tris = scene.vertices.astype(np.float64)[scene.faces.astype(np.int64)]
-    return np.array([np.sqrt(closest_on_triangles(p, tris).min()) for p in pts])
+    """The float64 brute force `bench points` reports its error against: projection onto the
+    plane when inside, onto the three edges otherwise (unlike the package's Voronoi-region
+    closest point)."""
+    return brute_distances(scene, pts)
 
 
 def unit_box() -> ss.Scene:

@@ -11,7 +11,7 @@ import numpy as np
 
 from . import _core
 from ._progress import Bar, Progress
-from ._rays import _threads
+from ._rays import _indexed, _threads
 from ._scene import Scene, core_of
 from .errors import InputError
 from .results import ClosestPoints
@@ -27,22 +27,6 @@ def _points(points: Any) -> tuple[np.ndarray, tuple[int, ...]]:
         raise InputError(f"points must have shape (..., 3), got {p.shape}")
     shape = p.shape[:-1]
     return p.reshape(math.prod(shape), 3), shape
-
-
-def _indexed(shape: tuple[int, ...], call: Any) -> Any:
-    """``call()``, a bad point's flat row number in an InputError turned into its batch index."""
-    try:
-        return call()
-    except InputError as e:
-        if len(shape) == 1:
-            raise
-        import re
-
-        def where(m: re.Match) -> str:
-            at = np.unravel_index(int(m.group(1)), shape) if shape else ()
-            return f"points[{', '.join(str(int(i)) for i in at)}]"
-
-        raise InputError(re.sub(r"points\[(\d+)\]", where, str(e))) from None
 
 
 def closest_points(
@@ -93,6 +77,7 @@ def closest_points(
             lambda: _core.closest_points(
                 core_of(scene), p, float(max_distance), _threads(threads), bar.callback
             ),
+            ("points",),
         )
     return ClosestPoints(
         point=r["point"].reshape((*shape, 3)),
@@ -130,6 +115,7 @@ def winding_number(
         w = _indexed(
             shape,
             lambda: _core.winding_numbers(core_of(scene), p, _threads(threads), bar.callback),
+            ("points",),
         )
     return w.reshape(shape)
 

@@ -36,9 +36,13 @@ def _rays(origins: Any, directions: Any) -> tuple[np.ndarray, np.ndarray, tuple[
     return (*(np.broadcast_to(a, (*shape, 3)).reshape(n, 3) for a in (o, d)), shape)
 
 
-def _indexed(shape: tuple[int, ...], call: Callable[[], Any]) -> Any:
-    """``call()``, with a bad ray's flat row number in an InputError turned into its index in
-    the batch (``origins[2, 17]`` for a (H, W, 3) array)."""
+def _indexed(
+    shape: tuple[int, ...],
+    call: Callable[[], Any],
+    names: tuple[str, ...] = ("origins", "directions"),
+) -> Any:
+    """``call()``, with a bad row's flat number in an InputError about one of ``names`` turned
+    into its index in the batch (``origins[2, 17]`` for a (H, W, 3) array)."""
     try:
         return call()
     except InputError as e:
@@ -49,7 +53,8 @@ def _indexed(shape: tuple[int, ...], call: Callable[[], Any]) -> Any:
             at = np.unravel_index(int(m.group(2)), shape) if shape else ()
             return f"{m.group(1)}[{', '.join(str(int(i)) for i in at)}]"
 
-        raise InputError(re.sub(r"(origins|directions)\[(\d+)\]", where, str(e))) from None
+        pattern = rf"({'|'.join(map(re.escape, names))})\[(\d+)\]"
+        raise InputError(re.sub(pattern, where, str(e))) from None
 
 
 def _threads(threads: Optional[int]) -> Optional[int]:
