@@ -71,8 +71,11 @@ pub fn closest_points(
         let start = Instant::now();
         let limit = max_distance as f64;
         // Each answer packed as it is found (28 bytes, not the 72 of an `Option<Near>`).
-        let found = chunked(threads, points, |s, p| {
-            match closest(&bvh.tree, s, p, limit * limit) {
+        let found = chunked(
+            threads,
+            points,
+            bvh.tree.nodes.len() > 1,
+            |s, p| match closest(&bvh.tree, s, p, limit * limit) {
                 Some(n) => (
                     n.point.as_vec3().to_array(),
                     n.d2.sqrt() as f32,
@@ -80,8 +83,8 @@ pub fn closest_points(
                     [n.u as f32, n.v as f32],
                 ),
                 None => ([f32::NAN; 3], f32::INFINITY, -1, [0.0; 2]),
-            }
-        })?;
+            },
+        )?;
         let n = found.len();
         let mut out = ClosestPoints {
             point: Vec::with_capacity(n),
@@ -109,7 +112,9 @@ pub fn winding_numbers(scene: &Scene, points: &[[f32; 3]], threads: Threads) -> 
     on_threads(threads, || {
         let (bvh, _) = super::bvh_for(scene, threads)?;
         let data = scene.derived(|| WindingData::of(&bvh.tree));
-        chunked(threads, points, |s, p| winding(&bvh.tree, &data, s, p))
+        chunked(threads, points, bvh.tree.nodes.len() > 1, |s, p| {
+            winding(&bvh.tree, &data, s, p)
+        })
     })?
 }
 
@@ -137,10 +142,12 @@ struct Scratch {
 /// caller's order. Each answer depends on its own point only, so the order changes nothing but
 /// the time: neighbouring queries take the same paths through the tree, and the branches of the
 /// descent and of the closest-point test are predicted (1.4-1.7x on the shared scenes' random
-/// point sets, sort included).
+/// point sets, sort included). `sort` false (a tree of one node: no branches to predict)
+/// keeps the caller's order.
 fn chunked<T: Send + Copy>(
     threads: Threads,
     points: &[[f32; 3]],
+    sort: bool,
     f: impl Fn(&mut Scratch, [f32; 3]) -> T + Sync,
 ) -> Result<Vec<T>> {
     let progress = crate::process::counter();
@@ -155,7 +162,7 @@ fn chunked<T: Send + Copy>(
         }
         Ok(out)
     };
-    let order = morton_order(points, threads);
+    let order = sort.then(|| morton_order(points, threads)).flatten();
     let sorted: Vec<[f32; 3]>;
     let visit = match &order {
         Some(o) => {
@@ -169,17 +176,21 @@ fn chunked<T: Send + Copy>(
     } else {
         visit.par_chunks(CHUNK).map(each).collect::<Result<_>>()?
     };
-    let found: Vec<T> = parts.into_iter().flatten().collect();
-    Ok(match order {
-        None => found,
+    let mut out = Vec::with_capacity(points.len());
+    match order {
+        None => parts.into_iter().for_each(|p| out.extend(p)),
         Some(o) => {
-            let mut out = found.clone();
-            for (k, &i) in o.iter().enumerate() {
-                out[i as usize] = found[k];
+            // Each answer written once, straight to its point's place.
+            let Some(&first) = parts.first().and_then(|p| p.first()) else {
+                return Ok(out);
+            };
+            out.resize(points.len(), first);
+            for (&i, v) in o.iter().zip(parts.into_iter().flatten()) {
+                out[i as usize] = v;
             }
-            out
         }
-    })
+    }
+    Ok(out)
 }
 
 /// The indices of `points` in Morton (Z-curve) order of their positions quantized to 1024 steps
@@ -332,6 +343,8 @@ fn closest(bvh: &Bvh8, s: &mut Scratch, q: [f32; 3], limit2: f64) -> Option<Near
             bound = d2;
         }
     }
+    // Measured already.
+    let seed = best.map_or(u32::MAX, |n| n.triangle);
     // (squared box distance, reference); a box no nearer than the bound is skipped. At most
     // seven entries stay behind per level of a tree at most `MAX_DEPTH` deep: `STACK` holds them.
     let stack = &mut s.near[..STACK];
@@ -353,7 +366,7 @@ fn closest(bvh: &Bvh8, s: &mut Scratch, q: [f32; 3], limit2: f64) -> Option<Near
                     let id = block.id[lane];
                     // The triangle's box is a lower bound of its distance: most triangles of
                     // a leaf are farther than the best so far, and skip the exact test.
-                    if id == u32::MAX || f64::from(box_d2) * (1.0 - 1e-5) > bound {
+                    if id == u32::MAX || id == seed || f64::from(box_d2) * (1.0 - 1e-5) > bound {
                         continue;
                     }
                     let [a, bb, c] = block.corners(lane).map(|v| DVec3::from(v.map(f64::from)));
@@ -406,6 +419,7 @@ fn closest(bvh: &Bvh8, s: &mut Scratch, q: [f32; 3], limit2: f64) -> Option<Near
 /// The point of triangle (a, b, c) closest to `p`, and its barycentric (u, v) (the point is
 /// (1−u−v)·a + u·b + v·c), by the Voronoi region of the triangle `p` lies in. A degenerate
 /// triangle (a segment or a point) gets the closest point of its edges.
+#[inline]
 pub fn closest_on_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> (DVec3, f64, f64) {
     let (ab, ac, ap) = (b - a, c - a, p - a);
     let (d1, d2) = (ab.dot(ap), ac.dot(ap));
@@ -705,7 +719,10 @@ mod tests {
             let one = closest_points(&scene, &[*p], f32::INFINITY, Threads::One).unwrap();
             assert_eq!(one.triangle[0], all.triangle[i], "{i}");
             assert_eq!(one.distance[0].to_bits(), all.distance[i].to_bits(), "{i}");
-            assert_eq!(one.point[0].map(f32::to_bits), all.point[i].map(f32::to_bits));
+            assert_eq!(
+                one.point[0].map(f32::to_bits),
+                all.point[i].map(f32::to_bits)
+            );
             let w1 = winding_numbers(&scene, &[*p], Threads::One).unwrap();
             assert_eq!(w1[0].to_bits(), w[i].to_bits(), "{i}");
         }
