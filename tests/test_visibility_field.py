@@ -413,3 +413,22 @@ def test_warnings_for_slabs_that_miss_the_bounds_and_cameras_inside():
     # From inside the sphere every pixel sees its inner wall, and none is missed.
     m = ss.evaluate(view, scene, "cells")
     assert m["hole_pixels"] == 0 and view.covered < 1
+
+
+def test_a_field_naming_a_cell_that_does_not_exist_is_refused(turtles):
+    """A view reads the field's arrays in place and checks the ids it reads: a corrupted id
+    raises instead of writing out of bounds, and a non-contiguous copy reads the same."""
+    import copy
+
+    scene, field = turtles
+    cam = turtle_path(scene, 1)[0]
+    good = ss.reconstruct(field, cam, fallback=False)
+    bad = copy.copy(field)
+    bad.ids = np.full_like(field.ids, len(field.cell_of) + 10**6)
+    with pytest.raises(ss.InputError, match="names cell"):
+        ss.reconstruct(bad, cam, fallback=False)
+    strided = copy.copy(field)
+    strided.ids = np.asfortranarray(field.ids)
+    again = ss.reconstruct(strided, cam, fallback=False)
+    assert np.array_equal(again.marked, good.marked)
+    assert good.marked.any()

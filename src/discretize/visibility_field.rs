@@ -32,6 +32,10 @@ pub struct Rect {
     pub origin: DVec3,
     pub u: DVec3,
     pub v: DVec3,
+    /// The unit normal and the Gram matrix's (u·u, u·v, v·v, determinant), made once: a view
+    /// crosses every slab's two planes with each pixel's line.
+    normal: DVec3,
+    gram: [f64; 4],
 }
 
 impl Rect {
@@ -43,7 +47,14 @@ impl Rect {
         if n.is_nan() || n <= 1e-12 * u.length() * v.length() || n == 0.0 {
             return input_err!("a slab rectangle's edges must be non-zero and not parallel");
         }
-        Ok(Self { origin, u, v })
+        let (uu, uv, vv) = (u.dot(u), u.dot(v), v.dot(v));
+        Ok(Self {
+            origin,
+            u,
+            v,
+            normal: u.cross(v).normalize(),
+            gram: [uu, uv, vv, uu * vv - uv * uv],
+        })
     }
 
     pub fn point(&self, a: f64, b: f64) -> DVec3 {
@@ -51,7 +62,7 @@ impl Rect {
     }
 
     pub fn normal(&self) -> DVec3 {
-        self.u.cross(self.v).normalize()
+        self.normal
     }
 
     /// Where the line `o + λ·d` crosses the rectangle's plane: (λ, rectangle coordinates).
@@ -65,9 +76,8 @@ impl Rect {
         let lambda = (self.origin - o).dot(n) / dn;
         let p = o + d * lambda - self.origin;
         // Solve p = a·u + b·v in the plane (Gram matrix).
-        let (uu, uv, vv) = (self.u.dot(self.u), self.u.dot(self.v), self.v.dot(self.v));
+        let [uu, uv, vv, det] = self.gram;
         let (pu, pv) = (p.dot(self.u), p.dot(self.v));
-        let det = uu * vv - uv * uv;
         let a = (pu * vv - pv * uv) / det;
         let b = (pv * uu - pu * uv) / det;
         (lambda.is_finite() && a.is_finite() && b.is_finite()).then_some((lambda, DVec2::new(a, b)))

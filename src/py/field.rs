@@ -8,7 +8,7 @@ use super::camera::PyCamera;
 use super::convert::{array, rows_f64};
 use super::errors::{input, IntoPy};
 use super::scene::PyScene;
-use crate::discretize::visibility_field::{self as vf, Field, Grouping, Rect, Slab};
+use crate::discretize::visibility_field::{self as vf, Grouping, Rect, Slab};
 use crate::reconstruct::field::{self as rf, Interpolate};
 
 /// A slab from a (2, 3, 3) array: uv then st, each (origin, u edge, v edge).
@@ -216,8 +216,7 @@ pub fn field_view<'py>(
     };
     let (marks, added, img, drawn, seconds) = super::run(py, || -> crate::error::Result<_> {
         let start = std::time::Instant::now();
-        let refs: Vec<(Slab, &Field)> = fields.iter().map(|(s, f)| (*s, f)).collect();
-        let mut marks = rf::resample(&refs, cell_count, &cam, how)?;
+        let mut marks = rf::resample(&fields, cell_count, &cam, how)?;
         let resample_seconds = start.elapsed().as_secs_f64();
         let start = std::time::Instant::now();
         let pixels = std::mem::take(&mut marks.fallback);
@@ -247,13 +246,13 @@ pub fn field_view<'py>(
 }
 
 /// The fields of a (K, U, V, S, T, n) id array and its (K, U, V, S, T) counts of cells hit,
-/// one per slab.
-fn fields(
+/// one per slab, read in place (both C-contiguous).
+fn fields<'a>(
     py: Python<'_>,
     slabs: &[Bound<'_, PyAny>],
-    ids: &PyReadonlyArrayDyn<'_, i32>,
-    hits: &PyReadonlyArrayDyn<'_, u16>,
-) -> PyResult<Vec<(Slab, Field)>> {
+    ids: &'a PyReadonlyArrayDyn<'_, i32>,
+    hits: &'a PyReadonlyArrayDyn<'_, u16>,
+) -> PyResult<Vec<(Slab, rf::Samples<'a>)>> {
     let shape = ids.shape().to_vec();
     if shape.len() != 6 || shape[0] != slabs.len() || hits.shape() != &shape[..5] {
         return Err(input(
@@ -266,25 +265,20 @@ fn fields(
             ),
         ));
     }
-    let ids = ids.as_array();
-    let hits = hits.as_array();
+    let (Ok(all_ids), Ok(all_hits)) = (ids.as_slice(), hits.as_slice()) else {
+        return Err(input(
+            py,
+            "field ids and cells_hit must be C-contiguous".into(),
+        ));
+    };
+    let per = shape[1..5].iter().product::<usize>();
     let mut out = Vec::with_capacity(slabs.len());
     for (k, s) in slabs.iter().enumerate() {
-        let f = Field {
+        let f = rf::Samples {
             dims: [shape[1], shape[2], shape[3], shape[4]].map(|d| d as u32),
             n: shape[5] as u32,
-            ids: ids
-                .index_axis(numpy::ndarray::Axis(0), k)
-                .iter()
-                .copied()
-                .collect(),
-            hits: hits
-                .index_axis(numpy::ndarray::Axis(0), k)
-                .iter()
-                .copied()
-                .collect(),
-            rays: 0,
-            timings: crate::types::Timings::new(),
+            ids: &all_ids[k * per * shape[5]..(k + 1) * per * shape[5]],
+            hits: &all_hits[k * per..(k + 1) * per],
         };
         out.push((slab(py, s)?, f));
     }

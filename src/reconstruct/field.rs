@@ -124,106 +124,149 @@ fn sample_index([_, dv, ds, dt]: [u32; 4], [iu, iv, is, it]: [u32; 4]) -> usize 
     ((d(iu) * d(dv) + d(iv)) * d(ds) + d(is)) * d(dt) + d(it)
 }
 
-/// The samples one line read from a slab's field (per axis, the indices and how many), and the
-/// most cells any of them hit: neighbouring pixels' lines mostly read the same samples (the
-/// field is far coarser than the image), and a row of pixels then adds their cells once.
-type SampleSet = ([([u32; 2], usize); 4], u16);
+/// A slab's field as resampling reads it, borrowed (a view reads the arrays it is given in
+/// place: copying a balanced field's ids, 46 MB on the Cornell box, took longer than reading
+/// them).
+#[derive(Debug, Clone, Copy)]
+pub struct Samples<'a> {
+    /// (U, V, S, T).
+    pub dims: [u32; 4],
+    /// Ids per sample.
+    pub n: u32,
+    /// (U, V, S, T, n) row-major cell ids, −1 empty.
+    pub ids: &'a [i32],
+    /// (U, V, S, T): how many distinct cells each sample's rays hit.
+    pub hits: &'a [u16],
+}
 
-/// The cells stored at the samples around the line `q` (the one holding it and, per
-/// `interpolate`, its neighbours), appended to `hit` unless `last` (this slab's previous line
-/// in the row) read the same samples; returns the most cells any of those samples' rays hit.
-fn read_samples(
-    f: &Field,
-    q: [f64; 4],
-    (do_uv, do_st): (bool, bool),
-    hit: &mut Vec<u32>,
-    last: &mut Option<SampleSet>,
-) -> u16 {
+impl<'a> From<&'a Field> for Samples<'a> {
+    fn from(f: &'a Field) -> Self {
+        Samples {
+            dims: f.dims,
+            n: f.n,
+            ids: &f.ids,
+            hits: &f.hits,
+        }
+    }
+}
+
+/// The samples one line reads from a slab's field: per axis, the indices and how many.
+type Axes = [([u32; 2], usize); 4];
+
+/// What one resampled pixel's line reads (per slab, the samples, `None` where the slab does
+/// not hold the line) and how the field answers it.
+#[derive(Debug, Clone, PartialEq)]
+struct Reading {
+    answer: Answer,
+    sets: Vec<Option<Axes>>,
+}
+
+/// The samples around the line `q`: the one holding it and, per `interpolate` (uv, st), its
+/// neighbours.
+fn axes_of(f: &Samples, q: [f64; 4], (do_uv, do_st): (bool, bool)) -> Axes {
     let [du, dv, ds, dt] = f.dims;
-    let axes = [
+    [
         around(q[0], du, do_uv),
         around(q[1], dv, do_uv),
         around(q[2], ds, do_st),
         around(q[3], dt, do_st),
-    ];
-    if let Some((seen, most)) = last {
-        if *seen == axes {
-            return *most;
-        }
-    }
+    ]
+}
+
+/// `g` of the index of every sample in `axes`.
+fn each_sample(f: &Samples, axes: &Axes, mut g: impl FnMut(usize)) {
     let [(us, nu), (vs, nv), (ss, ns), (ts, nt)] = axes;
-    let n = f.n as usize;
-    let mut most = 0u16;
-    for &iu in &us[..nu] {
-        for &iv in &vs[..nv] {
-            for &is in &ss[..ns] {
-                for &it in &ts[..nt] {
-                    let s = sample_index(f.dims, [iu, iv, is, it]);
-                    most = most.max(f.hits.get(s).copied().unwrap_or(u16::MAX));
-                    let ids = &f.ids[s * n..(s + 1) * n];
-                    hit.extend(ids.iter().filter(|&&id| id >= 0).map(|&id| id as u32));
+    for &iu in &us[..*nu] {
+        for &iv in &vs[..*nv] {
+            for &is in &ss[..*ns] {
+                for &it in &ts[..*nt] {
+                    g(sample_index(f.dims, [iu, iv, is, it]));
                 }
             }
         }
     }
-    *last = Some((axes, most));
+}
+
+/// The most cells any of the samples in `axes` saw.
+fn most_hits(f: &Samples, axes: &Axes) -> u16 {
+    let mut most = 0u16;
+    each_sample(f, axes, |s| {
+        most = most.max(f.hits.get(s).copied().unwrap_or(u16::MAX))
+    });
     most
 }
 
-/// Answer the line `o + λ·d` from the fields, appending the cells read to `hit` (`last`: per
-/// slab, the samples the row's previous line read from it).
-fn answer(
-    fields: &[(Slab, &Field)],
+/// How the fields answer the line `o + λ·d`, and the samples it reads.
+fn read(
+    fields: &[(Slab, Samples)],
     (o, d): (DVec3, DVec3),
     how: &Resampling,
     range: (f64, f64),
-    hit: &mut Vec<u32>,
-    last: &mut [Option<SampleSet>],
-) -> Answer {
+) -> Reading {
     let interp = match how.interpolate {
         Interpolate::None => (false, false),
         Interpolate::Uv => (true, false),
         Interpolate::St => (false, true),
         Interpolate::UvSt => (true, true),
     };
+    let mut sets = vec![None; fields.len()];
     let Some(bounds) = how.conservative else {
-        let mut any = false;
-        for ((slab, f), last) in fields.iter().zip(last.iter_mut()) {
-            if let Some(q) = slab.line(o, d) {
-                any = true;
-                read_samples(f, q, interp, hit, last);
-            }
+        for ((slab, f), set) in fields.iter().zip(sets.iter_mut()) {
+            *set = slab.line(o, d).map(|q| axes_of(f, q, interp));
         }
-        return if any { Answer::Field } else { Answer::Outside };
+        let answer = if sets.iter().any(Option::is_some) {
+            Answer::Field
+        } else {
+            Answer::Outside
+        };
+        return Reading { answer, sets };
     };
     // What the ray can see: its [near, far] range within the scene's bounds.
-    let Some((box_from, box_to)) = clip_line(o, d, bounds) else {
-        return Answer::Field;
+    let seen = clip_line(o, d, bounds).map(|(a, b)| (a, [a.max(range.0), b.min(range.1)]));
+    let Some((box_from, seen)) = seen.filter(|(_, [a, b])| a <= b) else {
+        return Reading {
+            answer: Answer::Field,
+            sets,
+        };
     };
-    let seen = [box_from.max(range.0), box_to.min(range.1)];
-    if seen[0] > seen[1] {
-        return Answer::Field;
-    }
     let (mut held, mut answered) = (false, false);
-    for ((slab, f), last) in fields.iter().zip(last.iter_mut()) {
+    for ((slab, f), set) in fields.iter().zip(sets.iter_mut()) {
         if let Some(q) = slab.answers(o, d, seen, box_from) {
+            let axes = axes_of(f, q, interp);
             held = true;
-            answered |= u32::from(read_samples(f, q, interp, hit, last)) <= how.trust;
+            answered |= u32::from(most_hits(f, &axes)) <= how.trust;
+            *set = Some(axes);
         }
     }
-    match (answered, held) {
+    let answer = match (answered, held) {
         (true, _) => Answer::Field,
         (false, true) => Answer::Overflowed,
         (false, false) => Answer::Outside,
-    }
+    };
+    Reading { answer, sets }
 }
 
-/// One row of resampled pixels: the cells it marked, and the pixels the field did not answer.
-type RowMarks = (Vec<u32>, Vec<(usize, Answer)>);
+/// Side, in resampled pixels, of the blocks resampling starts from.
+const BLOCK: usize = 8;
+
+/// What rows of blocks found: the samples read (a bit per sample of every slab, in slab
+/// order; empty until one is read), and the pixels the field did not answer.
+type RowMarks = (Vec<u64>, Vec<(usize, Answer)>);
 
 /// Mark the cells `camera` sees through the fields (one per slab).
+///
+/// Pixels are resampled by blocks rather than one by one: the resampled pixels of a block of
+/// `BLOCK x BLOCK` whose four corner pixels read the same samples and get the same answer all
+/// do, and the block adds its samples' cells once; a block whose corners differ is split in
+/// four, down to single pixels. The pinhole projection maps the image linearly onto each slab
+/// plane's rectangle (a homography), so the (u, v) and (s, t) of a block's pixels lie within
+/// its corners' and the sample indices and the rectangle tests, monotone in them, agree inside
+/// when they agree at the corners; so do the tests of the visible range against the planes for
+/// a camera outside the bounds, where they always pass. What changes is the cost: the field's
+/// resolution, not the image's, sets the number of lines read (visibility-field.txt §4 reads
+/// the field per pixel on the GPU; on the CPU that was 70-89% of a view).
 pub fn resample(
-    fields: &[(Slab, &Field)],
+    fields: &[(Slab, Samples)],
     cell_count: usize,
     camera: &Camera,
     how: Resampling,
@@ -247,9 +290,6 @@ pub fn resample(
                 samples * f.n as usize
             );
         }
-        if let Some(&bad) = f.ids.iter().find(|&&c| c >= cell_count as i32) {
-            return input_err!("the field names cell {bad}, but there are {cell_count} cells");
-        }
     }
     let k = how.subsample as usize;
     let (w, h) = (camera.width as usize, camera.height as usize);
@@ -258,44 +298,114 @@ pub fn resample(
         Some([lo, hi]) => camera.clip_range([lo.as_vec3().to_array(), hi.as_vec3().to_array()]),
         None => (0.0, f64::INFINITY),
     };
-    // Per row of resampled pixels: its marked cell ids and the pixels the field did not answer.
-    let per_row: Vec<RowMarks> = (0..rows)
+    // The image pixel resampled pixel (c, r) stands for, and what its line reads.
+    let pixel = |c: usize, r: usize| ((c * k + k / 2).min(w - 1), (r * k + k / 2).min(h - 1));
+    let read_at = |c: usize, r: usize| {
+        let (x, y) = pixel(c, r);
+        let line = camera.ray_z1(DVec2::new(x as f64 + 0.5, y as f64 + 0.5));
+        read(fields, line, &how, range)
+    };
+    // Where each slab's samples start among the bits.
+    let mut base = vec![0usize; fields.len() + 1];
+    for (k, (_, f)) in fields.iter().enumerate() {
+        base[k + 1] = base[k] + f.hits.len();
+    }
+    let words = base[fields.len()].div_ceil(64);
+    let (read_bits, missed) = (0..rows.div_ceil(BLOCK))
         .into_par_iter()
-        .map(|r| {
-            let mut hit = Vec::new();
-            let mut missed = Vec::new();
-            let mut last = vec![None; fields.len()];
-            let y = (r * k + k / 2).min(h - 1);
-            for c in 0..cols {
-                let x = (c * k + k / 2).min(w - 1);
-                let line = camera.ray_z1(DVec2::new(x as f64 + 0.5, y as f64 + 0.5));
-                let a = answer(fields, line, &how, range, &mut hit, &mut last);
-                if a != Answer::Field {
-                    missed.push((y * w + x, a));
+        .fold(RowMarks::default, |(mut samples, mut missed), br| {
+            // Blocks as inclusive ranges of resampled columns and rows.
+            let (r0, r1) = (br * BLOCK, ((br + 1) * BLOCK).min(rows) - 1);
+            let mut todo: Vec<[usize; 4]> = (0..cols.div_ceil(BLOCK))
+                .rev()
+                .map(|bc| [bc * BLOCK, ((bc + 1) * BLOCK).min(cols) - 1, r0, r1])
+                .collect();
+            // Each resampled pixel of the row of blocks read at most once.
+            let mut cache: Vec<Option<Reading>> = vec![None; cols * (r1 - r0 + 1)];
+            let row0 = r0;
+            while let Some([c0, c1, r0, r1]) = todo.pop() {
+                let corners = [(c0, r0), (c1, r0), (c0, r1), (c1, r1)];
+                for &(c, r) in &corners {
+                    let slot = &mut cache[(r - row0) * cols + c];
+                    if slot.is_none() {
+                        *slot = Some(read_at(c, r));
+                    }
+                }
+                let at = |(c, r): (usize, usize)| cache[(r - row0) * cols + c].as_ref();
+                let first = at(corners[0]).expect("read above");
+                if !corners[1..].iter().all(|&x| at(x) == Some(first)) {
+                    let (cm, rm) = ((c0 + c1) / 2, (r0 + r1) / 2);
+                    for [a, b] in [[rm + 1, r1], [r0, rm]] {
+                        for [x, y] in [[cm + 1, c1], [c0, cm]] {
+                            if a <= b && x <= y {
+                                todo.push([x, y, a, b]);
+                            }
+                        }
+                    }
+                    continue;
+                }
+                for (slab, set) in first.sets.iter().enumerate() {
+                    if let Some(axes) = set {
+                        if samples.is_empty() {
+                            samples = vec![0u64; words];
+                        }
+                        each_sample(&fields[slab].1, axes, |s| {
+                            let bit = base[slab] + s;
+                            samples[bit / 64] |= 1 << (bit % 64);
+                        });
+                    }
+                }
+                if first.answer != Answer::Field {
+                    for r in r0..=r1 {
+                        for c in c0..=c1 {
+                            let (x, y) = pixel(c, r);
+                            missed.push((y * w + x, first.answer));
+                        }
+                    }
                 }
             }
-            hit.sort_unstable();
-            hit.dedup();
-            (hit, missed)
+            (samples, missed)
         })
-        .collect();
+        .reduce(RowMarks::default, |(mut a, mut ma), (b, mb)| {
+            if a.is_empty() {
+                a = b;
+            } else if !b.is_empty() {
+                a.iter_mut().zip(&b).for_each(|(x, y)| *x |= y);
+            }
+            ma.extend(mb);
+            (a, ma)
+        });
     let mut marks = Marks {
         marked: vec![false; cell_count],
         pixels: rows * cols,
         ..Default::default()
     };
-    for (hit, missed) in per_row {
-        for (p, a) in missed {
-            match a {
-                Answer::Outside => marks.outside += 1,
-                _ => marks.overflowed += 1,
-            }
-            if how.conservative.is_some() {
-                marks.fallback.push(p);
-            }
+    for (p, a) in missed {
+        match a {
+            Answer::Outside => marks.outside += 1,
+            _ => marks.overflowed += 1,
         }
-        for c in hit {
-            marks.marked[c as usize] = true;
+        if how.conservative.is_some() {
+            marks.fallback.push(p);
+        }
+    }
+    // In pixel order, whatever order the rows finished in.
+    marks.fallback.sort_unstable();
+    let set_bits = read_bits.iter().enumerate().flat_map(|(i, &word)| {
+        (0..64)
+            .filter(move |b| word >> b & 1 == 1)
+            .map(move |b| i * 64 + b)
+    });
+    for bit in set_bits {
+        let slab = base.partition_point(|&b| b <= bit) - 1;
+        let f = &fields[slab].1;
+        let (n, s) = (f.n as usize, bit - base[slab]);
+        for &id in f.ids[s * n..(s + 1) * n].iter().filter(|&&id| id >= 0) {
+            // Checked as read: only the samples a view reads, not the whole field each view.
+            let Some(m) = marks.marked.get_mut(id as usize) else {
+                return input_err!("the field names cell {id}, but there are {cell_count} cells");
+            };
+            *m = true;
         }
     }
     Ok(marks)
