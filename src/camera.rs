@@ -217,30 +217,10 @@ impl Camera {
         }
     }
 
-    /// Normalised device coordinates (x right, y up, in [−1, 1]) of a pixel position
-    /// (x = column, y = row, pixel centres at +0.5).
-    fn ndc(&self, pixel: DVec2) -> DVec2 {
-        DVec2::new(
-            2.0 * pixel.x / self.width as f64 - 1.0,
-            1.0 - 2.0 * pixel.y / self.height as f64,
-        )
-    }
-
     /// World point → (pixel x, pixel y, depth). Depth is camera-space z (positive in front);
     /// points at or behind a perspective camera's plane give non-finite pixel coordinates.
     pub fn project(&self, p: DVec3) -> (DVec2, f64) {
-        let c = self.world_to_camera_rotation() * (p - self.eye());
-        let depth = -c.z;
-        let h = self.half_extents();
-        let ndc = match self.projection {
-            Projection::Perspective { .. } => DVec2::new(c.x, c.y) / (depth * h),
-            Projection::Orthographic { .. } => DVec2::new(c.x, c.y) / h,
-        };
-        let px = DVec2::new(
-            (ndc.x + 1.0) * 0.5 * self.width as f64,
-            (1.0 - ndc.y) * 0.5 * self.height as f64,
-        );
-        (px, depth)
+        self.projector().project(p)
     }
 
     /// The view volume as planes (unit inward normal, offset), inside meaning `n·p + d >= 0`
@@ -285,18 +265,21 @@ impl Camera {
     /// The ray through a pixel position, with a direction whose camera-space z is −1, so that
     /// `origin + t·dir` lies at depth `t`.
     pub fn ray_z1(&self, pixel: DVec2) -> (DVec3, DVec3) {
-        let ndc = self.ndc(pixel);
-        let h = self.half_extents();
-        let r = DMat3::from_mat4(self.pose);
-        match self.projection {
-            Projection::Perspective { .. } => {
-                let d = DVec3::new(ndc.x * h.x, ndc.y * h.y, -1.0);
-                (self.eye(), r * d)
-            }
-            Projection::Orthographic { .. } => {
-                let o = DVec3::new(ndc.x * h.x, ndc.y * h.y, 0.0);
-                (self.eye() + r * o, r * DVec3::NEG_Z)
-            }
+        self.projector().ray_z1(pixel)
+    }
+
+    /// [`Camera::project`] and [`Camera::ray_z1`] with the rotations and the half extents
+    /// worked out once, for loops over many pixels or points (the same arithmetic, so the same
+    /// answers to the bit).
+    pub fn projector(&self) -> Projector {
+        let to_world = DMat3::from_mat4(self.pose);
+        Projector {
+            to_camera: to_world.transpose(),
+            to_world,
+            eye: self.eye(),
+            half: self.half_extents(),
+            size: DVec2::new(self.width as f64, self.height as f64),
+            perspective: matches!(self.projection, Projection::Perspective { .. }),
         }
     }
 
@@ -488,6 +471,66 @@ pub fn rigid_from(m: DMat4) -> DMat4 {
     )
 }
 
+/// A camera's projection with its per-call work hoisted: see [`Camera::projector`].
+#[derive(Debug, Clone, Copy)]
+pub struct Projector {
+    to_camera: DMat3,
+    to_world: DMat3,
+    eye: DVec3,
+    half: DVec2,
+    size: DVec2,
+    perspective: bool,
+}
+
+impl Projector {
+    /// See [`Camera::project`].
+    pub fn project(&self, p: DVec3) -> (DVec2, f64) {
+        let c = self.to_camera * (p - self.eye);
+        let depth = -c.z;
+        let ndc = if self.perspective {
+            DVec2::new(c.x, c.y) / (depth * self.half)
+        } else {
+            DVec2::new(c.x, c.y) / self.half
+        };
+        let px = DVec2::new(
+            (ndc.x + 1.0) * 0.5 * self.size.x,
+            (1.0 - ndc.y) * 0.5 * self.size.y,
+        );
+        (px, depth)
+    }
+
+    /// [`Projector::project`] of the point `q / w` given in homogeneous form, as homogeneous
+    /// pixel coordinates `(x·k, y·k, k)`: affine in `(q, w)`, so that along a line of points
+    /// (a row of another view's pixels meeting a plane) they are affine in the parameter and
+    /// only the division is left per point.
+    pub fn project_homogeneous(&self, q: DVec3, w: f64) -> DVec3 {
+        let c = self.to_camera * (q - self.eye * w);
+        let k = if self.perspective { -c.z } else { w };
+        DVec3::new(
+            (c.x / self.half.x + k) * 0.5 * self.size.x,
+            (k - c.y / self.half.y) * 0.5 * self.size.y,
+            k,
+        )
+    }
+
+    /// See [`Camera::ray_z1`].
+    pub fn ray_z1(&self, pixel: DVec2) -> (DVec3, DVec3) {
+        // Normalised device coordinates: x right, y up, in [−1, 1]; pixel centres at +0.5.
+        let ndc = DVec2::new(
+            2.0 * pixel.x / self.size.x - 1.0,
+            1.0 - 2.0 * pixel.y / self.size.y,
+        );
+        let h = self.half;
+        if self.perspective {
+            let d = DVec3::new(ndc.x * h.x, ndc.y * h.y, -1.0);
+            (self.eye, self.to_world * d)
+        } else {
+            let o = DVec3::new(ndc.x * h.x, ndc.y * h.y, 0.0);
+            (self.eye + self.to_world * o, self.to_world * DVec3::NEG_Z)
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -516,6 +559,37 @@ mod tests {
             assert!((o1 - o2).length() < 1e-12 && (d1 - d2).length() < 1e-12);
         }
         assert!((k.pixel_footprint(2.0) - c.pixel_footprint(2.0)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn homogeneous_projection_is_the_projection() {
+        let ortho = Camera::new(
+            cam().pose,
+            Projection::Orthographic {
+                xmag: 1.5,
+                ymag: 1.0,
+            },
+            64,
+            48,
+            None,
+            None,
+        )
+        .unwrap();
+        for c in [cam(), ortho] {
+            let p = c.projector();
+            for (q, w) in [
+                (DVec3::new(0.3, -0.2, 0.1), 1.0),
+                (DVec3::new(-1.0, 2.0, 0.5), -2.5),
+            ] {
+                let h = p.project_homogeneous(q, w);
+                let (px, _) = c.project(q / w);
+                assert!(
+                    (DVec2::new(h.x, h.y) / h.z - px).length() < 1e-9,
+                    "{h} {px}"
+                );
+                assert_eq!(p.ray_z1(px), c.ray_z1(px));
+            }
+        }
     }
 
     #[test]

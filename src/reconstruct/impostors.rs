@@ -15,7 +15,7 @@ use std::time::Instant;
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 
-use crate::camera::{Camera, Projection};
+use crate::camera::{Camera, Projection, Projector};
 use crate::discretize::impostors::{
     impostor_camera, lit, shading_normal, vertex_normals, ImpostorProjection, Impostors,
 };
@@ -110,18 +110,30 @@ pub fn reconstruct(
     };
     let triangle_seconds = start.elapsed().as_secs_f64();
 
-    // 4. Billboards, depth-tested.
+    // 4. Billboards, depth-tested: set up nearest first, then drawn in bands of rows on all
+    // cores, each band taking the billboards in that order (so every pixel sees the same
+    // sequence of depth tests however the bands are shared out).
     let start = Instant::now();
-    let mut billboard_pixels = 0u64;
+    let mut billboards = Vec::new();
     for &c in &order {
-        let k = used[c];
-        if k < 0 {
-            continue;
+        if let Ok(k) = usize::try_from(used[c]) {
+            billboards.extend(Billboard::new(imp, projection, c, k, camera)?);
         }
-        billboard_pixels += draw_billboard(
-            imp, projection, c, k as usize, camera, &mut color, &mut depth,
-        )?;
     }
+    let eye = PixelRays::of(camera);
+    let band = BAND_ROWS * w;
+    let billboard_pixels: u64 = color
+        .par_chunks_mut(band)
+        .zip(depth.par_chunks_mut(band))
+        .enumerate()
+        .map(|(b, (color, depth))| {
+            let rows = b * BAND_ROWS..b * BAND_ROWS + color.len() / w;
+            let bands = billboards.iter();
+            bands
+                .map(|bb| bb.draw(&eye, rows.clone(), w, color, depth))
+                .sum::<u64>()
+        })
+        .sum();
     let impostor_seconds = start.elapsed().as_secs_f64();
     let count = |u: i32| used.iter().filter(|&&x| x == u).count() as f64;
     let impostors = used.iter().filter(|&&x| x >= 0).count() as f64;
@@ -294,91 +306,178 @@ pub fn best_direction(imp: &Impostors, c: usize, camera: &Camera) -> usize {
     best
 }
 
-/// Composite cell `c`'s impostor `k` as a billboard; returns the pixels written.
-fn draw_billboard(
-    imp: &Impostors,
-    projection: ImpostorProjection,
-    c: usize,
-    k: usize,
-    camera: &Camera,
-    color: &mut [[f32; 3]],
-    depth: &mut [f32],
-) -> Result<u64> {
-    let cell = &imp.cells[c];
-    let d = imp.directions[k];
-    let icam = impostor_camera(cell, d, imp.resolution, projection)?;
-    let crop = imp.crops[c * imp.directions.len() + k];
-    if crop[2] == 0 {
-        return Ok(0);
-    }
-    let centre = cell.center();
-    // The billboard: the plane through the centre facing d; its extent, the impostor's view at
-    // that plane.
-    let half = match projection {
-        ImpostorProjection::Orthographic => cell.radius(),
-        ImpostorProjection::Perspective(fov) => cell.radius() / (fov / 2.0).cos(),
-    };
-    let r = icam.world_to_camera_rotation();
-    let (right, up) = (r.row(0), r.row(1));
-    let (w, h) = (camera.width as usize, camera.height as usize);
-    let mut lo = DVec2::splat(f64::INFINITY);
-    let mut hi = DVec2::splat(f64::NEG_INFINITY);
-    let mut behind = false;
-    for (a, b) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
-        let (px, z) = camera.project(centre + (right * a + up * b) * half);
-        if !(z > 0.0 && px.is_finite()) {
-            behind = true;
-            break;
+/// Rows of the view each thread composites at a time.
+const BAND_ROWS: usize = 8;
+
+/// One cell's impostor image placed as a billboard: the plane through the cell's centre facing
+/// the impostor's direction, and the pixels its square may cover.
+struct Billboard<'a> {
+    centre: DVec3,
+    facing: DVec3,
+    /// The impostor's camera, which maps a point of the plane to its texel.
+    image: Projector,
+    rows: std::ops::Range<usize>,
+    columns: std::ops::Range<usize>,
+    /// The image's crop: x, y, width, height.
+    crop: [i64; 4],
+    /// The cell's image along this direction, rows of `width` texels.
+    texels: &'a [[u8; 4]],
+    width: usize,
+}
+
+impl<'a> Billboard<'a> {
+    /// Cell `c`'s impostor `k` seen from `camera`; `None` when its image is empty.
+    fn new(
+        imp: &'a Impostors,
+        projection: ImpostorProjection,
+        c: usize,
+        k: usize,
+        camera: &Camera,
+    ) -> Result<Option<Self>> {
+        let cell = &imp.cells[c];
+        let facing = imp.directions[k];
+        let icam = impostor_camera(cell, facing, imp.resolution, projection)?;
+        let crop = imp.crops[c * imp.directions.len() + k];
+        if crop[2] == 0 {
+            return Ok(None);
         }
-        lo = lo.min(px);
-        hi = hi.max(px);
+        let centre = cell.center();
+        // The pixels it may cover: those of the image's cropped rectangle on the plane, with a
+        // pixel's margin for rounding (the plane's map to the view is projective, so the
+        // rectangle's corners bound what lies inside it).
+        let plane_depth = icam.project(centre).1;
+        let (w, h) = (camera.width as usize, camera.height as usize);
+        let mut lo = DVec2::splat(f64::INFINITY);
+        let mut hi = DVec2::splat(f64::NEG_INFINITY);
+        let mut behind = false;
+        let [cx, cy, cw, ch] = crop.map(f64::from);
+        for (a, b) in [(cx, cy), (cx + cw, cy), (cx + cw, cy + ch), (cx, cy + ch)] {
+            let corner = icam.unproject(DVec2::new(a, b), plane_depth);
+            let (px, z) = camera.project(corner);
+            if !(z > 0.0 && px.is_finite()) {
+                behind = true;
+                break;
+            }
+            lo = lo.min(px);
+            hi = hi.max(px);
+        }
+        let (columns, rows) = if behind {
+            (0..w, 0..h)
+        } else {
+            let at = |v: f64, n: usize| (v.max(0.0) as usize).min(n);
+            (
+                at(lo.x.floor() - 1.0, w)..at(hi.x.ceil() + 1.0, w),
+                at(lo.y.floor() - 1.0, h)..at(hi.y.ceil() + 1.0, h),
+            )
+        };
+        let size = imp.height * imp.width;
+        let base = (c * imp.directions.len() + k) * size;
+        Ok(Some(Billboard {
+            centre,
+            facing,
+            image: icam.projector(),
+            rows,
+            columns,
+            crop: crop.map(i64::from),
+            texels: &imp.color[base..base + size],
+            width: imp.width,
+        }))
     }
-    let (x0, x1, y0, y1) = if behind {
-        (0, w, 0, h)
-    } else {
-        (
-            (lo.x.floor().max(0.0) as usize).min(w),
-            (hi.x.ceil().max(0.0) as usize).min(w),
-            (lo.y.floor().max(0.0) as usize).min(h),
-            (hi.y.ceil().max(0.0) as usize).min(h),
-        )
-    };
-    let [cx, cy, cw, ch] = crop.map(|v| v as i64);
-    let base = (c * imp.directions.len() + k) * imp.height * imp.width;
-    let mut written = 0;
-    for y in y0..y1 {
-        for x in x0..x1 {
-            let (o, dir) = camera.ray_z1(DVec2::new(x as f64 + 0.5, y as f64 + 0.5));
-            let denom = dir.dot(d);
-            if denom.abs() < 1e-12 {
-                continue;
-            }
-            let t = (centre - o).dot(d) / denom;
-            if t <= 0.0 {
-                continue;
-            }
-            let q = o + dir * t;
-            let (tp, _) = icam.project(q);
-            if !tp.is_finite() {
-                continue;
-            }
-            let (tx, ty) = (tp.x.floor() as i64 - cx, tp.y.floor() as i64 - cy);
-            if tx < 0 || ty < 0 || tx >= cw || ty >= ch {
-                continue;
-            }
-            let texel = base + ty as usize * imp.width + tx as usize;
-            let rgba = imp.color[texel];
-            if rgba[3] == 0 {
-                continue;
-            }
-            let z = camera.project(q).1 as f32;
-            let i = y * w + x;
-            if z < depth[i] {
-                depth[i] = z;
-                color[i] = [rgba[0], rgba[1], rgba[2]].map(|v| v as f32 / 255.0);
-                written += 1;
+
+    /// Where the ray (`o`, `dir`) meets the plane, in homogeneous form: the texel position
+    /// times k, k, the ray's depth there times m, and m. Affine along a row of pixels.
+    fn homogeneous(&self, o: DVec3, dir: DVec3) -> [f64; 5] {
+        let along = self.facing.dot(self.centre - o);
+        let m = dir.dot(self.facing);
+        let h = self.image.project_homogeneous(o * m + dir * along, m);
+        [h.x, h.y, h.z, along, m]
+    }
+
+    /// Composite the billboard into the view's rows `rows` (`color` and `depth` hold just
+    /// those rows, `w` pixels each); returns the pixels written. Each pixel's ray meets the
+    /// plane, the texel there is looked up, and the plane's depth is tested. Along a row the
+    /// texel position and the depth are ratios of affine functions of the column, set up from
+    /// the row's first two pixels.
+    fn draw(
+        &self,
+        eye: &PixelRays,
+        rows: std::ops::Range<usize>,
+        w: usize,
+        color: &mut [[f32; 3]],
+        depth: &mut [f32],
+    ) -> u64 {
+        let [cx, cy, cw, ch] = self.crop;
+        let x0 = self.columns.start as f64;
+        let mut written = 0;
+        for y in rows.start.max(self.rows.start)..rows.end.min(self.rows.end) {
+            let (o, dir) = eye.at(x0, y as f64);
+            let first = self.homogeneous(o, dir);
+            let next = self.homogeneous(o + eye.step.0, dir + eye.step.1);
+            let slope: [f64; 5] = std::array::from_fn(|k| next[k] - first[k]);
+            let at = |k: usize, i: f64| first[k] + slope[k] * i;
+            let row = (y - rows.start) * w;
+            for x in self.columns.clone() {
+                let i = x as f64 - x0;
+                // The ray's direction has camera-space z −1: t is the plane's depth here.
+                let m = at(4, i);
+                if m.abs() < 1e-12 {
+                    continue;
+                }
+                let t = at(3, i) / m;
+                if t <= 0.0 {
+                    continue;
+                }
+                let k = at(2, i);
+                let (tx, ty) = (at(0, i) / k, at(1, i) / k);
+                if !(tx.is_finite() && ty.is_finite()) {
+                    continue;
+                }
+                let (tx, ty) = (tx.floor() as i64 - cx, ty.floor() as i64 - cy);
+                if tx < 0 || ty < 0 || tx >= cw || ty >= ch {
+                    continue;
+                }
+                let rgba = self.texels[ty as usize * self.width + tx as usize];
+                if rgba[3] == 0 {
+                    continue;
+                }
+                let (z, i) = (t as f32, row + x);
+                if z < depth[i] {
+                    depth[i] = z;
+                    color[i] = [rgba[0], rgba[1], rgba[2]].map(|v| v as f32 / 255.0);
+                    written += 1;
+                }
             }
         }
+        written
     }
-    Ok(written)
+}
+
+/// A view's pixel rays ([`Camera::ray_z1`]) as affine functions of the pixel, so that a row is
+/// walked by adding a step: origin and direction at pixel (0, 0) and their change per column
+/// and per row.
+struct PixelRays {
+    first: (DVec3, DVec3),
+    step: (DVec3, DVec3),
+    down: (DVec3, DVec3),
+}
+
+impl PixelRays {
+    fn of(camera: &Camera) -> Self {
+        let p = camera.projector();
+        let first = p.ray_z1(DVec2::new(0.5, 0.5));
+        let right = p.ray_z1(DVec2::new(1.5, 0.5));
+        let below = p.ray_z1(DVec2::new(0.5, 1.5));
+        PixelRays {
+            first,
+            step: (right.0 - first.0, right.1 - first.1),
+            down: (below.0 - first.0, below.1 - first.1),
+        }
+    }
+
+    /// The ray through the centre of pixel (`x`, `y`).
+    fn at(&self, x: f64, y: f64) -> (DVec3, DVec3) {
+        let o = self.first.0 + self.step.0 * x + self.down.0 * y;
+        let d = self.first.1 + self.step.1 * x + self.down.1 * y;
+        (o, d)
+    }
 }
