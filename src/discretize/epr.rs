@@ -136,6 +136,7 @@ pub fn generate(
     // A reflector does not see itself, nor the back of a single-sided triangle (§3.2: a
     // triangle is sampled only for the views it faces; its cube map's eye is its centre).
     let facing: Vec<(DVec3, DVec3, bool)> = (0..scene.triangle_count())
+        .into_par_iter()
         .map(|t| {
             let v0 = scene.triangle(t)[0];
             (scene.face_normal(t), v0, scene.is_double_sided(t))
@@ -378,65 +379,73 @@ fn sample_triangles(
     let floor = scene.diagonal() * 1e-9;
     let verts = scene.vertices();
     let faces = scene.faces();
-    // In blocks, so the caller sees progress (in triangles) and Ctrl-C is heard between them.
+    // In blocks, so the caller sees progress (in triangles) and Ctrl-C is heard between them;
+    // each block's points are appended in triangle order before the next block starts.
     const BLOCK: usize = 1 << 16;
     crate::process::add_total(faces.len() as u64);
-    let mut per_triangle: Vec<TrianglePoints> = Vec::with_capacity(faces.len());
-    for (k, block) in faces.chunks(BLOCK).enumerate() {
-        crate::process::check()?;
-        per_triangle.par_extend(block.par_iter().enumerate().map(|(j, f)| {
-            let t = k * BLOCK + j;
-            let p = f.map(|i| DVec3::from(verts[i as usize].map(f64::from)));
-            let mut bits = vec![0u64; words];
-            for (v, fr) in frusta.iter().enumerate() {
-                if !skip(t, v) && fr.may_see(&p) {
-                    bits[v / 64] |= 1 << (v % 64);
-                }
-            }
-            if bits.iter().all(|&b| b == 0) {
-                return TrianglePoints::Invisible;
-            }
-            let area = 0.5 * (p[1] - p[0]).cross(p[2] - p[0]).length();
-            let s = spacing(t, &p, &bits);
-            let s = if s.is_nan() { floor } else { s };
-            let s = s.max((area / MAX_PER_TRIANGLE).sqrt()).max(floor);
-            let epr_area = area / (s * s);
-            if epr_area <= 0.1 && unit_hash(seed, t as u64) >= 10.0 * epr_area {
-                return TrianglePoints::Culled;
-            }
-            TrianglePoints::Points(bits, cover(&p, s))
-        }));
-        crate::process::advance(block.len() as u64);
-    }
-
     let mut out = Points {
         view_count: views.len(),
         ..Default::default()
     };
     let (mut invisible, mut culled, mut sampled) = (0usize, 0usize, 0usize);
     let materials = scene.material_ids();
-    for (t, tp) in per_triangle.into_iter().enumerate() {
-        let (bits, pts) = match tp {
-            TrianglePoints::Invisible => {
-                invisible += 1;
-                continue;
+    let mut per_triangle: Vec<TrianglePoints> = Vec::with_capacity(BLOCK.min(faces.len()));
+    for (k, block) in faces.chunks(BLOCK).enumerate() {
+        crate::process::check()?;
+        per_triangle.clear();
+        // The visibility bits are worked out in a scratch buffer per job and copied only for
+        // a triangle that gets points (most of a large scene's are culled, §3.3).
+        let work = block.par_iter().enumerate().map_init(
+            || vec![0u64; words],
+            |bits, (j, f)| {
+                let t = k * BLOCK + j;
+                let p = f.map(|i| DVec3::from(verts[i as usize].map(f64::from)));
+                bits.fill(0);
+                for (v, fr) in frusta.iter().enumerate() {
+                    if !skip(t, v) && fr.may_see(&p) {
+                        bits[v / 64] |= 1 << (v % 64);
+                    }
+                }
+                if bits.iter().all(|&b| b == 0) {
+                    return TrianglePoints::Invisible;
+                }
+                let area = 0.5 * (p[1] - p[0]).cross(p[2] - p[0]).length();
+                let s = spacing(t, &p, bits);
+                let s = if s.is_nan() { floor } else { s };
+                let s = s.max((area / MAX_PER_TRIANGLE).sqrt()).max(floor);
+                let epr_area = area / (s * s);
+                if epr_area <= 0.1 && unit_hash(seed, t as u64) >= 10.0 * epr_area {
+                    return TrianglePoints::Culled;
+                }
+                TrianglePoints::Points(bits.clone(), cover(&p, s))
+            },
+        );
+        per_triangle.par_extend(work);
+        for (j, tp) in per_triangle.drain(..).enumerate() {
+            let t = k * BLOCK + j;
+            let (bits, pts) = match tp {
+                TrianglePoints::Invisible => {
+                    invisible += 1;
+                    continue;
+                }
+                TrianglePoints::Culled => {
+                    culled += 1;
+                    continue;
+                }
+                TrianglePoints::Points(bits, pts) => (bits, pts),
+            };
+            sampled += 1;
+            let n = normal(scene, t);
+            for (c, l) in pts {
+                out.center.push(c.as_vec3().to_array());
+                out.length.push(l as f32);
+                out.triangle.push(t as i32);
+                out.normal.push(n);
+                out.material.push(materials[t]);
+                out.views.extend_from_slice(&bits);
             }
-            TrianglePoints::Culled => {
-                culled += 1;
-                continue;
-            }
-            TrianglePoints::Points(bits, pts) => (bits, pts),
-        };
-        sampled += 1;
-        let n = normal(scene, t);
-        for (c, l) in pts {
-            out.center.push(c.as_vec3().to_array());
-            out.length.push(l as f32);
-            out.triangle.push(t as i32);
-            out.normal.push(n);
-            out.material.push(materials[t]);
-            out.views.extend_from_slice(&bits);
         }
+        crate::process::advance(block.len() as u64);
     }
     out.timings = Timings::from([("points", start.elapsed().as_secs_f64())]);
     out.stats = Stats::from([
