@@ -28,7 +28,7 @@ use std::time::Instant;
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 
-use crate::camera::Camera;
+use crate::camera::{Camera, Projector};
 use crate::discretize::conventional::{walk, TraceFrame, Walk};
 use crate::discretize::visibility_field::{clip_line, Field, Slab};
 use crate::discretize::{discretize_ranges, push_range};
@@ -88,11 +88,9 @@ pub struct Marks {
     pub fallback: Vec<usize>,
 }
 
-/// How the field answered one pixel's line.
+/// Why the field did not answer a pixel's line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Answer {
-    /// From a slab whose samples are trusted (or the line sees nothing).
-    Field,
     /// Slabs hold the line, but each reads a sample that hit more cells than trusted.
     Overflowed,
     /// No slab holds the line.
@@ -153,14 +151,6 @@ impl<'a> From<&'a Field> for Samples<'a> {
 /// The samples one line reads from a slab's field: per axis, the indices and how many.
 type Axes = [([u32; 2], usize); 4];
 
-/// What one resampled pixel's line reads (per slab, the samples, `None` where the slab does
-/// not hold the line) and how the field answers it.
-#[derive(Debug, Clone, PartialEq)]
-struct Reading {
-    answer: Answer,
-    sets: Vec<Option<Axes>>,
-}
-
 /// The samples around the line `q`: the one holding it and, per `interpolate` (uv, st), its
 /// neighbours.
 fn axes_of(f: &Samples, q: [f64; 4], (do_uv, do_st): (bool, bool)) -> Axes {
@@ -196,58 +186,57 @@ fn most_hits(f: &Samples, axes: &Axes) -> u16 {
     most
 }
 
-/// How the fields answer the line `o + λ·d`, and the samples it reads.
+/// What one slab says about one resampled pixel's line.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum SlabRead {
+    /// The line sees nothing inside the scene's bounds: answered, with nothing to read.
+    Nothing,
+    /// The slab does not answer the line.
+    No,
+    /// It answers by reading these samples, `true` when each saw at most `trust` cells.
+    Reads(Axes, bool),
+}
+
+/// How one slab's field answers the line `o + λ·d`, and the samples it reads.
 fn read(
-    fields: &[(Slab, Samples)],
+    (slab, f): &(Slab, Samples),
     (o, d): (DVec3, DVec3),
     how: &Resampling,
     range: (f64, f64),
-) -> Reading {
+) -> SlabRead {
     let interp = match how.interpolate {
         Interpolate::None => (false, false),
         Interpolate::Uv => (true, false),
         Interpolate::St => (false, true),
         Interpolate::UvSt => (true, true),
     };
-    let mut sets = vec![None; fields.len()];
     let Some(bounds) = how.conservative else {
-        for ((slab, f), set) in fields.iter().zip(sets.iter_mut()) {
-            *set = slab.line(o, d).map(|q| axes_of(f, q, interp));
-        }
-        let answer = if sets.iter().any(Option::is_some) {
-            Answer::Field
-        } else {
-            Answer::Outside
+        return match slab.line(o, d) {
+            Some(q) => SlabRead::Reads(axes_of(f, q, interp), true),
+            None => SlabRead::No,
         };
-        return Reading { answer, sets };
     };
     // What the ray can see: its [near, far] range within the scene's bounds.
     let seen = clip_line(o, d, bounds).map(|(a, b)| (a, [a.max(range.0), b.min(range.1)]));
     let Some((box_from, seen)) = seen.filter(|(_, [a, b])| a <= b) else {
-        return Reading {
-            answer: Answer::Field,
-            sets,
-        };
+        return SlabRead::Nothing;
     };
-    let (mut held, mut answered) = (false, false);
-    for ((slab, f), set) in fields.iter().zip(sets.iter_mut()) {
-        if let Some(q) = slab.answers(o, d, seen, box_from) {
+    match slab.answers(o, d, seen, box_from) {
+        Some(q) => {
             let axes = axes_of(f, q, interp);
-            held = true;
-            answered |= u32::from(most_hits(f, &axes)) <= how.trust;
-            *set = Some(axes);
+            SlabRead::Reads(axes, u32::from(most_hits(f, &axes)) <= how.trust)
         }
+        None => SlabRead::No,
     }
-    let answer = match (answered, held) {
-        (true, _) => Answer::Field,
-        (false, true) => Answer::Overflowed,
-        (false, false) => Answer::Outside,
-    };
-    Reading { answer, sets }
 }
 
+/// Per resampled pixel: some slab answered it (or it sees nothing), and some slab holds its
+/// line; a pixel answered by none goes to the fallback, as overflowed when held.
+const ANSWERED: u8 = 1;
+const HELD: u8 = 2;
+
 /// Side, in resampled pixels, of the blocks resampling starts from.
-const BLOCK: usize = 8;
+const BLOCK: usize = 32;
 
 /// What rows of blocks found: the samples read (a bit per sample of every slab, in slab
 /// order; empty until one is read), and the pixels the field did not answer.
@@ -255,16 +244,19 @@ type RowMarks = (Vec<u64>, Vec<(usize, Answer)>);
 
 /// Mark the cells `camera` sees through the fields (one per slab).
 ///
-/// Pixels are resampled by blocks rather than one by one: the resampled pixels of a block of
-/// `BLOCK x BLOCK` whose four corner pixels read the same samples and get the same answer all
-/// do, and the block adds its samples' cells once; a block whose corners differ is split in
-/// four, down to single pixels. The pinhole projection maps the image linearly onto each slab
-/// plane's rectangle (a homography), so the (u, v) and (s, t) of a block's pixels lie within
-/// its corners' and the sample indices and the rectangle tests, monotone in them, agree inside
-/// when they agree at the corners; so do the tests of the visible range against the planes for
-/// a camera outside the bounds, where they always pass. What changes is the cost: the field's
-/// resolution, not the image's, sets the number of lines read (visibility-field.txt §4 reads
-/// the field per pixel on the GPU; on the CPU that was 70-89% of a view).
+/// Pixels are resampled by blocks rather than one by one, and each slab on its own: the
+/// resampled pixels of a block of `BLOCK x BLOCK` whose four corner pixels read the same
+/// samples of a slab and get the same answer from it all do, and the block adds those samples'
+/// cells once; a block whose corners differ is split in four, down to single pixels. The
+/// pinhole projection maps the image linearly onto each slab plane's rectangle (a homography),
+/// so the (u, v) and (s, t) of a block's pixels lie within its corners' and the sample indices
+/// and the rectangle tests, monotone in them, agree inside when they agree at the corners; so
+/// do the tests of the visible range against the planes for a camera outside the bounds, where
+/// they always pass. A pixel's answer is then its slabs' answers merged. Taking the slabs one
+/// at a time, a block is split only where that slab's samples change, not wherever any of the
+/// six slabs' do. What changes is the cost: the field's resolution, not the image's, sets the
+/// number of lines read (visibility-field.txt §4 reads the field per pixel on the GPU; on the
+/// CPU that was 70-89% of a view).
 pub fn resample(
     fields: &[(Slab, Samples)],
     cell_count: usize,
@@ -298,12 +290,45 @@ pub fn resample(
         Some([lo, hi]) => camera.clip_range([lo.as_vec3().to_array(), hi.as_vec3().to_array()]),
         None => (0.0, f64::INFINITY),
     };
-    // The image pixel resampled pixel (c, r) stands for, and what its line reads.
+    // The image pixel resampled pixel (c, r) stands for, and its line.
     let pixel = |c: usize, r: usize| ((c * k + k / 2).min(w - 1), (r * k + k / 2).min(h - 1));
-    let read_at = |c: usize, r: usize| {
+    let eye = camera.projector();
+    let line_at = |c: usize, r: usize| {
         let (x, y) = pixel(c, r);
-        let line = camera.ray_z1(DVec2::new(x as f64 + 0.5, y as f64 + 0.5));
-        read(fields, line, &how, range)
+        eye.ray_z1(DVec2::new(x as f64 + 0.5, y as f64 + 0.5))
+    };
+    // The outline the scene's bounds project to (None: a corner lies behind the camera, and
+    // any block may reach them): a block whose corners' lines all miss the bounds may still
+    // hold lines that meet them (a far scene smaller than a block, a flat one seen edge on, a
+    // corner of the outline poking in between two block corners) unless it lies outside.
+    let outline = how.conservative.map(|[lo, hi]| {
+        let mut points = Vec::with_capacity(8);
+        for i in 0..8 {
+            let p = DVec3::new(
+                if i & 1 == 0 { lo.x } else { hi.x },
+                if i & 2 == 0 { lo.y } else { hi.y },
+                if i & 4 == 0 { lo.z } else { hi.z },
+            );
+            let (px, z) = eye.project(p);
+            if !(z > 0.0 && px.is_finite()) {
+                return None;
+            }
+            points.push(px);
+        }
+        Some(convex_hull(points))
+    });
+    let may_reach = |c0: usize, c1: usize, r0: usize, r1: usize| {
+        let Some(outline) = &outline else {
+            return false;
+        };
+        let Some(hull) = outline else {
+            return true;
+        };
+        let ((a, b), (c, d)) = (pixel(c0, r0), pixel(c1, r1));
+        let m = k as f64 + 1.0;
+        let lo = DVec2::new(a as f64 - m, b as f64 - m);
+        let hi = DVec2::new(c as f64 + 1.0 + m, d as f64 + 1.0 + m);
+        polygon_meets_box(hull, lo, hi)
     };
     // Where each slab's samples start among the bits.
     let mut base = vec![0usize; fields.len() + 1];
@@ -315,52 +340,76 @@ pub fn resample(
         .into_par_iter()
         .fold(RowMarks::default, |(mut samples, mut missed), br| {
             // Blocks as inclusive ranges of resampled columns and rows.
-            let (r0, r1) = (br * BLOCK, ((br + 1) * BLOCK).min(rows) - 1);
-            let mut todo: Vec<[usize; 4]> = (0..cols.div_ceil(BLOCK))
-                .rev()
-                .map(|bc| [bc * BLOCK, ((bc + 1) * BLOCK).min(cols) - 1, r0, r1])
-                .collect();
-            // Each resampled pixel of the row of blocks read at most once.
-            let mut cache: Vec<Option<Reading>> = vec![None; cols * (r1 - r0 + 1)];
-            let row0 = r0;
-            while let Some([c0, c1, r0, r1]) = todo.pop() {
-                let corners = [(c0, r0), (c1, r0), (c0, r1), (c1, r1)];
-                for &(c, r) in &corners {
-                    let slot = &mut cache[(r - row0) * cols + c];
-                    if slot.is_none() {
-                        *slot = Some(read_at(c, r));
+            let (row0, row1) = (br * BLOCK, ((br + 1) * BLOCK).min(rows) - 1);
+            let at = |c: usize, r: usize| (r - row0) * cols + c;
+            let mut state = vec![0u8; cols * (row1 - row0 + 1)];
+            // Each resampled pixel of the row of blocks read at most once per slab: its read
+            // is in `cache` when `stamp` holds the slab's number + 1.
+            let mut cache = vec![SlabRead::No; state.len()];
+            let mut stamp = vec![0usize; state.len()];
+            for (slab, field) in fields.iter().enumerate() {
+                let mut todo: Vec<[usize; 4]> = (0..cols.div_ceil(BLOCK))
+                    .rev()
+                    .map(|bc| [bc * BLOCK, ((bc + 1) * BLOCK).min(cols) - 1, row0, row1])
+                    .collect();
+                while let Some([c0, c1, r0, r1]) = todo.pop() {
+                    let corners = [(c0, r0), (c1, r0), (c0, r1), (c1, r1)];
+                    for &(c, r) in &corners {
+                        if stamp[at(c, r)] != slab + 1 {
+                            stamp[at(c, r)] = slab + 1;
+                            cache[at(c, r)] = read(field, line_at(c, r), &how, range);
+                        }
                     }
-                }
-                let at = |(c, r): (usize, usize)| cache[(r - row0) * cols + c].as_ref();
-                let first = at(corners[0]).expect("read above");
-                if !corners[1..].iter().all(|&x| at(x) == Some(first)) {
-                    let (cm, rm) = ((c0 + c1) / 2, (r0 + r1) / 2);
-                    for [a, b] in [[rm + 1, r1], [r0, rm]] {
-                        for [x, y] in [[cm + 1, c1], [c0, cm]] {
-                            if a <= b && x <= y {
-                                todo.push([x, y, a, b]);
+                    let first = cache[at(c0, r0)];
+                    let single = c0 == c1 && r0 == r1;
+                    let unsure = first == SlabRead::Nothing && !single && may_reach(c0, c1, r0, r1);
+                    if unsure || !corners[1..].iter().all(|&(c, r)| cache[at(c, r)] == first) {
+                        let (cm, rm) = ((c0 + c1) / 2, (r0 + r1) / 2);
+                        for [a, b] in [[rm + 1, r1], [r0, rm]] {
+                            for [x, y] in [[cm + 1, c1], [c0, cm]] {
+                                if a <= b && x <= y {
+                                    todo.push([x, y, a, b]);
+                                }
                             }
                         }
+                        continue;
                     }
-                    continue;
-                }
-                for (slab, set) in first.sets.iter().enumerate() {
-                    if let Some(axes) = set {
-                        if samples.is_empty() {
-                            samples = vec![0u64; words];
+                    let bits = match first {
+                        SlabRead::No => continue,
+                        SlabRead::Nothing => ANSWERED,
+                        SlabRead::Reads(axes, trusted) => {
+                            if samples.is_empty() {
+                                samples = vec![0u64; words];
+                            }
+                            each_sample(&field.1, &axes, |s| {
+                                let bit = base[slab] + s;
+                                samples[bit / 64] |= 1 << (bit % 64);
+                            });
+                            if trusted {
+                                HELD | ANSWERED
+                            } else {
+                                HELD
+                            }
                         }
-                        each_sample(&fields[slab].1, axes, |s| {
-                            let bit = base[slab] + s;
-                            samples[bit / 64] |= 1 << (bit % 64);
-                        });
-                    }
-                }
-                if first.answer != Answer::Field {
+                    };
                     for r in r0..=r1 {
-                        for c in c0..=c1 {
-                            let (x, y) = pixel(c, r);
-                            missed.push((y * w + x, first.answer));
-                        }
+                        state[at(c0, r)..=at(c1, r)]
+                            .iter_mut()
+                            .for_each(|s| *s |= bits);
+                    }
+                }
+            }
+            for r in row0..=row1 {
+                for c in 0..cols {
+                    let s = state[at(c, r)];
+                    if s & ANSWERED == 0 {
+                        let (x, y) = pixel(c, r);
+                        let answer = if s & HELD != 0 {
+                            Answer::Overflowed
+                        } else {
+                            Answer::Outside
+                        };
+                        missed.push((y * w + x, answer));
                     }
                 }
             }
@@ -409,6 +458,60 @@ pub fn resample(
         }
     }
     Ok(marks)
+}
+
+/// The convex hull of `points`, counter-clockwise in a y-up frame (Andrew's monotone chain);
+/// fewer than three distinct points give those points.
+fn convex_hull(mut points: Vec<DVec2>) -> Vec<DVec2> {
+    points.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
+    points.dedup();
+    if points.len() < 3 {
+        return points;
+    }
+    let turn = |o: DVec2, a: DVec2, b: DVec2| (a - o).perp_dot(b - o);
+    let mut hull: Vec<DVec2> = Vec::with_capacity(2 * points.len());
+    for pass in [points.clone(), points.into_iter().rev().collect()] {
+        let start = hull.len();
+        for p in pass {
+            while hull.len() >= start + 2
+                && turn(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0.0
+            {
+                hull.pop();
+            }
+            hull.push(p);
+        }
+        hull.pop();
+    }
+    hull
+}
+
+/// Whether the convex polygon `hull` and the box `[lo, hi]` overlap (separating axes: the
+/// box's two and each edge's normal).
+fn polygon_meets_box(hull: &[DVec2], lo: DVec2, hi: DVec2) -> bool {
+    let (mut pmin, mut pmax) = (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY));
+    for &p in hull {
+        pmin = pmin.min(p);
+        pmax = pmax.max(p);
+    }
+    if pmax.x < lo.x || hi.x < pmin.x || pmax.y < lo.y || hi.y < pmin.y {
+        return false;
+    }
+    let corners = [lo, DVec2::new(hi.x, lo.y), hi, DVec2::new(lo.x, hi.y)];
+    for (i, &a) in hull.iter().enumerate() {
+        let n = (hull[(i + 1) % hull.len()] - a).perp();
+        let span = |pts: &mut dyn Iterator<Item = DVec2>| {
+            pts.map(|p| n.dot(p))
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| {
+                    (l.min(v), h.max(v))
+                })
+        };
+        let (h0, h1) = span(&mut hull.iter().copied());
+        let (b0, b1) = span(&mut corners.iter().copied());
+        if h1 < b0 || b1 < h0 {
+            return false;
+        }
+    }
+    true
 }
 
 /// The scene's bounds, widened by a millionth of its diagonal (and at least 1e-30) so that
@@ -461,17 +564,18 @@ pub fn trace_fallback(
     let walked = walk(sorted, camera, start, how, |c| Ok(vec![false; c.len()]))?;
     let w = camera.width as usize;
     let centre = |p: usize| DVec2::new((p % w) as f64 + 0.5, (p / w) as f64 + 0.5);
+    let eye = camera.projector();
     let on_edge: Vec<usize> = walked
         .found
         .par_iter()
-        .filter(|&&(p, t)| near_edge(sorted.triangle(t as usize), camera, centre(p)))
+        .filter(|&&(p, t)| near_edge(sorted.triangle(t as usize), &eye, centre(p)))
         .map(|&(p, _)| p)
         .collect();
     let (origins, dirs): (Vec<[f32; 3]>, Vec<[f32; 3]>) = on_edge
         .iter()
         .flat_map(|&p| AROUND.map(|o| centre(p) + DVec2::from_array(o)))
         .map(|x| {
-            let (o, d) = camera.ray_z1(x);
+            let (o, d) = eye.ray_z1(x);
             (
                 (o + d * near - frame.shift).as_vec3().to_array(),
                 d.as_vec3().to_array(),
@@ -500,7 +604,7 @@ pub fn trace_fallback(
 
 /// Whether the pixel position `x` lies within [`EDGE`] pixels of an edge of `tri` as `camera`
 /// projects it (true when a vertex lies behind the camera, where the projection is no guide).
-fn near_edge(tri: [DVec3; 3], camera: &Camera, x: DVec2) -> bool {
+fn near_edge(tri: [DVec3; 3], camera: &Projector, x: DVec2) -> bool {
     let projected = tri.map(|p| camera.project(p));
     if projected
         .iter()
@@ -565,6 +669,27 @@ mod tests {
         }
         assert_eq!(around(0.01, 4, true), ([0, 0], 1));
         assert_eq!(around(0.4, 4, true), ([1, 2], 2));
+    }
+
+    #[test]
+    fn a_polygon_meets_the_boxes_it_overlaps() {
+        let p = |x, y| DVec2::new(x, y);
+        let hull = convex_hull(vec![
+            p(0.0, 0.0),
+            p(4.0, 0.0),
+            p(0.0, 4.0),
+            p(1.0, 1.0),
+            p(4.0, 0.0),
+        ]);
+        assert_eq!(hull.len(), 3, "{hull:?}");
+        // Inside, across an edge, beside the hypotenuse, far away, and a sliver's box.
+        assert!(polygon_meets_box(&hull, p(1.0, 1.0), p(1.5, 1.5)));
+        assert!(polygon_meets_box(&hull, p(-1.0, 1.0), p(0.5, 2.0)));
+        assert!(!polygon_meets_box(&hull, p(3.0, 3.0), p(5.0, 5.0)));
+        assert!(!polygon_meets_box(&hull, p(10.0, 0.0), p(11.0, 1.0)));
+        let sliver = convex_hull(vec![p(0.0, 0.0), p(10.0, 10.0), p(10.0, 10.0001)]);
+        assert!(polygon_meets_box(&sliver, p(4.0, 3.0), p(6.0, 7.0)));
+        assert!(!polygon_meets_box(&sliver, p(6.0, 3.0), p(7.0, 4.0)));
     }
 
     #[test]
