@@ -442,7 +442,9 @@ def test_a_scene_smaller_than_a_resampling_block_is_not_lost(offset):
     scene = sphere_scene(2)
     field = ss.discretize(scene, method="visibility_field", quality="fast", progress=False)
     target = np.array([offset[0], offset[1], 0.0]) * 12.0
-    cam = ss.Camera.look_at((-40.0, 3.0, 2.0), tuple(target), (0, 0, 1), yfov=0.8, width=256, height=256)
+    cam = ss.Camera.look_at(
+        (-40.0, 3.0, 2.0), tuple(target), (0, 0, 1), yfov=0.8, width=256, height=256
+    )
     view = ss.reconstruct(field, cam)
     m = ss.evaluate(view, scene, "cells")
     assert 0 < m["cells_visible"] and m["missed_fraction"] == 0 and m["hole_pixels"] == 0, m
