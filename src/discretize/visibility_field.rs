@@ -68,18 +68,51 @@ impl Rect {
     /// Where the line `o + λ·d` crosses the rectangle's plane: (λ, rectangle coordinates).
     /// `None` when the line runs parallel to the plane (within 1e-12 of its length).
     pub fn cross(&self, o: DVec3, d: DVec3) -> Option<(f64, DVec2)> {
-        let n = self.normal();
-        let dn = d.dot(n);
-        if dn.abs() <= 1e-12 * d.length() {
+        self.from(o).cross(d)
+    }
+
+    /// The crossings of the lines through `o` ([`CrossFrom`]).
+    pub fn from(&self, o: DVec3) -> CrossFrom {
+        // p = a·u + b·v solved with the Gram matrix: a = p·ga, b = p·gb.
+        let [uu, uv, vv, det] = self.gram;
+        let ga = (self.u * vv - self.v * uv) / det;
+        let gb = (self.v * uu - self.u * uv) / det;
+        let q = o - self.origin;
+        CrossFrom {
+            normal: self.normal,
+            c: -q.dot(self.normal),
+            ga,
+            gb,
+            a0: q.dot(ga),
+            b0: q.dot(gb),
+        }
+    }
+}
+
+/// [`Rect::cross`] for the lines through one point `o`, with what depends only on `o` worked
+/// out once: a pinhole view crosses each plane with the lines through its eye, and
+/// `o + λ·d - origin` has coordinates `a0 + λ·(d·ga)`, `b0 + λ·(d·gb)` with `λ = c / (d·n)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CrossFrom {
+    normal: DVec3,
+    c: f64,
+    ga: DVec3,
+    gb: DVec3,
+    a0: f64,
+    b0: f64,
+}
+
+impl CrossFrom {
+    /// Where the line through the point along `d` crosses the plane (see [`Rect::cross`]).
+    #[inline]
+    pub fn cross(&self, d: DVec3) -> Option<(f64, DVec2)> {
+        let dn = d.dot(self.normal);
+        if dn * dn <= 1e-24 * d.length_squared() {
             return None;
         }
-        let lambda = (self.origin - o).dot(n) / dn;
-        let p = o + d * lambda - self.origin;
-        // Solve p = a·u + b·v in the plane (Gram matrix).
-        let [uu, uv, vv, det] = self.gram;
-        let (pu, pv) = (p.dot(self.u), p.dot(self.v));
-        let a = (pu * vv - pv * uv) / det;
-        let b = (pv * uu - pu * uv) / det;
+        let lambda = self.c / dn;
+        let a = self.a0 + lambda * d.dot(self.ga);
+        let b = self.b0 + lambda * d.dot(self.gb);
         (lambda.is_finite() && a.is_finite() && b.is_finite()).then_some((lambda, DVec2::new(a, b)))
     }
 }
@@ -172,20 +205,7 @@ impl Slab {
     /// before the st plane (so that it runs the way the field was sampled) and both inside
     /// their rectangles; `None` otherwise (parallel to a plane, backwards, or outside).
     pub fn line(&self, o: DVec3, d: DVec3) -> Option<[f64; 4]> {
-        self.crossing(o, d).map(|(q, _)| q)
-    }
-
-    /// [`Slab::line`] and where (λ) the ray crosses the uv and st planes.
-    fn crossing(&self, o: DVec3, d: DVec3) -> Option<([f64; 4], [f64; 2])> {
-        let (l_uv, uv) = self.uv.cross(o, d)?;
-        let (l_st, st) = self.st.cross(o, d)?;
-        if l_st <= l_uv {
-            return None;
-        }
-        let q = [uv.x, uv.y, st.x, st.y];
-        q.iter()
-            .all(|x| (0.0..1.0).contains(x))
-            .then_some((q, [l_uv, l_st]))
+        self.from(o).line(d)
     }
 
     /// The line coordinates of the ray `o + λ·d` when this slab's answer is what the ray sees:
@@ -195,7 +215,50 @@ impl Slab {
     /// them, and no surface may lie on the line between the uv plane and the near end of the
     /// visible range (behind the camera, or nearer than its near plane).
     pub fn answers(&self, o: DVec3, d: DVec3, seen: [f64; 2], box_from: f64) -> Option<[f64; 4]> {
-        let (q, [l_uv, l_st]) = self.crossing(o, d)?;
+        self.from(o).answers(d, seen, box_from)
+    }
+
+    /// [`Slab::line`] and [`Slab::answers`] for the lines through `o`.
+    pub fn from(&self, o: DVec3) -> SlabFrom {
+        SlabFrom {
+            uv: self.uv.from(o),
+            st: self.st.from(o),
+        }
+    }
+}
+
+/// A slab's planes crossed by the lines through one point ([`Slab::from`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SlabFrom {
+    uv: CrossFrom,
+    st: CrossFrom,
+}
+
+impl SlabFrom {
+    /// See [`Slab::line`].
+    #[inline]
+    pub fn line(&self, d: DVec3) -> Option<[f64; 4]> {
+        self.crossing(d).map(|(q, _)| q)
+    }
+
+    /// [`SlabFrom::line`] and where (λ) the ray crosses the uv and st planes.
+    #[inline]
+    fn crossing(&self, d: DVec3) -> Option<([f64; 4], [f64; 2])> {
+        let (l_uv, uv) = self.uv.cross(d)?;
+        let (l_st, st) = self.st.cross(d)?;
+        if l_st <= l_uv {
+            return None;
+        }
+        let q = [uv.x, uv.y, st.x, st.y];
+        q.iter()
+            .all(|x| (0.0..1.0).contains(x))
+            .then_some((q, [l_uv, l_st]))
+    }
+
+    /// See [`Slab::answers`].
+    #[inline]
+    pub fn answers(&self, d: DVec3, seen: [f64; 2], box_from: f64) -> Option<[f64; 4]> {
+        let (q, [l_uv, l_st]) = self.crossing(d)?;
         let [from, to] = seen;
         let nothing_before = l_uv >= from || box_from >= from;
         (l_uv <= from && to <= l_st && nothing_before).then_some(q)

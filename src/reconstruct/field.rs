@@ -30,7 +30,7 @@ use rayon::prelude::*;
 
 use crate::camera::{Camera, Projector};
 use crate::discretize::conventional::{walk, TraceFrame, Walk};
-use crate::discretize::visibility_field::{clip_line, Field, Slab};
+use crate::discretize::visibility_field::{clip_line, Field, Slab, SlabFrom};
 use crate::discretize::{discretize_ranges, push_range};
 use crate::error::Result;
 use crate::input_err;
@@ -186,23 +186,63 @@ fn most_hits(f: &Samples, axes: &Axes) -> u16 {
     most
 }
 
-/// What one slab says about one resampled pixel's line.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// What one slab says about one resampled pixel's line, compact (compared at a block's
+/// corners, cached per pixel): whether each sample read saw at most `trust` cells is worked
+/// out only for the blocks that are taken ([`Trust`]), since it follows from the samples.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum SlabRead {
     /// The line sees nothing inside the scene's bounds: answered, with nothing to read.
     Nothing,
     /// The slab does not answer the line.
     No,
-    /// It answers by reading these samples, `true` when each saw at most `trust` cells.
-    Reads(Axes, bool),
+    /// It answers by reading, per axis, sample `first` and (bit k of `two`) the next one.
+    Reads { first: [u32; 4], two: u8 },
 }
 
-/// How one slab's field answers the line `o + λ·d`, and the samples it reads.
+impl SlabRead {
+    fn reads(axes: &Axes) -> Self {
+        let mut two = 0;
+        for (k, (_, n)) in axes.iter().enumerate() {
+            two |= u8::from(*n == 2) << k;
+        }
+        SlabRead::Reads {
+            first: axes.map(|(i, _)| i[0]),
+            two,
+        }
+    }
+
+    /// The samples read, per axis (for `Reads`).
+    fn axes(first: [u32; 4], two: u8) -> Axes {
+        std::array::from_fn(|k| {
+            if two >> k & 1 == 1 {
+                ([first[k], first[k] + 1], 2)
+            } else {
+                ([first[k], first[k]], 1)
+            }
+        })
+    }
+}
+
+/// Where a pixel's line can see something: `(λ where the whole line enters the bounds, its
+/// visible range [near end, far end] inside them)`, `None` when it sees nothing there. The
+/// same for every slab, so worked out once per pixel.
+type Seen = Option<(f64, [f64; 2])>;
+
+fn seen_of((o, d): (DVec3, DVec3), bounds: [DVec3; 2], range: (f64, f64)) -> Seen {
+    clip_line(o, d, bounds)
+        .map(|(a, b)| (a, [a.max(range.0), b.min(range.1)]))
+        .filter(|(_, [a, b])| a <= b)
+}
+
+/// How one slab's field answers the line `o + λ·d` (`seen`: [`seen_of`] the line, for
+/// conservative resampling; `from`: the slab crossed from `o`, when every line starts there),
+/// and the samples it reads.
 fn read(
     (slab, f): &(Slab, Samples),
+    from: Option<&SlabFrom>,
     (o, d): (DVec3, DVec3),
     how: &Resampling,
-    range: (f64, f64),
+    seen: Seen,
 ) -> SlabRead {
     let interp = match how.interpolate {
         Interpolate::None => (false, false),
@@ -210,23 +250,50 @@ fn read(
         Interpolate::St => (false, true),
         Interpolate::UvSt => (true, true),
     };
-    let Some(bounds) = how.conservative else {
-        return match slab.line(o, d) {
-            Some(q) => SlabRead::Reads(axes_of(f, q, interp), true),
-            None => SlabRead::No,
+    let from = from.copied().unwrap_or_else(|| slab.from(o));
+    let q = if how.conservative.is_none() {
+        from.line(d)
+    } else {
+        let Some((box_from, seen)) = seen else {
+            return SlabRead::Nothing;
         };
+        from.answers(d, seen, box_from)
     };
-    // What the ray can see: its [near, far] range within the scene's bounds.
-    let seen = clip_line(o, d, bounds).map(|(a, b)| (a, [a.max(range.0), b.min(range.1)]));
-    let Some((box_from, seen)) = seen.filter(|(_, [a, b])| a <= b) else {
-        return SlabRead::Nothing;
-    };
-    match slab.answers(o, d, seen, box_from) {
-        Some(q) => {
-            let axes = axes_of(f, q, interp);
-            SlabRead::Reads(axes, u32::from(most_hits(f, &axes)) <= how.trust)
-        }
+    match q {
+        Some(q) => SlabRead::reads(&axes_of(f, q, interp)),
         None => SlabRead::No,
+    }
+}
+
+/// Whether each sample a read takes saw at most `trust` cells, remembered for the reads met
+/// before (a direct-mapped table: the reads along a block's boundary repeat a few keys).
+struct Trust {
+    table: Vec<Option<(usize, [u32; 4], u8, bool)>>,
+}
+
+impl Trust {
+    const SIZE: usize = 4096;
+
+    fn new() -> Self {
+        Trust {
+            table: vec![None; Self::SIZE],
+        }
+    }
+
+    fn of(&mut self, slab: usize, f: &Samples, first: [u32; 4], two: u8, trust: u32) -> bool {
+        let mut h = (slab as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ u64::from(two);
+        for x in first {
+            h = (h ^ u64::from(x)).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        }
+        let at = (h >> 52) as usize % Self::SIZE;
+        if let Some((s, fi, tw, ok)) = self.table[at] {
+            if s == slab && fi == first && tw == two {
+                return ok;
+            }
+        }
+        let ok = u32::from(most_hits(f, &SlabRead::axes(first, two))) <= trust;
+        self.table[at] = Some((slab, first, two, ok));
+        ok
     }
 }
 
@@ -242,6 +309,38 @@ const BLOCK: usize = 32;
 /// order; empty until one is read), and the pixels the field did not answer.
 type RowMarks = (Vec<u64>, Vec<(usize, Answer)>);
 
+/// A worker's scratch for resampling rows of blocks, kept from one row of blocks to the next:
+/// per resampled pixel of the row, its state bits, its slab read (current while its stamp is
+/// `stamp`, which changes for each slab of each row, so nothing is cleared), and its line's
+/// [`Seen`] (current while its stamp is `row`).
+struct Band {
+    state: Vec<u8>,
+    reads: Vec<SlabRead>,
+    read_stamp: Vec<u32>,
+    stamp: u32,
+    seen: Vec<Seen>,
+    seen_stamp: Vec<u32>,
+    row: u32,
+    trust: Trust,
+    todo: Vec<[usize; 4]>,
+}
+
+impl Band {
+    fn new(len: usize) -> Self {
+        Band {
+            state: vec![0; len],
+            reads: vec![SlabRead::No; len],
+            read_stamp: vec![0; len],
+            stamp: 0,
+            seen: vec![None; len],
+            seen_stamp: vec![0; len],
+            row: 0,
+            trust: Trust::new(),
+            todo: Vec::new(),
+        }
+    }
+}
+
 /// Mark the cells `camera` sees through the fields (one per slab).
 ///
 /// Pixels are resampled by blocks rather than one by one, and each slab on its own: the
@@ -256,7 +355,8 @@ type RowMarks = (Vec<u64>, Vec<(usize, Answer)>);
 /// at a time, a block is split only where that slab's samples change, not wherever any of the
 /// six slabs' do. What changes is the cost: the field's resolution, not the image's, sets the
 /// number of lines read (visibility-field.txt §4 reads the field per pixel on the GPU; on the
-/// CPU that was 70-89% of a view).
+/// CPU that was 70-89% of a view). Where a line meets the bounds is worked out once per pixel
+/// for all slabs, and whether the samples read are trusted once per block taken.
 pub fn resample(
     fields: &[(Slab, Samples)],
     cell_count: usize,
@@ -336,85 +436,121 @@ pub fn resample(
         base[k + 1] = base[k] + f.hits.len();
     }
     let words = base[fields.len()].div_ceil(64);
+    // Every line of a pinhole view starts at its eye: each slab's planes crossed from there.
+    let perspective = matches!(
+        camera.projection,
+        crate::camera::Projection::Perspective { .. }
+    );
+    let froms: Vec<Option<SlabFrom>> = fields
+        .iter()
+        .map(|(slab, _)| perspective.then(|| slab.from(eye.ray_z1(DVec2::ZERO).0)))
+        .collect();
+    let band_len = cols * BLOCK.min(rows);
     let (read_bits, missed) = (0..rows.div_ceil(BLOCK))
         .into_par_iter()
-        .fold(RowMarks::default, |(mut samples, mut missed), br| {
-            // Blocks as inclusive ranges of resampled columns and rows.
-            let (row0, row1) = (br * BLOCK, ((br + 1) * BLOCK).min(rows) - 1);
-            let at = |c: usize, r: usize| (r - row0) * cols + c;
-            let mut state = vec![0u8; cols * (row1 - row0 + 1)];
-            // Each resampled pixel of the row of blocks read at most once per slab: its read
-            // is in `cache` when `stamp` holds the slab's number + 1.
-            let mut cache = vec![SlabRead::No; state.len()];
-            let mut stamp = vec![0usize; state.len()];
-            for (slab, field) in fields.iter().enumerate() {
-                let mut todo: Vec<[usize; 4]> = (0..cols.div_ceil(BLOCK))
-                    .rev()
-                    .map(|bc| [bc * BLOCK, ((bc + 1) * BLOCK).min(cols) - 1, row0, row1])
-                    .collect();
-                while let Some([c0, c1, r0, r1]) = todo.pop() {
-                    let corners = [(c0, r0), (c1, r0), (c0, r1), (c1, r1)];
-                    for &(c, r) in &corners {
-                        if stamp[at(c, r)] != slab + 1 {
-                            stamp[at(c, r)] = slab + 1;
-                            cache[at(c, r)] = read(field, line_at(c, r), &how, range);
+        .fold(
+            || (Vec::new(), Vec::new(), Band::new(band_len)),
+            |(mut samples, mut missed, mut band), br| {
+                // Blocks as inclusive ranges of resampled columns and rows.
+                let (row0, row1) = (br * BLOCK, ((br + 1) * BLOCK).min(rows) - 1);
+                let at = |c: usize, r: usize| (r - row0) * cols + c;
+                let len = cols * (row1 - row0 + 1);
+                band.state[..len].fill(0);
+                band.row += 1;
+                let b = &mut band;
+                for (slab, field) in fields.iter().enumerate() {
+                    b.stamp += 1;
+                    b.todo.clear();
+                    b.todo.extend(
+                        (0..cols.div_ceil(BLOCK))
+                            .rev()
+                            .map(|bc| [bc * BLOCK, ((bc + 1) * BLOCK).min(cols) - 1, row0, row1]),
+                    );
+                    while let Some([c0, c1, r0, r1]) = b.todo.pop() {
+                        let corners = [(c0, r0), (c1, r0), (c0, r1), (c1, r1)];
+                        for &(c, r) in &corners {
+                            let i = at(c, r);
+                            if b.read_stamp[i] != b.stamp {
+                                b.read_stamp[i] = b.stamp;
+                                let line = line_at(c, r);
+                                let seen = match how.conservative {
+                                    Some(bounds) => {
+                                        if b.seen_stamp[i] != b.row {
+                                            b.seen_stamp[i] = b.row;
+                                            b.seen[i] = seen_of(line, bounds, range);
+                                        }
+                                        b.seen[i]
+                                    }
+                                    None => None,
+                                };
+                                b.reads[i] = read(field, froms[slab].as_ref(), line, &how, seen);
+                            }
                         }
-                    }
-                    let first = cache[at(c0, r0)];
-                    let single = c0 == c1 && r0 == r1;
-                    let unsure = first == SlabRead::Nothing && !single && may_reach(c0, c1, r0, r1);
-                    if unsure || !corners[1..].iter().all(|&(c, r)| cache[at(c, r)] == first) {
-                        let (cm, rm) = ((c0 + c1) / 2, (r0 + r1) / 2);
-                        for [a, b] in [[rm + 1, r1], [r0, rm]] {
-                            for [x, y] in [[cm + 1, c1], [c0, cm]] {
-                                if a <= b && x <= y {
-                                    todo.push([x, y, a, b]);
+                        let first = b.reads[at(c0, r0)];
+                        let single = c0 == c1 && r0 == r1;
+                        let unsure =
+                            first == SlabRead::Nothing && !single && may_reach(c0, c1, r0, r1);
+                        if unsure
+                            || !corners[1..]
+                                .iter()
+                                .all(|&(c, r)| b.reads[at(c, r)] == first)
+                        {
+                            let (cm, rm) = ((c0 + c1) / 2, (r0 + r1) / 2);
+                            for [a, bb] in [[rm + 1, r1], [r0, rm]] {
+                                for [x, y] in [[cm + 1, c1], [c0, cm]] {
+                                    if a <= bb && x <= y {
+                                        b.todo.push([x, y, a, bb]);
+                                    }
                                 }
                             }
+                            continue;
                         }
-                        continue;
-                    }
-                    let bits = match first {
-                        SlabRead::No => continue,
-                        SlabRead::Nothing => ANSWERED,
-                        SlabRead::Reads(axes, trusted) => {
-                            if samples.is_empty() {
-                                samples = vec![0u64; words];
+                        let bits = match first {
+                            SlabRead::No => continue,
+                            SlabRead::Nothing => ANSWERED,
+                            SlabRead::Reads { first, two } => {
+                                if samples.is_empty() {
+                                    samples = vec![0u64; words];
+                                }
+                                let axes = SlabRead::axes(first, two);
+                                each_sample(&field.1, &axes, |s| {
+                                    let bit = base[slab] + s;
+                                    samples[bit / 64] |= 1 << (bit % 64);
+                                });
+                                let trusted = how.conservative.is_none()
+                                    || b.trust.of(slab, &field.1, first, two, how.trust);
+                                if trusted {
+                                    HELD | ANSWERED
+                                } else {
+                                    HELD
+                                }
                             }
-                            each_sample(&field.1, &axes, |s| {
-                                let bit = base[slab] + s;
-                                samples[bit / 64] |= 1 << (bit % 64);
-                            });
-                            if trusted {
-                                HELD | ANSWERED
-                            } else {
-                                HELD
-                            }
-                        }
-                    };
-                    for r in r0..=r1 {
-                        state[at(c0, r)..=at(c1, r)]
-                            .iter_mut()
-                            .for_each(|s| *s |= bits);
-                    }
-                }
-            }
-            for r in row0..=row1 {
-                for c in 0..cols {
-                    let s = state[at(c, r)];
-                    if s & ANSWERED == 0 {
-                        let (x, y) = pixel(c, r);
-                        let answer = if s & HELD != 0 {
-                            Answer::Overflowed
-                        } else {
-                            Answer::Outside
                         };
-                        missed.push((y * w + x, answer));
+                        for r in r0..=r1 {
+                            b.state[at(c0, r)..=at(c1, r)]
+                                .iter_mut()
+                                .for_each(|s| *s |= bits);
+                        }
                     }
                 }
-            }
-            (samples, missed)
-        })
+                for r in row0..=row1 {
+                    for c in 0..cols {
+                        let s = band.state[at(c, r)];
+                        if s & ANSWERED == 0 {
+                            let (x, y) = pixel(c, r);
+                            let answer = if s & HELD != 0 {
+                                Answer::Overflowed
+                            } else {
+                                Answer::Outside
+                            };
+                            missed.push((y * w + x, answer));
+                        }
+                    }
+                }
+                (samples, missed, band)
+            },
+        )
+        .map(|(samples, missed, _)| (samples, missed))
         .reduce(RowMarks::default, |(mut a, mut ma), (b, mb)| {
             if a.is_empty() {
                 a = b;
