@@ -268,8 +268,11 @@ fn read(
 /// Whether each sample a read takes saw at most `trust` cells, remembered for the reads met
 /// before (a direct-mapped table: the reads along a block's boundary repeat a few keys).
 struct Trust {
-    table: Vec<Option<(usize, [u32; 4], u8, bool)>>,
+    table: Vec<Option<Trusted>>,
 }
+
+/// A [`Trust`] entry: slab, the read's `first` and `two`, and whether it is trusted.
+type Trusted = (usize, [u32; 4], u8, bool);
 
 impl Trust {
     const SIZE: usize = 4096;
