@@ -91,7 +91,10 @@ def calls(name: str) -> list[tuple[str, Callable[[], Any]]]:
 
     def field_view():
         field = ss.discretize(scene, method="visibility_field", uv=(8, 8), st=(8, 8))
-        return field.as_dict() | {"view": ss.reconstruct(field, eye)}
+        return field.as_dict() | {
+            "view": ss.reconstruct(field, eye),
+            "cpu view": ss.reconstruct(field, eye, backend="cpu"),
+        }
 
     def impostor_view():
         imp = ss.discretize(scene, method="impostors", octree_depth=1, resolution=16)

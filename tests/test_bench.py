@@ -25,7 +25,7 @@ def test_bench_all_quick_writes_a_summary(tmp_path, capsys):
         "iVIR / EPR points",
         "field speedup over drawing everything, default (balanced) (turtles",
         "field speedup over drawing everything, paper, 1 slab, 1 id (turtles",
-        "methods: field view / conventional, GPU",
+        "methods: field view / conventional, both on the GPU",
         "methods: non-redundant / conventional, GPU",
     ):
         assert row in md, row
@@ -74,8 +74,8 @@ def test_bench_methods_quick_writes_every_row(tmp_path, gpu):
     bench.main(["methods", "--quick", "--out", str(out)])
     md = out.read_text()
     for label in (
-        "field view / conventional, GPU (>= 1M triangles)",
-        "field view / conventional, CPU (>= 1M triangles)",
+        "field view / conventional, both on the GPU (>= 1M triangles)",
+        "field view / conventional, both on the CPU (>= 1M triangles)",
         "field: resampling share of the view's time",
         "field: cells drawn / cells visible",
         "field: hole pixels",

@@ -448,3 +448,45 @@ def test_a_scene_smaller_than_a_resampling_block_is_not_lost(offset):
     view = ss.reconstruct(field, cam)
     m = ss.evaluate(view, scene, "cells")
     assert 0 < m["cells_visible"] and m["missed_fraction"] == 0 and m["hole_pixels"] == 0, m
+
+
+def test_the_cpu_backend_traces_what_the_gpu_draws(turtles):
+    """backend="cpu" marks the same cells as the GPU view and traces only their triangles: where
+    the field missed nothing its image is the CPU backend's image of the whole scene, and it
+    agrees with the GPU view as the two conventional backends agree (edge pixels aside)."""
+    scene, _ = turtles
+    field = ss.discretize(scene, method="visibility_field", quality="fast")
+    for cam in turtle_path(scene, n=2, size=64):
+        gpu = ss.reconstruct(field, cam)
+        cpu = ss.reconstruct(field, cam, backend="cpu")
+        np.testing.assert_array_equal(gpu.marked, cpu.marked)
+        assert cpu.stats == gpu.stats and cpu.image.backend == "cpu"
+        assert np.mean(cpu.image.triangle == gpu.image.triangle) > 0.995
+        full = ss.discretize(scene, cam, backend="cpu")
+        cell_of = field.cell_of.astype(np.int64)
+        tri = full.triangle[0]
+        drawn = np.zeros(tri.shape, dtype=bool)
+        drawn[tri >= 0] = cpu.marked[cell_of[tri[tri >= 0]]]
+        # Every pixel whose visible triangle is drawn shows it; the others show what lies
+        # behind among the marked cells, or nothing.
+        np.testing.assert_array_equal(cpu.image.triangle[0][drawn], tri[drawn])
+        np.testing.assert_array_equal(cpu.image.depth[0][drawn], full.depth[0][drawn])
+        behind = cpu.image.triangle[0][(tri >= 0) & ~drawn]
+        assert ((behind < 0) | cpu.marked[cell_of[np.maximum(behind, 0)]]).all()
+    with pytest.raises(ss.InputError, match="backend"):
+        ss.reconstruct(field, cam, backend="vulkan")
+
+
+def test_the_cpu_backend_draws_only_the_marked_cells(turtles):
+    """The paper's view (no fallback) misses cells: the CPU backend, like the GPU's, shows only
+    marked cells' triangles, so where a visible cell was missed it shows what lies behind."""
+    scene, field = turtles
+    cam = turtle_path(scene)[1]
+    gpu = paper_view(field, cam)
+    cpu = paper_view(field, cam, backend="cpu")
+    np.testing.assert_array_equal(gpu.marked, cpu.marked)
+    assert ss.evaluate(cpu, scene, "cells")["hole_pixels"] > 0
+    cell_of = field.cell_of.astype(np.int64)
+    shown = cpu.image.triangle[cpu.image.triangle >= 0]
+    assert shown.size > 0 and cpu.marked[cell_of[shown]].all()
+    assert np.mean(cpu.image.triangle == gpu.image.triangle) > 0.995

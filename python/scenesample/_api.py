@@ -128,7 +128,7 @@ def reconstruct(
       ``offset``) and :func:`~scenesample.methods.points`. Returns a :class:`Mesh`.
     - ``reconstruct(field, camera, **options)`` with a :class:`VisibilityField`: see
       :func:`~scenesample.methods.field_view` (``interpolate``, ``subsample``, ``fallback``,
-      ``trust``). Returns a :class:`FieldView`.
+      ``trust``, ``backend``). Returns a :class:`FieldView`.
     - ``reconstruct(impostors, camera, **options)``: see
       :func:`~scenesample.methods.impostor_view` (``triangle_budget``, ``scene``,
       ``screen_threshold``). Returns an :class:`ImpostorView`.

@@ -523,6 +523,7 @@ def field_view(
     subsample: int,
     fallback: bool,
     trust: int,
+    backend: Literal["gpu", "cpu"],
 ) -> _FieldViewDict: ...
 def render_cells(
     sorted_scene: Scene,

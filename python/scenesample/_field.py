@@ -185,8 +185,8 @@ class FieldView:
     marked : (C,) bool
         Cells drawn: those the resampling marked, and those the fallback's rays hit.
     image : DepthImages
-        One depth image rendered on the GPU from only the marked cells' triangles (triangle
-        ids are the scene's).
+        One depth image drawn from only the marked cells' triangles, on the GPU or the CPU
+        (``image.backend``; triangle ids are the scene's).
     camera : Camera
     covered : float
         The fraction of resampled pixels the field answered; the others were traced
@@ -220,6 +220,7 @@ class FieldView:
     _subsample: int = 1
     _fallback: bool = True
     _trust: int = 1
+    _backend: str = "gpu"
 
     def __repr__(self) -> str:
         return (
@@ -546,6 +547,7 @@ def field_view(
     subsample: int = 1,
     fallback: bool = True,
     trust: Optional[int] = None,
+    backend: str = "gpu",
 ) -> FieldView:
     """Render ``camera``'s view from a visibility field (visibility-field.txt §4, Fig. 4).
 
@@ -560,8 +562,8 @@ def field_view(
     answers is traced instead (``fallback``): its ray is cast through the scene and the cell
     it hits is marked (and, when it lies on a triangle's edge, the cells of four rays a 32nd
     of a pixel around it, as the raster may pick the neighbour). Then only the marked cells'
-    triangles are rasterized on the GPU (faces are kept sorted by cell: one draw per run of
-    marked cells).
+    triangles are drawn: rasterized on the GPU (faces are kept sorted by cell: one draw per
+    run of marked cells), or traced on the CPU.
 
     The guarantee, with ``fallback`` and ``subsample=1``: every pixel's visible triangle is
     drawn unless its cell is smaller than a sample's beam and none of the sample's rays (nor,
@@ -586,6 +588,15 @@ def field_view(
         Default: the field's ``settings["trust"]``, else its ids per sample (no sample read
         overflowed). 1 (``quality="balanced"`` and ``"exact"``): only where every sample read
         saw a single cell; lines near a cell border are traced.
+    backend : {"gpu", "cpu"}
+        How the marked cells are drawn. ``"gpu"`` (default): rasterized, as
+        ``discretize(scene, camera, backend="gpu")`` draws the whole scene. ``"cpu"``: traced
+        as ``backend="cpu"`` traces the whole scene (pixel-centre rays through the scene's BVH
+        on all cores, centres on an edge decided by the raster's rule), each ray meeting only
+        the marked cells' triangles; the pixels the fallback traced keep what it found. The two
+        backends mark the same cells, and their images agree as the two backends of
+        conventional images do (up to edge pixels where the GPU's float32 transform rounds a
+        vertex differently). Resampling and the fallback run on the CPU either way.
 
     Returns
     -------
@@ -610,6 +621,8 @@ def field_view(
         raise InputError(f"subsample must be a positive integer, got {subsample!r}")
     if not isinstance(fallback, (bool, np.bool_)):
         raise InputError(f"fallback must be True or False, got {fallback!r}")
+    if backend not in ("gpu", "cpu"):
+        raise InputError(f"backend must be 'gpu' or 'cpu', got {backend!r}")
     if trust is None:
         trust = field_.settings.get("trust") or field_.ids.shape[-1]
     if isinstance(trust, bool) or not isinstance(trust, (int, np.integer)) or trust < 1:
@@ -641,8 +654,10 @@ def field_view(
         int(subsample),
         bool(fallback),
         int(min(trust, 65535)),
+        backend,
     )
     img = DepthImages._from_core(d["image"], [camera], False)
+    img.backend, img.backend_reason = backend, "requested"
     marked = d["marked"]
     pixels = int(d["pixels"])
     missed = int(d["outside"]) + int(d["overflowed"])
@@ -676,6 +691,7 @@ def field_view(
         _subsample=int(subsample),
         _fallback=bool(fallback),
         _trust=int(trust),
+        _backend=backend,
     )
 
 
@@ -698,6 +714,7 @@ def cells_metric(view: FieldView, scene: Scene, camera: Optional[Camera] = None)
             subsample=view._subsample,
             fallback=view._fallback,
             trust=view._trust,
+            backend=view._backend,
         )
     cell_of = f0.cell_of.astype(np.int64)
     c = len(view.marked)

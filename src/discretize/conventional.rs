@@ -163,7 +163,7 @@ fn traced_ids(scene: &Scene, cam: &Camera, cull_backfaces: bool) -> Result<(Vec<
     let hits = nearest_hits_facing(target, &origins, &dirs, 1, &range, cull_backfaces)?;
     let mut out = hits.triangle;
     let (changes, edge_seconds) =
-        super::raster_rule::settle_edges(scene, cam, cull_backfaces, &frame, &out)?;
+        super::raster_rule::settle_edges(scene, cam, cull_backfaces, &frame, &out, None)?;
     for (p, t) in changes {
         out[p] = t;
     }
@@ -180,18 +180,35 @@ fn traced_ids(scene: &Scene, cam: &Camera, cull_backfaces: bool) -> Result<(Vec<
 /// Every pixel-centre ray of `cam` in `frame` (origin on the camera, direction with camera z
 /// −1, so `t` is the depth), rounded to f32 for the ray caster, row-major.
 pub(crate) fn pixel_rays_f32(cam: &Camera, frame: &TraceFrame) -> (Vec<[f32; 3]>, Vec<[f32; 3]>) {
-    let w = cam.width as usize;
     let rays = PixelRays::new(cam);
-    (0..w * cam.height as usize)
+    (0..cam.width as usize * cam.height as usize)
         .into_par_iter()
-        .map(|p| {
-            let (o, d) = rays.ray(p % w, p / w);
-            (
-                (o - frame.shift).as_vec3().to_array(),
-                d.as_vec3().to_array(),
-            )
-        })
+        .map(|p| ray_f32(&rays, cam, frame, p))
         .unzip()
+}
+
+/// [`pixel_rays_f32`] of the pixels `pixels` (row-major indices) only.
+pub(crate) fn pixel_rays_f32_at(
+    cam: &Camera,
+    frame: &TraceFrame,
+    pixels: &[usize],
+) -> (Vec<[f32; 3]>, Vec<[f32; 3]>) {
+    let rays = PixelRays::new(cam);
+    pixels
+        .par_iter()
+        .map(|&p| ray_f32(&rays, cam, frame, p))
+        .unzip()
+}
+
+/// Pixel `p`'s ray as [`pixel_rays_f32`] gives it.
+#[inline]
+fn ray_f32(rays: &PixelRays, cam: &Camera, frame: &TraceFrame, p: usize) -> ([f32; 3], [f32; 3]) {
+    let w = cam.width as usize;
+    let (o, d) = rays.ray(p % w, p / w);
+    (
+        (o - frame.shift).as_vec3().to_array(),
+        d.as_vec3().to_array(),
+    )
 }
 
 /// How [`walk`] walks: culling back faces or not, up to which depth, and in which frame.

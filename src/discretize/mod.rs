@@ -10,7 +10,7 @@ pub mod conventional;
 pub mod epr;
 pub mod impostors;
 pub mod nonredundant;
-mod raster_rule;
+pub(crate) mod raster_rule;
 pub mod redundancy;
 pub mod visibility_field;
 

@@ -161,7 +161,7 @@ pub fn discretize_peeling_traced(
     // backend's conventional images do, and the layers behind follow the new first surface.
     let first: Vec<i32> = rows.iter().step_by(layers).copied().collect();
     let (changes, settle_seconds) =
-        super::raster_rule::settle_edges(scene, camera, cull_backfaces, &frame, &first)?;
+        super::raster_rule::settle_edges(scene, camera, cull_backfaces, &frame, &first, None)?;
     let planes = SurfacePlane::of(scene);
     for (p, t) in changes {
         let (o, d) = rays.ray(p % w, p / w);

@@ -149,12 +149,15 @@ struct Suspect {
 /// outside the convex triangle), so the snapped transform is computed only for those pixels;
 /// each edge that near gets one ray just across it. An empty pixel is re-decided when the
 /// snapped triangle of a covered neighbour passes within [`NEAR_EDGE`] of its centre.
+/// With `keep` (triangle bits, as `trace::cast_rays_kept` takes them) only those triangles
+/// are drawn: the rays across edges pass through the others.
 pub(crate) fn settle_edges(
     scene: &Scene,
     cam: &Camera,
     cull_backfaces: bool,
     frame: &TraceFrame,
     ids: &[i32],
+    keep: Option<&[u64]>,
 ) -> Result<(Vec<(usize, i32)>, f64)> {
     let start = std::time::Instant::now();
     let snap = Snap::new(scene, cam);
@@ -182,7 +185,7 @@ pub(crate) fn settle_edges(
         ids,
         size: (cam.width as usize, cam.height as usize),
     };
-    let across = judge.trace_across(cull_backfaces, frame, &offsets)?;
+    let across = judge.trace_across(cull_backfaces, frame, &offsets, keep)?;
     let decided: Vec<Option<i32>> = suspects
         .par_iter()
         .map(|s| judge.decide(s.pixel, &across[s.rays.clone()]))
@@ -267,6 +270,7 @@ impl Judge<'_> {
         cull_backfaces: bool,
         frame: &TraceFrame,
         offsets: &[(usize, [f64; 2])],
+        keep: Option<&[u64]>,
     ) -> Result<Vec<i32>> {
         let w = self.size.0;
         let (origins, dirs): (Vec<[f32; 3]>, Vec<[f32; 3]>) = offsets
@@ -283,7 +287,11 @@ impl Judge<'_> {
         let (near, far) = self.clip;
         let range = Query::new(near as f32, (far as f32).max(near as f32));
         let target = frame.scene(self.scene);
-        Ok(nearest_hits_facing(target, &origins, &dirs, 1, &range, cull_backfaces)?.triangle)
+        Ok(match keep {
+            Some(keep) => crate::trace::cast_rays_kept(target, &origins, &dirs, &range, keep)?,
+            None => nearest_hits_facing(target, &origins, &dirs, 1, &range, cull_backfaces)?,
+        }
+        .triangle)
     }
 
     /// The triangle the rasteriser gives pixel `p`: the nearest candidate (the traced triangle,

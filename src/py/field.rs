@@ -180,7 +180,7 @@ pub fn visibility_field<'py>(
 /// Resample the fields from a camera, trace the pixels they cannot answer (with `fallback`),
 /// and render the marked cells.
 #[pyfunction]
-#[pyo3(signature = (sorted_scene, triangles, offsets, slabs, ids, cells_hit, camera, interpolate, subsample, fallback, trust))]
+#[pyo3(signature = (sorted_scene, triangles, offsets, slabs, ids, cells_hit, camera, interpolate, subsample, fallback, trust, backend))]
 #[allow(clippy::too_many_arguments)]
 pub fn field_view<'py>(
     py: Python<'py>,
@@ -195,7 +195,18 @@ pub fn field_view<'py>(
     subsample: u32,
     fallback: bool,
     trust: u32,
+    backend: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
+    let traced = match backend {
+        "gpu" => false,
+        "cpu" => true,
+        _ => {
+            return Err(input(
+                py,
+                format!("backend must be 'gpu' or 'cpu', got {backend:?}"),
+            ))
+        }
+    };
     let Some(interp) = Interpolate::parse(interpolate) else {
         return Err(input(
             py,
@@ -220,10 +231,14 @@ pub fn field_view<'py>(
         let resample_seconds = start.elapsed().as_secs_f64();
         let start = std::time::Instant::now();
         let pixels = std::mem::take(&mut marks.fallback);
-        let added = rf::trace_fallback(&scene, &offsets, &cam, pixels, &mut marks.marked)?;
+        let (added, known) = rf::trace_fallback(&scene, &offsets, &cam, pixels, &mut marks.marked)?;
         let fallback_seconds = start.elapsed().as_secs_f64();
         let start = std::time::Instant::now();
-        let (img, drawn) = rf::render_marked(&scene, &triangles, &offsets, &marks.marked, &cam)?;
+        let (img, drawn) = if traced {
+            rf::trace_marked(&scene, &triangles, &offsets, &marks.marked, &cam, &known)?
+        } else {
+            rf::render_marked(&scene, &triangles, &offsets, &marks.marked, &cam)?
+        };
         let seconds = [
             resample_seconds,
             fallback_seconds,

@@ -29,12 +29,14 @@ use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 
 use crate::camera::{Camera, Projector};
-use crate::discretize::conventional::{walk, TraceFrame, Walk};
+use crate::discretize::conventional::{pixel_rays_f32_at, resolve_ids, TraceFrame};
+use crate::discretize::raster_rule::settle_edges;
 use crate::discretize::visibility_field::{clip_line, Field, Slab, SlabFrom};
 use crate::discretize::{discretize_ranges, push_range};
 use crate::error::Result;
 use crate::input_err;
 use crate::scene::Scene;
+use crate::trace::Query;
 use crate::types::DepthImages;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -678,36 +680,34 @@ const AROUND: [[f64; 2]; 4] = [[EDGE, EDGE], [-EDGE, EDGE], [EDGE, -EDGE], [-EDG
 
 /// The fallback (conservative culling): trace the pixel rays of `pixels` through `sorted` (the
 /// scene with its faces in cell order, `offsets` the cells' CSR offsets into them) as the CPU
-/// backend of conventional images does, and mark the cells they hit. A pixel centre within
-/// [`EDGE`] of its triangle's edge is where the raster may draw the neighbour across the edge
-/// instead, so four rays around it mark the neighbours' cells too. Returns the cells it marked
-/// that were not marked yet.
+/// backend of conventional images does (the same f32 rays between the same near and far
+/// planes), and mark the cells they hit. A pixel centre within [`EDGE`] of its triangle's edge
+/// is where the raster may draw the neighbour across the edge instead, so four rays around it
+/// mark the neighbours' cells too. Returns the cells it marked that were not marked yet, and
+/// each pixel with the sorted face its ray hit (−1: none), which is also its answer among the
+/// marked cells ([`trace_marked`] takes them as they are).
 pub fn trace_fallback(
     sorted: &Scene,
     offsets: &[u32],
     camera: &Camera,
     pixels: Vec<usize>,
     marked: &mut [bool],
-) -> Result<usize> {
+) -> Result<(usize, Vec<(usize, i32)>)> {
     if pixels.is_empty() {
-        return Ok(0);
+        return Ok((0, Vec::new()));
     }
     let (near, far) = camera.clip_range(sorted.bounds());
     let frame = TraceFrame::of(sorted)?;
-    let how = Walk {
-        cull_backfaces: false,
-        far,
-        frame: Some(&frame),
-    };
-    let start = pixels.into_iter().map(|p| (p, near)).collect();
-    let walked = walk(sorted, camera, start, how, |c| Ok(vec![false; c.len()]))?;
+    let (origins, dirs) = pixel_rays_f32_at(camera, &frame, &pixels);
+    let range = Query::new(near as f32, (far as f32).max(near as f32));
+    let hits = crate::trace::cast_rays_with(frame.scene(sorted), &origins, &dirs, &range)?;
+    let traced: Vec<(usize, i32)> = pixels.into_iter().zip(hits.triangle).collect();
     let w = camera.width as usize;
     let centre = |p: usize| DVec2::new((p % w) as f64 + 0.5, (p / w) as f64 + 0.5);
     let eye = camera.projector();
-    let on_edge: Vec<usize> = walked
-        .found
+    let on_edge: Vec<usize> = traced
         .par_iter()
-        .filter(|&&(p, t)| near_edge(sorted.triangle(t as usize), &eye, centre(p)))
+        .filter(|&&(p, t)| t >= 0 && near_edge(sorted.triangle(t as usize), &eye, centre(p)))
         .map(|&(p, _)| p)
         .collect();
     let (origins, dirs): (Vec<[f32; 3]>, Vec<[f32; 3]>) = on_edge
@@ -729,8 +729,11 @@ pub fn trace_fallback(
         (far - near) as f32,
     )?;
     let mut added = 0;
-    let found = walked.found.iter().map(|&(_, t)| t);
-    for t in found.chain(around.triangle.iter().copied().filter(|&t| t >= 0)) {
+    let found = traced.iter().map(|&(_, t)| t);
+    for t in found
+        .chain(around.triangle.iter().copied())
+        .filter(|&t| t >= 0)
+    {
         // The cell holding sorted face t: the last whose offset is <= t.
         let cell = offsets.partition_point(|&o| o <= t as u32) - 1;
         if !marked[cell] {
@@ -738,7 +741,7 @@ pub fn trace_fallback(
             added += 1;
         }
     }
-    Ok(added)
+    Ok((added, traced))
 }
 
 /// Whether the pixel position `x` lies within [`EDGE`] pixels of an edge of `tri` as `camera`
@@ -792,6 +795,78 @@ pub fn render_marked(
     }
     img.timings.add("ranges", start.elapsed().as_secs_f64());
     Ok((img, drawn))
+}
+
+/// The image [`render_marked`] draws, without the GPU (a field view's `"cpu"` backend): traced
+/// as the CPU backend of conventional images traces (`discretize_traced`), each pixel-centre
+/// ray meeting only the marked cells' triangles (the BVH's traversal passes through the
+/// others), centres on an edge decided by the raster's rule among them. `known`: pixels the
+/// fallback already traced through the whole scene, with what they hit; the cell of what
+/// they hit is marked, so that is their answer here too and they are not traced again.
+pub fn trace_marked(
+    sorted: &Scene,
+    order: &[u32],
+    offsets: &[u32],
+    marked: &[bool],
+    camera: &Camera,
+    known: &[(usize, i32)],
+) -> Result<(DepthImages, usize)> {
+    if offsets.len() != marked.len() + 1 || order.len() != sorted.triangle_count() {
+        return input_err!("the cells do not match the cell-sorted scene");
+    }
+    let start = Instant::now();
+    let rs = ranges(offsets, marked);
+    let drawn: usize = rs.iter().map(|&(a, b)| (b - a) as usize).sum();
+    let mut keep = vec![0u64; sorted.triangle_count().div_ceil(64)];
+    for &(a, b) in &rs {
+        set_bits(&mut keep, a as usize, b as usize);
+    }
+    let npx = camera.width as usize * camera.height as usize;
+    let mut ids = vec![-1i32; npx];
+    let mut done = vec![false; npx];
+    for &(p, t) in known {
+        ids[p] = t;
+        done[p] = true;
+    }
+    let todo: Vec<usize> = (0..npx).filter(|&p| !done[p]).collect();
+    let frame = TraceFrame::of(sorted)?;
+    let (origins, dirs) = pixel_rays_f32_at(camera, &frame, &todo);
+    let (near, far) = camera.clip_range(sorted.bounds());
+    let range = Query::new(near as f32, (far as f32).max(near as f32));
+    let hits = crate::trace::cast_rays_kept(frame.scene(sorted), &origins, &dirs, &range, &keep)?;
+    for (&p, &t) in todo.iter().zip(&hits.triangle) {
+        ids[p] = t;
+    }
+    let (changes, edge_seconds) = settle_edges(sorted, camera, false, &frame, &ids, Some(&keep))?;
+    for (p, t) in changes {
+        ids[p] = t;
+    }
+    let (mut img, resolve_seconds) = resolve_ids(sorted, std::slice::from_ref(camera), ids)?;
+    for t in img.triangle.iter_mut().filter(|t| **t >= 0) {
+        *t = order[*t as usize] as i32;
+    }
+    img.timings = crate::types::Timings::from([
+        ("bvh", hits.bvh_build_seconds),
+        ("trace", hits.trace_seconds),
+        ("edges", edge_seconds),
+        ("resolve", resolve_seconds),
+        ("total", start.elapsed().as_secs_f64()),
+    ]);
+    Ok((img, drawn))
+}
+
+/// Set bits `[a, b)` of `bits`.
+fn set_bits(bits: &mut [u64], a: usize, b: usize) {
+    let mut i = a;
+    while i < b {
+        if i.is_multiple_of(64) && i + 64 <= b {
+            bits[i / 64] = u64::MAX;
+            i += 64;
+        } else {
+            bits[i / 64] |= 1 << (i % 64);
+            i += 1;
+        }
+    }
 }
 
 #[cfg(test)]

@@ -820,6 +820,38 @@ impl Sink for Closest {
     }
 }
 
+/// Closest-hit sink that meets only the triangles whose bit is set in `keep` (bit `i % 64` of
+/// word `i / 64` for triangle `i`); the traversal passes through the others.
+#[derive(Clone, Copy)]
+pub struct ClosestKept<'a> {
+    pub closest: Closest,
+    pub keep: &'a [u64],
+}
+
+impl Sink for ClosestKept<'_> {
+    const INTERLEAVE: bool = true;
+
+    #[inline(always)]
+    fn t_far(&self) -> f32 {
+        self.closest.t_far
+    }
+
+    #[inline(always)]
+    fn take(&mut self, bvh: &Bvh8, block: usize, h: &Tri4Hit) -> bool {
+        let mut kept = *h;
+        let mut m = h.mask;
+        while m != 0 {
+            let lane = m.trailing_zeros() as usize;
+            m &= m - 1;
+            let id = bvh.blocks[block].id[lane] as usize;
+            if self.keep[id / 64] >> (id % 64) & 1 == 0 {
+                kept.mask &= !(1 << lane);
+            }
+        }
+        self.closest.take(bvh, block, &kept)
+    }
+}
+
 /// Any-hit sink: stops at the first hit.
 #[derive(Clone, Copy)]
 pub struct Any {

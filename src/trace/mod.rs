@@ -29,8 +29,8 @@ use crate::error::Result;
 use crate::input_err;
 use crate::scene::Scene;
 use bvh8::{
-    coherent, portable::Portable, traverse, Any, BlockHit, Bvh8, Closest, Kernel, PacketStack, Ray,
-    Sink, Stack, Tri4Hit, WIDTH,
+    coherent, portable::Portable, traverse, Any, BlockHit, Bvh8, Closest, ClosestKept, Kernel,
+    PacketStack, Ray, Sink, Stack, Tri4Hit, WIDTH,
 };
 use interleave::Flights;
 use refine::Pending;
@@ -266,7 +266,7 @@ fn nearest_hits_here(
     let out: HitSlices = (&mut t, &mut triangle, &mut barycentric);
     if k == 1 && !front_only {
         run(q, out, 1, |base, out| {
-            dispatch(&ClosestJob(&job), base, out)
+            dispatch(&ClosestJob::new(&job), base, out)
         })?;
     } else {
         run(q, out, k, |base, out| {
@@ -281,6 +281,54 @@ fn nearest_hits_here(
         bvh_build_seconds: built,
         trace_seconds: start.elapsed().as_secs_f64(),
     })
+}
+
+/// [`cast_rays_with`] meeting only the triangles kept: triangle `i` counts when bit `i % 64`
+/// of `keep[i / 64]` is set, and a ray passes through the others (the visibility field's
+/// CPU view traces only its marked cells, as its GPU view draws only them).
+pub fn cast_rays_kept(
+    scene: &Scene,
+    origins: &[[f32; 3]],
+    directions: &[[f32; 3]],
+    q: &Query,
+    keep: &[u64],
+) -> Result<RayHits> {
+    let need = scene.triangle_count().div_ceil(64);
+    if keep.len() < need {
+        return input_err!(
+            "{} words of triangle bits for {} triangles, need {need}",
+            keep.len(),
+            scene.triangle_count()
+        );
+    }
+    let n = origins.len();
+    crate::limits::check(|| format!("{n} rays"), n as u128, 16)?;
+    on_threads(q.threads, || -> Result<RayHits> {
+        let (bvh, built) = prepare(scene, origins, directions, q)?;
+        let start = Instant::now();
+        let mut t = vec![f32::INFINITY; n];
+        let mut triangle = vec![-1i32; n];
+        let mut barycentric = vec![[0.0f32; 2]; n];
+        let job = Rays::new(&bvh.tree, origins, directions, q);
+        let sink = ClosestKept {
+            closest: Closest::new(job.range.1),
+            keep,
+        };
+        run(
+            q,
+            (&mut t[..], &mut triangle[..], &mut barycentric[..]),
+            1,
+            |base, out| dispatch(&ClosestJob(&job, sink), base, out),
+        )?;
+        Ok(RayHits {
+            k: 1,
+            t,
+            triangle,
+            barycentric,
+            bvh_build_seconds: built,
+            trace_seconds: start.elapsed().as_secs_f64(),
+        })
+    })?
 }
 
 /// Whether anything lies along each ray within `[t_min, t_max)`: the traversal stops at the
@@ -641,9 +689,35 @@ impl Rays<'_> {
     }
 }
 
-struct ClosestJob<'a>(&'a Rays<'a>);
+/// A closest-hit sink: what it kept.
+trait Best: Sink + Copy + Sync {
+    fn best(&self) -> Option<BlockHit>;
+}
 
-impl Job for ClosestJob<'_> {
+impl Best for Closest {
+    #[inline(always)]
+    fn best(&self) -> Option<BlockHit> {
+        self.best
+    }
+}
+
+impl Best for ClosestKept<'_> {
+    #[inline(always)]
+    fn best(&self) -> Option<BlockHit> {
+        self.closest.best
+    }
+}
+
+/// Closest hits, each ray's sink a copy of the prototype `.1`.
+struct ClosestJob<'a, S>(&'a Rays<'a>, S);
+
+impl<'a> ClosestJob<'a, Closest> {
+    fn new(rays: &'a Rays<'a>) -> Self {
+        ClosestJob(rays, Closest::new(rays.range.1))
+    }
+}
+
+impl<S: Best> Job for ClosestJob<'_, S> {
     type Out<'o> = HitSlices<'o>;
 
     #[inline(always)]
@@ -665,13 +739,14 @@ impl Job for ClosestJob<'_> {
                 base,
                 start..end,
                 &mut scratch,
-                || Closest::new(rays.range.1),
+                #[inline(always)]
+                || self.1,
                 // Inlined, so compiled with the kernel's instructions: a closure does not
                 // inherit its caller's target features, and a call from AVX2 code into this
                 // one, for every ray, spilled the traversal's registers around it.
                 #[inline(always)]
                 |j, sink| {
-                    if let Some(h) = sink.best {
+                    if let Some(h) = sink.best() {
                         tri[j] = h.triangle as i32;
                         found[hits] = j as u32;
                         pending[hits] = Pending {
@@ -1244,7 +1319,7 @@ pub(crate) mod tests {
         let rays = Rays::new(&bvh.tree, &o, &d, &q);
         let n = o.len();
         let mut p = (vec![f32::INFINITY; n], vec![-1; n], vec![[0.0; 2]; n]);
-        ClosestJob(&rays).chunk(Portable, 0, (&mut p.0, &mut p.1, &mut p.2));
+        ClosestJob::new(&rays).chunk(Portable, 0, (&mut p.0, &mut p.1, &mut p.2));
         let portable = RayHits {
             k: 1,
             t: p.0,
@@ -1260,9 +1335,9 @@ pub(crate) mod tests {
         let mut turns = Rays::new(&bvh.tree, &o[..m], &d[..m], &q);
         turns.interleave = true;
         let mut a = (vec![f32::INFINITY; m], vec![-1; m], vec![[0.0; 2]; m]);
-        dispatch(&ClosestJob(&turns), 0, (&mut a.0, &mut a.1, &mut a.2));
+        dispatch(&ClosestJob::new(&turns), 0, (&mut a.0, &mut a.1, &mut a.2));
         let mut p = (vec![f32::INFINITY; m], vec![-1; m], vec![[0.0; 2]; m]);
-        ClosestJob(&turns).chunk(Portable, 0, (&mut p.0, &mut p.1, &mut p.2));
+        ClosestJob::new(&turns).chunk(Portable, 0, (&mut p.0, &mut p.1, &mut p.2));
         for (name, (t, tri, bary)) in [("dispatched", a), ("portable", p)] {
             let h = RayHits {
                 k: 1,
@@ -1360,6 +1435,45 @@ pub(crate) mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn kept_hits_are_the_nearest_kept_triangle() {
+        // Every other triangle kept: each ray's hit is the nearest kept one on its brute-force
+        // list, by packets (camera rays) and one by one (random rays); all kept is cast_rays.
+        let s = soup(1500, 31);
+        let n = s.triangle_count();
+        let mut keep = vec![0u64; n.div_ceil(64)];
+        for i in (0..n).step_by(2) {
+            keep[i / 64] |= 1 << (i % 64);
+        }
+        let q = Query::new(0.0, f32::INFINITY);
+        let (mut o, mut d) = random_rays(1000, 32);
+        let (co, cd) = camera_rays(32, [0.1, -0.2, 3.0]);
+        o.extend(co);
+        d.extend(cd);
+        let h = cast_rays_kept(&s, &o, &d, &q, &keep).unwrap();
+        let mut met = 0;
+        for i in 0..o.len() {
+            let want = brute(&s, o[i], d[i], f64::INFINITY)
+                .into_iter()
+                .find(|&(_, tri)| tri % 2 == 0);
+            match want {
+                None => assert_eq!(h.triangle[i], -1, "ray {i}"),
+                Some((t, tri)) => {
+                    assert_eq!(h.triangle[i], tri as i32, "ray {i}");
+                    assert!(((h.t[i] as f64 - t) / t).abs() < 1e-5, "ray {i}");
+                    met += 1;
+                }
+            }
+        }
+        assert!(met > 300, "{met}");
+        let all = vec![u64::MAX; n.div_ceil(64)];
+        let every = cast_rays_kept(&s, &o, &d, &q, &all).unwrap();
+        let plain = cast_rays_with(&s, &o, &d, &q).unwrap();
+        assert_eq!(every.triangle, plain.triangle);
+        assert_eq!(every.t, plain.t);
+        assert!(cast_rays_kept(&s, &o, &d, &q, &keep[1..]).is_err());
     }
 
     #[test]
