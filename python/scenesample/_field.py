@@ -558,7 +558,8 @@ def field_view(
     the near end. The cells stored at the sample holding (u, v, s, t) are marked
     (``interpolate="uv"``: also the 2 x 2 samples around (u, v); ``"st"``: around (s, t);
     ``"uv+st"``: the 16 around both, §4.1); several slabs' answers are merged. A slab answers
-    only when every sample it reads for the line hit at most ``trust`` cells. A pixel no slab
+    only when every sample it reads for the line hit at most ``trust`` cells, and only its
+    answers mark cells (with ``fallback``; without it every read marks). A pixel no slab
     answers is traced instead (``fallback``): its ray is cast through the scene and the cell
     it hits is marked (and, when it lies on a triangle's edge, the cells of four rays a 32nd
     of a pixel around it, as the raster may pick the neighbour). Then only the marked cells'

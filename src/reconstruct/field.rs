@@ -18,10 +18,13 @@
 //! cells; the other pixels are traced through the cell-sorted scene ([`trace_fallback`]) and
 //! the cells they hit are marked: a camera no slab serves, or a sample that saw several cells,
 //! leaves no hole; holes remain only where a cell smaller than a sample's beam slipped between
-//! the rays of every sample read.
+//! the rays of every sample read. Only trusted reads mark cells: an untrusted one's pixel is
+//! answered elsewhere or traced.
 //!
 //! Rendering: the scene's faces are kept sorted by cell (`Cells::triangles`), so the marked
-//! cells are ranges of faces, drawn as one draw call per run of consecutive marked cells.
+//! cells are ranges of faces, drawn as one draw call per run of consecutive marked cells on
+//! the GPU ([`render_marked`]), or traced on the CPU, each ray meeting only the marked cells'
+//! triangles ([`trace_marked`]).
 
 use std::time::Instant;
 
@@ -302,6 +305,55 @@ impl Trust {
     }
 }
 
+/// The most samples per axis a block's reads may span for [`span_of`]: two overlapping
+/// interpolation pairs (wider spans took no less time on khr_cameras).
+const SPAN: u32 = 3;
+
+/// The samples, per axis an inclusive range of indices, that every line of a block reads from
+/// when its four corners all read (`Reads`), though not the same samples: the (u, v) and
+/// (s, t) of a block's lines lie within its corners', so each line's samples lie within the
+/// corners' per axis. `None` when a corner does not read, or the span is wider than [`SPAN`]
+/// on some axis (a box that wide marks cells no line of the block reads).
+fn span_of(reads: &[SlabRead; 4], f: &Samples) -> Option<[[u32; 2]; 4]> {
+    let mut span = [[u32::MAX, 0]; 4];
+    for r in reads {
+        let SlabRead::Reads { first, two } = *r else {
+            return None;
+        };
+        for k in 0..4 {
+            span[k][0] = span[k][0].min(first[k]);
+            span[k][1] = span[k][1].max(first[k] + u32::from(two >> k & 1));
+        }
+    }
+    (0..4)
+        .all(|k| span[k][1] - span[k][0] < SPAN && span[k][1] < f.dims[k])
+        .then_some(span)
+}
+
+/// `g` of every sample index in `span`.
+fn each_in_span(f: &Samples, span: &[[u32; 2]; 4], mut g: impl FnMut(usize)) {
+    for iu in span[0][0]..=span[0][1] {
+        for iv in span[1][0]..=span[1][1] {
+            for is in span[2][0]..=span[2][1] {
+                for it in span[3][0]..=span[3][1] {
+                    g(sample_index(f.dims, [iu, iv, is, it]));
+                }
+            }
+        }
+    }
+}
+
+/// Whether some sample in `span` saw at most `trust` cells, and whether some saw more: all of
+/// them trusted is `[true, false]`, none `[false, true]`.
+fn span_trust(f: &Samples, span: &[[u32; 2]; 4], trust: u32) -> [bool; 2] {
+    let mut seen = [false; 2];
+    each_in_span(f, span, |s| {
+        let hits = u32::from(f.hits.get(s).copied().unwrap_or(u16::MAX));
+        seen[usize::from(hits > trust)] = true;
+    });
+    seen
+}
+
 /// Per resampled pixel: some slab answered it (or it sees nothing), and some slab holds its
 /// line; a pixel answered by none goes to the fallback, as overflowed when held.
 const ANSWERED: u8 = 1;
@@ -361,7 +413,14 @@ impl Band {
 /// six slabs' do. What changes is the cost: the field's resolution, not the image's, sets the
 /// number of lines read (visibility-field.txt §4 reads the field per pixel on the GPU; on the
 /// CPU that was 70-89% of a view). Where a line meets the bounds is worked out once per pixel
-/// for all slabs, and whether the samples read are trusted once per block taken.
+/// for all slabs, and whether the samples read are trusted once per block taken. A block whose
+/// corners all read, from samples spanning at most [`SPAN`] per axis that are all trusted, is
+/// taken whole with the cells of that span (with conservative resampling).
+///
+/// With conservative resampling a read that is not trusted marks nothing: its pixel is either
+/// answered by another slab's trusted read, which marks what it sees, or traced, and the
+/// fallback marks what the ray hits. (Marking the untrusted samples' ids as well drew 1.5-2.3x
+/// the visible cells on the Cornell box and khr_simple_instancing; without them, 0.99-1.01x.)
 pub fn resample(
     fields: &[(Slab, Samples)],
     cell_count: usize,
@@ -495,11 +554,39 @@ pub fn resample(
                         let single = c0 == c1 && r0 == r1;
                         let unsure =
                             first == SlabRead::Nothing && !single && may_reach(c0, c1, r0, r1);
-                        if unsure
-                            || !corners[1..]
-                                .iter()
-                                .all(|&(c, r)| b.reads[at(c, r)] == first)
-                        {
+                        let same = corners[1..]
+                            .iter()
+                            .all(|&(c, r)| b.reads[at(c, r)] == first);
+                        if !same && how.conservative.is_some() {
+                            let reads = corners.map(|(c, r)| b.reads[at(c, r)]);
+                            let span = span_of(&reads, &field.1);
+                            // All trusted: every line of the block is answered; none: none is.
+                            let bits = span.and_then(|span| {
+                                match span_trust(&field.1, &span, how.trust) {
+                                    [true, false] => Some((span, HELD | ANSWERED)),
+                                    [false, true] => Some((span, HELD)),
+                                    _ => None,
+                                }
+                            });
+                            if let Some((span, bits)) = bits {
+                                if bits & ANSWERED != 0 {
+                                    if samples.is_empty() {
+                                        samples = vec![0u64; words];
+                                    }
+                                    each_in_span(&field.1, &span, |s| {
+                                        let bit = base[slab] + s;
+                                        samples[bit / 64] |= 1 << (bit % 64);
+                                    });
+                                }
+                                for r in r0..=r1 {
+                                    b.state[at(c0, r)..=at(c1, r)]
+                                        .iter_mut()
+                                        .for_each(|s| *s |= bits);
+                                }
+                                continue;
+                            }
+                        }
+                        if unsure || !same {
                             let (cm, rm) = ((c0 + c1) / 2, (r0 + r1) / 2);
                             for [a, bb] in [[rm + 1, r1], [r0, rm]] {
                                 for [x, y] in [[cm + 1, c1], [c0, cm]] {
@@ -514,17 +601,19 @@ pub fn resample(
                             SlabRead::No => continue,
                             SlabRead::Nothing => ANSWERED,
                             SlabRead::Reads { first, two } => {
-                                if samples.is_empty() {
-                                    samples = vec![0u64; words];
-                                }
-                                let axes = SlabRead::axes(first, two);
-                                each_sample(&field.1, &axes, |s| {
-                                    let bit = base[slab] + s;
-                                    samples[bit / 64] |= 1 << (bit % 64);
-                                });
                                 let trusted = how.conservative.is_none()
                                     || b.trust.of(slab, &field.1, first, two, how.trust);
+                                // An untrusted read marks nothing: its lines are answered by
+                                // another slab or traced, and either marks what they see.
                                 if trusted {
+                                    if samples.is_empty() {
+                                        samples = vec![0u64; words];
+                                    }
+                                    let axes = SlabRead::axes(first, two);
+                                    each_sample(&field.1, &axes, |s| {
+                                        let bit = base[slab] + s;
+                                        samples[bit / 64] |= 1 << (bit % 64);
+                                    });
                                     HELD | ANSWERED
                                 } else {
                                     HELD
