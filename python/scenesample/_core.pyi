@@ -316,6 +316,7 @@ class _FieldViewDict(TypedDict):
     outside: int
     overflowed: int
     fallback_cells: int
+    border_cells: int
     triangles_drawn: int
     resample_seconds: float
     fallback_seconds: float

@@ -201,7 +201,10 @@ class FieldView:
     stats : dict
         ``cells_marked``, ``triangles_drawn``, ``pixels`` (resampled, after subsampling),
         ``pixels_outside`` (no slab holds their line), ``pixels_overflowed`` (only overflowed
-        samples do), ``covered``, ``fallback_pixels``, ``fallback_cells``.
+        samples do), ``covered``, ``fallback_pixels``, ``fallback_cells``, ``border_cells``
+        (cells found by looking across the edges at the borders between cells of the drawn
+        view, then drawn too: a pixel the field answered may go, under the raster's snapping,
+        to a triangle across an edge passing within a 32nd of a pixel of its centre).
     timings : dict of str to float
         Seconds: ``resample`` (the paper's K_rasterize+resample), ``fallback`` (tracing),
         ``render`` (the marked cells), ``total``.
@@ -564,7 +567,11 @@ def field_view(
     it hits is marked (and, when it lies on a triangle's edge, the cells of four rays a 32nd
     of a pixel around it, as the raster may pick the neighbour). Then only the marked cells'
     triangles are drawn: rasterized on the GPU (faces are kept sorted by cell: one draw per
-    run of marked cells), or traced on the CPU.
+    run of marked cells), or traced on the CPU. With ``fallback``, the drawn view's pixels at
+    the borders between cells that lie within a 32nd of a pixel of their triangle's edge then
+    trace the same four rays, and the cells those find are drawn too (``border_cells``): the
+    field answered those pixels without a ray, and the raster may give them to the triangle
+    across the edge.
 
     The guarantee, with ``fallback`` and ``subsample=1``: every pixel's visible triangle is
     drawn unless its cell is smaller than a sample's beam and none of the sample's rays (nor,
@@ -680,6 +687,7 @@ def field_view(
             "covered": covered,
             "fallback_pixels": fallback_pixels,
             "fallback_cells": int(d["fallback_cells"]),
+            "border_cells": int(d["border_cells"]),
         },
         timings={
             "resample": d["resample_seconds"],

@@ -225,33 +225,41 @@ pub fn field_view<'py>(
         conservative: fallback.then(|| rf::scene_box(&scene)),
         trust,
     };
-    let (marks, added, img, drawn, seconds) = super::run(py, || -> crate::error::Result<_> {
-        let start = std::time::Instant::now();
-        let mut marks = rf::resample(&fields, cell_count, &cam, how)?;
-        let resample_seconds = start.elapsed().as_secs_f64();
-        let start = std::time::Instant::now();
-        let pixels = std::mem::take(&mut marks.fallback);
-        let (added, known) = rf::trace_fallback(&scene, &offsets, &cam, pixels, &mut marks.marked)?;
-        let fallback_seconds = start.elapsed().as_secs_f64();
-        let start = std::time::Instant::now();
-        let (img, drawn) = if traced {
-            rf::trace_marked(&scene, &triangles, &offsets, &marks.marked, &cam, &known)?
-        } else {
-            rf::render_marked(&scene, &triangles, &offsets, &marks.marked, &cam)?
-        };
-        let seconds = [
-            resample_seconds,
-            fallback_seconds,
-            start.elapsed().as_secs_f64(),
-        ];
-        Ok((marks, added, img, drawn, seconds))
-    })?;
+    let (marks, added, img, drawn, borders, seconds) =
+        super::run(py, || -> crate::error::Result<_> {
+            let start = std::time::Instant::now();
+            let mut marks = rf::resample(&fields, cell_count, &cam, how)?;
+            let resample_seconds = start.elapsed().as_secs_f64();
+            let start = std::time::Instant::now();
+            let pixels = std::mem::take(&mut marks.fallback);
+            let (added, known) =
+                rf::trace_fallback(&scene, &offsets, &cam, pixels, &mut marks.marked)?;
+            let fallback_seconds = start.elapsed().as_secs_f64();
+            let start = std::time::Instant::now();
+            let (img, drawn, borders) = rf::draw_view(
+                &scene,
+                &triangles,
+                &offsets,
+                &mut marks.marked,
+                &cam,
+                &known,
+                traced,
+                fallback,
+            )?;
+            let seconds = [
+                resample_seconds,
+                fallback_seconds,
+                start.elapsed().as_secs_f64(),
+            ];
+            Ok((marks, added, img, drawn, borders, seconds))
+        })?;
     let d = PyDict::new(py);
     d.set_item("marked", array(py, marks.marked, &[cell_count])?)?;
     d.set_item("pixels", marks.pixels)?;
     d.set_item("outside", marks.outside)?;
     d.set_item("overflowed", marks.overflowed)?;
     d.set_item("fallback_cells", added)?;
+    d.set_item("border_cells", borders)?;
     d.set_item("triangles_drawn", drawn)?;
     d.set_item("resample_seconds", seconds[0])?;
     d.set_item("fallback_seconds", seconds[1])?;

@@ -24,7 +24,7 @@
 //! Rendering: the scene's faces are kept sorted by cell (`Cells::triangles`), so the marked
 //! cells are ranges of faces, drawn as one draw call per run of consecutive marked cells on
 //! the GPU ([`render_marked`]), or traced on the CPU, each ray meeting only the marked cells'
-//! triangles ([`trace_marked`]).
+//! triangles ([`trace_sorted`]); [`draw_view`] does either.
 
 use std::time::Instant;
 
@@ -38,6 +38,7 @@ use crate::discretize::visibility_field::{clip_line, Field, Slab, SlabFrom};
 use crate::discretize::{discretize_ranges, push_range};
 use crate::error::Result;
 use crate::input_err;
+use crate::scene::adjacency::{EdgeNeighbours, NONE};
 use crate::scene::Scene;
 use crate::trace::Query;
 use crate::types::DepthImages;
@@ -757,6 +758,7 @@ pub fn scene_box(scene: &Scene) -> [DVec3; 2] {
 pub fn prepare_fallback(sorted: &Scene) -> Result<()> {
     let frame = TraceFrame::of(sorted)?;
     crate::trace::Bvh::of(frame.scene(sorted));
+    EdgeNeighbours::of(sorted);
     Ok(())
 }
 
@@ -765,6 +767,12 @@ pub fn prepare_fallback(sorted: &Scene) -> Result<()> {
 /// neighbour across the edge: the fallback also traces the corners of a square this wide
 /// around the centre, which straddle any line passing this close.
 const EDGE: f64 = 1.0 / 32.0;
+/// Where a pixel centre lies within this many pixels of an edge, the triangle sharing the edge
+/// is drawn too ([`across_near`]): lavapipe's raster snaps vertices to 1/256 pixel.
+const FOLD: f64 = 1.0 / 256.0;
+/// Relative depth within which a triangle folding back behind another at their shared edge
+/// may still win the depth test there (a float32 depth buffer's rounding, with margin).
+const DEPTH_ROUNDING: f64 = 1e-6;
 const AROUND: [[f64; 2]; 4] = [[EDGE, EDGE], [-EDGE, EDGE], [EDGE, -EDGE], [-EDGE, -EDGE]];
 
 /// The fallback (conservative culling): trace the pixel rays of `pixels` through `sorted` (the
@@ -774,7 +782,7 @@ const AROUND: [[f64; 2]; 4] = [[EDGE, EDGE], [-EDGE, EDGE], [EDGE, -EDGE], [-EDG
 /// is where the raster may draw the neighbour across the edge instead, so four rays around it
 /// mark the neighbours' cells too. Returns the cells it marked that were not marked yet, and
 /// each pixel with the sorted face its ray hit (−1: none), which is also its answer among the
-/// marked cells ([`trace_marked`] takes them as they are).
+/// marked cells ([`trace_sorted`] takes them as they are).
 pub fn trace_fallback(
     sorted: &Scene,
     offsets: &[u32],
@@ -794,35 +802,30 @@ pub fn trace_fallback(
     let w = camera.width as usize;
     let centre = |p: usize| DVec2::new((p % w) as f64 + 0.5, (p / w) as f64 + 0.5);
     let eye = camera.projector();
-    let on_edge: Vec<usize> = traced
+    let adjacent = EdgeNeighbours::of(sorted);
+    let on_edge: Vec<(usize, usize, u8)> = traced
         .par_iter()
-        .filter(|&&(p, t)| t >= 0 && near_edge(sorted.triangle(t as usize), &eye, centre(p)))
-        .map(|&(p, _)| p)
-        .collect();
-    let (origins, dirs): (Vec<[f32; 3]>, Vec<[f32; 3]>) = on_edge
-        .iter()
-        .flat_map(|&p| AROUND.map(|o| centre(p) + DVec2::from_array(o)))
-        .map(|x| {
-            let (o, d) = eye.ray_z1(x);
+        .filter(|&&(_, t)| t >= 0)
+        .map(|&(p, t)| {
             (
-                (o + d * near - frame.shift).as_vec3().to_array(),
-                d.as_vec3().to_array(),
+                p,
+                t as usize,
+                near_edges(sorted.triangle(t as usize), &eye, centre(p)),
             )
         })
-        .unzip();
-    let around = crate::trace::cast_rays(
-        frame.scene(sorted),
-        &origins,
-        &dirs,
-        0.0,
-        (far - near) as f32,
-    )?;
+        .filter(|&(_, _, near)| near != 0)
+        .collect();
+    let points: Vec<DVec2> = on_edge
+        .iter()
+        .flat_map(|&(p, _, _)| AROUND.map(|o| centre(p) + DVec2::from_array(o)))
+        .collect();
+    let around = trace_points(sorted, camera, &points)?;
+    let across = on_edge
+        .iter()
+        .flat_map(|&(p, t, near)| across_near(sorted, &adjacent, &eye, (t, near), centre(p)));
     let mut added = 0;
     let found = traced.iter().map(|&(_, t)| t);
-    for t in found
-        .chain(around.triangle.iter().copied())
-        .filter(|&t| t >= 0)
-    {
+    for t in found.chain(around).chain(across).filter(|&t| t >= 0) {
         // The cell holding sorted face t: the last whose offset is <= t.
         let cell = offsets.partition_point(|&o| o <= t as u32) - 1;
         if !marked[cell] {
@@ -833,23 +836,88 @@ pub fn trace_fallback(
     Ok((added, traced))
 }
 
-/// Whether the pixel position `x` lies within [`EDGE`] pixels of an edge of `tri` as `camera`
-/// projects it (true when a vertex lies behind the camera, where the projection is no guide).
-fn near_edge(tri: [DVec3; 3], camera: &Projector, x: DVec2) -> bool {
+/// Which edges of `tri` (bit `k`: from corner `k` to `k + 1`) pass within [`EDGE`] pixels of
+/// the pixel position `x` as `camera` projects it (all of them when a vertex lies behind the
+/// camera, where the projection is no guide, or an edge collapses to a point).
+fn near_edges(tri: [DVec3; 3], camera: &Projector, x: DVec2) -> u8 {
     let projected = tri.map(|p| camera.project(p));
     if projected
         .iter()
         .any(|&(_, depth)| depth.is_nan() || depth <= 0.0)
     {
-        return true;
+        return 0b111;
     }
     let q = projected.map(|(p, _)| p);
-    (0..3).any(|i| {
+    let mut near = 0;
+    for i in 0..3 {
         let (a, b) = (q[i], q[(i + 1) % 3]);
         let e = b - a;
         let len = e.length();
-        len <= f64::MIN_POSITIVE || e.perp_dot(x - a).abs() / len < EDGE
-    })
+        if len <= f64::MIN_POSITIVE {
+            return 0b111;
+        }
+        if e.perp_dot(x - a).abs() / len < EDGE {
+            near |= 1 << i;
+        }
+    }
+    near
+}
+
+/// The triangles sharing the edges of sorted face `t` that pass within [`FOLD`] pixels of the
+/// centre `x` (of those `near` it, [`near_edges`]), where the raster, rounding, may give the
+/// pixel to the neighbour across: a sliver seen edge on (thinner on screen than [`EDGE`]), which
+/// no ray around the centre meets, or one folding back behind `t` beyond a silhouette, which
+/// wins the pixel only where its depth there is `t`'s to within the depth buffer's rounding.
+/// On khr_simple_instancing and the Cornell box such pixels were the only ones of 1-7 visible
+/// cells in a view. All near edges' neighbours when `t` does not project (a vertex behind).
+fn across_near(
+    sorted: &Scene,
+    adjacent: &EdgeNeighbours,
+    camera: &Projector,
+    (t, near): (usize, u8),
+    x: DVec2,
+) -> Vec<i32> {
+    let tri = sorted.triangle(t);
+    let q = tri.map(|v| camera.project(v));
+    let projects = q.iter().all(|&(p, depth)| depth > 0.0 && p.is_finite());
+    let (o, d) = camera.ray_z1(x);
+    // Where the pixel's line meets a triangle's plane (λ along it; None: parallel).
+    let meet = |v: [DVec3; 3]| {
+        let n = (v[1] - v[0]).cross(v[2] - v[0]);
+        let dn = d.dot(n);
+        (dn != 0.0).then(|| (v[0] - o).dot(n) / dn)
+    };
+    let mine = meet(tri);
+    (0..3)
+        .filter(|k| near >> k & 1 == 1)
+        .filter_map(|k| {
+            let n = adjacent.0[t][k];
+            if n == NONE {
+                return None;
+            }
+            if !projects {
+                return Some(n as i32);
+            }
+            let (a, b, c) = (q[k].0, q[(k + 1) % 3].0, q[(k + 2) % 3].0);
+            let e = b - a;
+            if e.perp_dot(x - a).abs() >= FOLD * e.length() {
+                return None;
+            }
+            let other = sorted.triangle(n as usize);
+            let m = other.map(|v| camera.project(v).0);
+            let off = m
+                .into_iter()
+                .map(|v| e.perp_dot(v - a))
+                .max_by(|u, v| u.abs().total_cmp(&v.abs()))
+                .unwrap_or(0.0);
+            let folds = off * e.perp_dot(c - a) > 0.0;
+            let level = match (mine, meet(other)) {
+                (Some(zt), Some(zn)) => zn - zt <= DEPTH_ROUNDING * zt.abs(),
+                _ => true,
+            };
+            (!folds || level).then_some(n as i32)
+        })
+        .collect()
 }
 
 /// The face ranges `[a, b)` of the marked cells, consecutive cells merged; `offsets` is the
@@ -872,16 +940,37 @@ pub fn render_marked(
     marked: &[bool],
     camera: &Camera,
 ) -> Result<(DepthImages, usize)> {
+    check_cells(sorted, order, offsets, marked)?;
+    let (mut img, drawn) = render_sorted(sorted, offsets, marked, camera)?;
+    remap(&mut img, order);
+    Ok((img, drawn))
+}
+
+fn check_cells(sorted: &Scene, order: &[u32], offsets: &[u32], marked: &[bool]) -> Result<()> {
     if offsets.len() != marked.len() + 1 || order.len() != sorted.triangle_count() {
         return input_err!("the cells do not match the cell-sorted scene");
     }
+    Ok(())
+}
+
+/// Sorted faces' ids to the scene's.
+fn remap(img: &mut DepthImages, order: &[u32]) {
+    for t in img.triangle.iter_mut().filter(|t| **t >= 0) {
+        *t = order[*t as usize] as i32;
+    }
+}
+
+/// [`render_marked`] with the sorted faces' ids.
+fn render_sorted(
+    sorted: &Scene,
+    offsets: &[u32],
+    marked: &[bool],
+    camera: &Camera,
+) -> Result<(DepthImages, usize)> {
     let start = Instant::now();
     let rs = ranges(offsets, marked);
     let drawn: usize = rs.iter().map(|&(a, b)| (b - a) as usize).sum();
     let mut img = discretize_ranges(sorted, std::slice::from_ref(camera), false, Some(&rs))?;
-    for t in img.triangle.iter_mut().filter(|t| **t >= 0) {
-        *t = order[*t as usize] as i32;
-    }
     img.timings.add("ranges", start.elapsed().as_secs_f64());
     Ok((img, drawn))
 }
@@ -892,17 +981,14 @@ pub fn render_marked(
 /// others), centres on an edge decided by the raster's rule among them. `known`: pixels the
 /// fallback already traced through the whole scene, with what they hit; the cell of what
 /// they hit is marked, so that is their answer here too and they are not traced again.
-pub fn trace_marked(
+/// Triangle ids are the sorted faces'.
+fn trace_sorted(
     sorted: &Scene,
-    order: &[u32],
     offsets: &[u32],
     marked: &[bool],
     camera: &Camera,
     known: &[(usize, i32)],
 ) -> Result<(DepthImages, usize)> {
-    if offsets.len() != marked.len() + 1 || order.len() != sorted.triangle_count() {
-        return input_err!("the cells do not match the cell-sorted scene");
-    }
     let start = Instant::now();
     let rs = ranges(offsets, marked);
     let drawn: usize = rs.iter().map(|&(a, b)| (b - a) as usize).sum();
@@ -931,9 +1017,6 @@ pub fn trace_marked(
         ids[p] = t;
     }
     let (mut img, resolve_seconds) = resolve_ids(sorted, std::slice::from_ref(camera), ids)?;
-    for t in img.triangle.iter_mut().filter(|t| **t >= 0) {
-        *t = order[*t as usize] as i32;
-    }
     img.timings = crate::types::Timings::from([
         ("bvh", hits.bvh_build_seconds),
         ("trace", hits.trace_seconds),
@@ -942,6 +1025,180 @@ pub fn trace_marked(
         ("total", start.elapsed().as_secs_f64()),
     ]);
     Ok((img, drawn))
+}
+
+/// A field view's image: the marked cells drawn on the GPU, or traced on the CPU (`cpu`,
+/// [`trace_sorted`]), then, with `borders`, looked over along the borders between cells at
+/// the pixels where the fallback did not trace the triangle shown ([`look_across_borders`]);
+/// where that marks more
+/// cells, they are drawn again with them. `known`: the fallback's pixels and what they hit.
+/// Returns the image (the scene's triangle ids), the triangles drawn, and the cells the look
+/// along the borders added.
+#[allow(clippy::too_many_arguments)]
+pub fn draw_view(
+    sorted: &Scene,
+    order: &[u32],
+    offsets: &[u32],
+    marked: &mut [bool],
+    camera: &Camera,
+    known: &[(usize, i32)],
+    cpu: bool,
+    borders: bool,
+) -> Result<(DepthImages, usize, usize)> {
+    check_cells(sorted, order, offsets, marked)?;
+    let draw = |marked: &[bool]| {
+        if cpu {
+            trace_sorted(sorted, offsets, marked, camera, known)
+        } else {
+            render_sorted(sorted, offsets, marked, camera)
+        }
+    };
+    let (mut img, mut drawn) = draw(marked)?;
+    let start = Instant::now();
+    let added = if borders {
+        // The fallback looked across the edges near its pixels of the triangles it hit; where
+        // the image shows those, that is done.
+        let mut looked = vec![false; img.triangle.len()];
+        for &(p, t) in known {
+            looked[p] = t >= 0 && img.triangle[p] == t;
+        }
+        look_across_borders(sorted, offsets, camera, &img.triangle, &looked, marked)?
+    } else {
+        0
+    };
+    let border_seconds = start.elapsed().as_secs_f64();
+    if added > 0 {
+        (img, drawn) = draw(marked)?;
+    }
+    img.timings.add("borders", border_seconds);
+    remap(&mut img, order);
+    Ok((img, drawn, added))
+}
+
+/// The cell of each face of a cell-sorted scene (cells are runs of faces), kept on the scene
+/// for the offsets it was made from.
+struct SortedCells {
+    offsets: Vec<u32>,
+    cell: Vec<u32>,
+}
+
+fn sorted_cells(sorted: &Scene, offsets: &[u32]) -> std::sync::Arc<SortedCells> {
+    let make = || {
+        let mut cell = vec![0u32; sorted.triangle_count()];
+        for (c, w) in offsets.windows(2).enumerate() {
+            cell[w[0] as usize..w[1] as usize].fill(c as u32);
+        }
+        SortedCells {
+            offsets: offsets.to_vec(),
+            cell,
+        }
+    };
+    let kept = sorted.derived(make);
+    if kept.offsets == offsets {
+        kept
+    } else {
+        std::sync::Arc::new(make())
+    }
+}
+
+/// Look across the edges near the borders between cells in a drawn field view (`ids`: sorted
+/// faces, −1 empty), and mark the cells found there. The field answered most pixels without a
+/// ray, and the fallback's ray at some pixels found nothing where the raster still draws
+/// something (an edge-on wall's silhouette), so nothing looked across the edges near those
+/// centres; where an edge passes that close and the cell across was marked by no pixel, the
+/// GPU's rounding may give the pixel to the triangle across, and the cell goes missing (1-7
+/// of 78-503 visible cells per view on the Cornell box and khr_simple_instancing, each seen at
+/// a single pixel). A pixel not `looked` at (where the fallback traced the triangle the image
+/// shows, and looked across its edges) whose 4-neighbour shows another cell (or nothing), within
+/// [`EDGE`] of an edge of its triangle, traces the four [`AROUND`] rays as the fallback does,
+/// and within [`FOLD`] takes the triangle sharing the edge ([`across_near`]). Returns the
+/// cells it marked.
+pub fn look_across_borders(
+    sorted: &Scene,
+    offsets: &[u32],
+    camera: &Camera,
+    ids: &[i32],
+    looked: &[bool],
+    marked: &mut [bool],
+) -> Result<usize> {
+    let cells = sorted_cells(sorted, offsets);
+    let (w, h) = (camera.width as usize, camera.height as usize);
+    if ids.len() != w * h {
+        return input_err!("{} pixels for a {w}x{h} view", ids.len());
+    }
+    let cell = |t: i32| {
+        if t < 0 {
+            u32::MAX
+        } else {
+            cells.cell[t as usize]
+        }
+    };
+    let eye = camera.projector();
+    let centre = |p: usize| DVec2::new((p % w) as f64 + 0.5, (p / w) as f64 + 0.5);
+    let on_edge: Vec<(usize, usize, u8)> = (0..h)
+        .into_par_iter()
+        .flat_map_iter(|y| {
+            let (cell, eye) = (&cell, &eye);
+            (0..w).filter_map(move |x| {
+                let p = y * w + x;
+                let t = ids[p];
+                if t < 0 || looked[p] {
+                    return None;
+                }
+                let c = cell(t);
+                let border = (x > 0 && cell(ids[p - 1]) != c)
+                    || (x + 1 < w && cell(ids[p + 1]) != c)
+                    || (y > 0 && cell(ids[p - w]) != c)
+                    || (y + 1 < h && cell(ids[p + w]) != c);
+                if !border {
+                    return None;
+                }
+                let near = near_edges(sorted.triangle(t as usize), eye, centre(p));
+                (near != 0).then_some((p, t as usize, near))
+            })
+        })
+        .collect();
+    let points: Vec<DVec2> = on_edge
+        .iter()
+        .flat_map(|&(p, _, _)| AROUND.map(|o| centre(p) + DVec2::from_array(o)))
+        .collect();
+    let hits = trace_points(sorted, camera, &points)?;
+    let adjacent = EdgeNeighbours::of(sorted);
+    let across = on_edge
+        .iter()
+        .flat_map(|&(p, t, near)| across_near(sorted, &adjacent, &eye, (t, near), centre(p)));
+    let mut added = 0;
+    for t in hits.into_iter().chain(across).filter(|&t| t >= 0) {
+        let c = cells.cell[t as usize] as usize;
+        if !marked[c] {
+            marked[c] = true;
+            added += 1;
+        }
+    }
+    Ok(added)
+}
+
+/// The triangle (sorted face, −1 none) each pixel position in `points` sees between the view's
+/// near and far planes, through the whole scene.
+fn trace_points(sorted: &Scene, camera: &Camera, points: &[DVec2]) -> Result<Vec<i32>> {
+    if points.is_empty() {
+        return Ok(Vec::new());
+    }
+    let (near, far) = camera.clip_range(sorted.bounds());
+    let frame = TraceFrame::of(sorted)?;
+    let eye = camera.projector();
+    let (origins, dirs): (Vec<[f32; 3]>, Vec<[f32; 3]>) = points
+        .par_iter()
+        .map(|&x| {
+            let (o, d) = eye.ray_z1(x);
+            (
+                (o + d * near - frame.shift).as_vec3().to_array(),
+                d.as_vec3().to_array(),
+            )
+        })
+        .unzip();
+    let scene = frame.scene(sorted);
+    Ok(crate::trace::cast_rays(scene, &origins, &dirs, 0.0, (far - near) as f32)?.triangle)
 }
 
 /// Set bits `[a, b)` of `bits`.

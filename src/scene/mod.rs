@@ -3,6 +3,7 @@
 //! (`obj::load`); validated
 //! once at construction so every later stage can trust it.
 
+pub mod adjacency;
 pub mod gltf;
 pub mod obj;
 pub mod shapes;
