@@ -150,7 +150,8 @@ struct Suspect {
 /// each edge that near gets one ray just across it. An empty pixel is re-decided when the
 /// snapped triangle of a covered neighbour passes within [`NEAR_EDGE`] of its centre.
 /// With `keep` (triangle bits, as `trace::cast_rays_kept` takes them) only those triangles
-/// are drawn: the rays across edges pass through the others.
+/// are drawn: the rays across edges pass through the others (for views drawn without culling
+/// back faces, as the visibility field's are).
 pub(crate) fn settle_edges(
     scene: &Scene,
     cam: &Camera,
@@ -159,6 +160,10 @@ pub(crate) fn settle_edges(
     ids: &[i32],
     keep: Option<&[u64]>,
 ) -> Result<(Vec<(usize, i32)>, f64)> {
+    debug_assert!(
+        keep.is_none() || !cull_backfaces,
+        "kept triangles are drawn unculled"
+    );
     let start = std::time::Instant::now();
     let snap = Snap::new(scene, cam);
     let found = near_edge_pixels(scene, cam, &snap, ids);

@@ -802,7 +802,6 @@ pub fn trace_fallback(
     let w = camera.width as usize;
     let centre = |p: usize| DVec2::new((p % w) as f64 + 0.5, (p / w) as f64 + 0.5);
     let eye = camera.projector();
-    let adjacent = EdgeNeighbours::of(sorted);
     let on_edge: Vec<(usize, usize, u8)> = traced
         .par_iter()
         .filter(|&&(_, t)| t >= 0)
@@ -815,25 +814,55 @@ pub fn trace_fallback(
         })
         .filter(|&(_, _, near)| near != 0)
         .collect();
+    let across = look_across(sorted, camera, &on_edge)?;
+    let found = traced.iter().map(|&(_, t)| t);
+    let added = mark(sorted, offsets, found.chain(across), marked);
+    Ok((added, traced))
+}
+
+/// What may lie across the near edges of the pixels `on_edge` (pixel, sorted face, its edges
+/// within [`EDGE`] of the pixel's centre, [`near_edges`]): what the four [`AROUND`] rays of
+/// each hit, and the triangles sharing those edges where the raster's rounding may pick them
+/// ([`across_near`]). Sorted faces, −1 for a ray that hit nothing.
+fn look_across(
+    sorted: &Scene,
+    camera: &Camera,
+    on_edge: &[(usize, usize, u8)],
+) -> Result<Vec<i32>> {
+    let w = camera.width as usize;
+    let centre = |p: usize| DVec2::new((p % w) as f64 + 0.5, (p / w) as f64 + 0.5);
     let points: Vec<DVec2> = on_edge
         .iter()
         .flat_map(|&(p, _, _)| AROUND.map(|o| centre(p) + DVec2::from_array(o)))
         .collect();
-    let around = trace_points(sorted, camera, &points)?;
-    let across = on_edge
-        .iter()
-        .flat_map(|&(p, t, near)| across_near(sorted, &adjacent, &eye, (t, near), centre(p)));
+    let mut found = trace_points(sorted, camera, &points)?;
+    let adjacent = EdgeNeighbours::of(sorted);
+    let eye = camera.projector();
+    found.extend(
+        on_edge
+            .iter()
+            .flat_map(|&(p, t, near)| across_near(sorted, &adjacent, &eye, (t, near), centre(p))),
+    );
+    Ok(found)
+}
+
+/// Mark the cells of the sorted faces `faces` (−1 ignored); returns how many were not marked.
+fn mark(
+    sorted: &Scene,
+    offsets: &[u32],
+    faces: impl IntoIterator<Item = i32>,
+    marked: &mut [bool],
+) -> usize {
+    let cells = sorted_cells(sorted, offsets);
     let mut added = 0;
-    let found = traced.iter().map(|&(_, t)| t);
-    for t in found.chain(around).chain(across).filter(|&t| t >= 0) {
-        // The cell holding sorted face t: the last whose offset is <= t.
-        let cell = offsets.partition_point(|&o| o <= t as u32) - 1;
-        if !marked[cell] {
-            marked[cell] = true;
+    for t in faces.into_iter().filter(|&t| t >= 0) {
+        let c = cells.cell[t as usize] as usize;
+        if !marked[c] {
+            marked[c] = true;
             added += 1;
         }
     }
-    Ok((added, traced))
+    added
 }
 
 /// Which edges of `tri` (bit `k`: from corner `k` to `k + 1`) pass within [`EDGE`] pixels of
@@ -1123,8 +1152,12 @@ pub fn look_across_borders(
 ) -> Result<usize> {
     let cells = sorted_cells(sorted, offsets);
     let (w, h) = (camera.width as usize, camera.height as usize);
-    if ids.len() != w * h {
-        return input_err!("{} pixels for a {w}x{h} view", ids.len());
+    if ids.len() != w * h || looked.len() != w * h {
+        return input_err!(
+            "{} and {} pixels for a {w}x{h} view",
+            ids.len(),
+            looked.len()
+        );
     }
     let cell = |t: i32| {
         if t < 0 {
@@ -1158,24 +1191,8 @@ pub fn look_across_borders(
             })
         })
         .collect();
-    let points: Vec<DVec2> = on_edge
-        .iter()
-        .flat_map(|&(p, _, _)| AROUND.map(|o| centre(p) + DVec2::from_array(o)))
-        .collect();
-    let hits = trace_points(sorted, camera, &points)?;
-    let adjacent = EdgeNeighbours::of(sorted);
-    let across = on_edge
-        .iter()
-        .flat_map(|&(p, t, near)| across_near(sorted, &adjacent, &eye, (t, near), centre(p)));
-    let mut added = 0;
-    for t in hits.into_iter().chain(across).filter(|&t| t >= 0) {
-        let c = cells.cell[t as usize] as usize;
-        if !marked[c] {
-            marked[c] = true;
-            added += 1;
-        }
-    }
-    Ok(added)
+    let across = look_across(sorted, camera, &on_edge)?;
+    Ok(mark(sorted, offsets, across, marked))
 }
 
 /// The triangle (sorted face, −1 none) each pixel position in `points` sees between the view's
