@@ -183,7 +183,8 @@ class FieldView:
     Attributes
     ----------
     marked : (C,) bool
-        Cells drawn: those the resampling marked, and those the fallback's rays hit.
+        Cells drawn: those the resampling marked, those the fallback's rays hit, and those
+        found across the edges at the cells' borders (``stats["border_cells"]``).
     image : DepthImages
         One depth image drawn from only the marked cells' triangles, on the GPU or the CPU
         (``image.backend``; triangle ids are the scene's).
@@ -207,7 +208,8 @@ class FieldView:
         to a triangle across an edge passing within a 32nd of a pixel of its centre).
     timings : dict of str to float
         Seconds: ``resample`` (the paper's K_rasterize+resample), ``fallback`` (tracing),
-        ``render`` (the marked cells), ``total``.
+        ``render`` (the marked cells, the look along their borders, and the second draw when
+        that found cells; ``image.timings["borders"]`` is the look), ``total``.
     """
 
     marked: np.ndarray
