@@ -562,7 +562,9 @@ def field_view(
     scene's bounds) lies between the two with nothing on the line between the uv plane and
     the near end. The cells stored at the sample holding (u, v, s, t) are marked
     (``interpolate="uv"``: also the 2 x 2 samples around (u, v); ``"st"``: around (s, t);
-    ``"uv+st"``: the 16 around both, §4.1); several slabs' answers are merged. A slab answers
+    ``"uv+st"``: the 16 around both, §4.1); several slabs' answers are merged (with
+    ``fallback``, a block of 8 x 8 pixels or fewer that earlier slabs answered is not read
+    again). A slab answers
     only when every sample it reads for the line hit at most ``trust`` cells, and only its
     answers mark cells (with ``fallback``; without it every read marks). A pixel no slab
     answers is traced instead (``fallback``): its ray is cast through the scene and the cell

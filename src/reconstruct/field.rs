@@ -532,6 +532,19 @@ pub fn resample(
                             .map(|bc| [bc * BLOCK, ((bc + 1) * BLOCK).min(cols) - 1, row0, row1]),
                     );
                     while let Some([c0, c1, r0, r1]) = b.todo.pop() {
+                        // A small block (8x8 or less) whose lines earlier slabs all answered
+                        // needs nothing more: their trusted reads marked what the lines see.
+                        // (Scanning large blocks cost more than it saved.)
+                        if how.conservative.is_some()
+                            && (c1 - c0 + 1) * (r1 - r0 + 1) <= 64
+                            && (r0..=r1).all(|r| {
+                                b.state[at(c0, r)..=at(c1, r)]
+                                    .iter()
+                                    .all(|s| s & ANSWERED != 0)
+                            })
+                        {
+                            continue;
+                        }
                         let corners = [(c0, r0), (c1, r0), (c0, r1), (c1, r1)];
                         for &(c, r) in &corners {
                             let i = at(c, r);
