@@ -564,9 +564,9 @@ def field_view(
     (``interpolate="uv"``: also the 2 x 2 samples around (u, v); ``"st"``: around (s, t);
     ``"uv+st"``: the 16 around both, §4.1); several slabs' answers are merged (with
     ``fallback``, a block of 8 x 8 pixels or fewer that earlier slabs answered is not read
-    again). A slab answers
-    only when every sample it reads for the line hit at most ``trust`` cells, and only its
-    answers mark cells (with ``fallback``; without it every read marks). A pixel no slab
+    again). A slab answers only when every sample it reads for the line hit at most
+    ``trust`` cells, and only its answers mark cells (with ``fallback``; without it every
+    read marks). A pixel no slab
     answers is traced instead (``fallback``): its ray is cast through the scene and the cell
     it hits is marked (and, when it lies on a triangle's edge, the cells of four rays a 32nd
     of a pixel around it, as the raster may pick the neighbour). Then only the marked cells'
