@@ -42,6 +42,16 @@ def front_camera(at=(-4.0, 0.3, 0.2), size: int = 96) -> ss.Camera:
     return ss.Camera.look_at(at, (0, 0, 0), (0, 0, 1), yfov=0.7, width=size, height=size)
 
 
+def shared_scene(name: str) -> ss.Scene:
+    """A scene of ../shared/scenes (the test skips without it), its loader warnings hushed."""
+    path = ss.scenes.shared_scene_files().get(name)
+    if path is None:
+        pytest.skip("../shared/scenes is not here")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ss.SceneWarning)
+        return ss.Scene.load(path)
+
+
 @pytest.fixture(scope="module")
 def turtles():
     scene = ss.scenes.turtles(count=9)
@@ -356,12 +366,7 @@ def test_the_default_field_leaves_no_holes_from_six_directions(name):
     """Out of the box (six slabs, scene-derived settings, fallback): at most 1% of the pixels
     that see the scene are holes from each of six directions outside the bounds, on a scanned
     model and on foliage (the worst shared scene: leaves smaller than a sample's beam)."""
-    path = ss.scenes.shared_scene_files().get(name)
-    if path is None:
-        pytest.skip("../shared/scenes is not here")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", ss.SceneWarning)
-        scene = ss.Scene.load(path)
+    scene = shared_scene(name)
     field = ss.discretize(scene, method="visibility_field")
     assert len(field.slabs) == 6 and field.settings["quality"] == "balanced"
     for cam in six_directions(scene, 128):
@@ -500,12 +505,7 @@ def test_the_default_view_draws_every_visible_cell_and_little_more(name):
     cells are drawn (untrusted reads mark nothing)."""
     from scenesample._bench_methods import views
 
-    path = ss.scenes.shared_scene_files().get(name)
-    if path is None:
-        pytest.skip("../shared/scenes is not here")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", ss.SceneWarning)
-        scene = ss.Scene.load(path)
+    scene = shared_scene(name)
     field = ss.discretize(scene, method="visibility_field", progress=False)
     for cam in views(scene, 1024):
         view = ss.reconstruct(field, cam)
