@@ -30,9 +30,17 @@ test-python: ## pytest against the editable install (`make setup`), on both core
 fuzz: setup ## a longer loader fuzzing run: FUZZ_CASES (20000) mutated glTF/GLB/OBJ/MTL files, seed FUZZ_SEED
 	$(PY) tests/fuzz_loaders.py --cases $(FUZZ_CASES) --seed $(FUZZ_SEED)
 
-wheel: ## the abi3 manylinux2014 wheel (CPython >= 3.9, glibc >= 2.17) and the sdist, into dist/
-	CARGO_TARGET_DIR=target/manylinux $(PY) -m maturin build --release --zig --compatibility manylinux2014 --out dist
-	$(PY) -m maturin sdist --out dist
+# The wheel's build tools (maturin, zig) at their pinned versions, in a venv of their own: nothing
+# is taken from the machine's Python. Remade when scripts/pins.txt changes.
+TOOLS := target/tools-venv
+$(TOOLS)/pins.txt: scripts/pins.txt
+	$(PY) -m venv --clear $(TOOLS)
+	$(TOOLS)/bin/python -m pip install --quiet --disable-pip-version-check -c scripts/pins.txt maturin ziglang
+	cp scripts/pins.txt $@
+
+wheel: $(TOOLS)/pins.txt ## the abi3 manylinux2014 wheel (CPython >= 3.9, glibc >= 2.17) and the sdist, into dist/
+	PATH="$(CURDIR)/$(TOOLS)/bin:$$PATH" CARGO_TARGET_DIR=target/manylinux maturin build --release --zig --compatibility manylinux2014 --out dist
+	PATH="$(CURDIR)/$(TOOLS)/bin:$$PATH" maturin sdist --out dist
 
 bench: setup ## side-by-side benchmarks against Embree and pyrender
 	$(PY) -m scenesample.bench

@@ -8,6 +8,11 @@ smoke test and the quickstart. The cargo tests (debug assertions and overflow ch
 clippy share a target folder of their own and build while the wheel does: on two cores, the
 long serial tail of the wheel's own crate leaves room for them.
 
+Nothing is taken from the machine's Python or PATH beyond the interpreter that runs this
+script: every tool (maturin, zig, ruff, pytest) comes from target/test-venv, whose `bin` is put
+first on PATH for every stage, at the versions of scripts/pins.txt (the `pins` stage checks
+them). `scripts/fresh_machine.sh` runs this as a machine where nothing was installed would.
+
 Usage: python3 scripts/make_test.py [--only STAGE ...]
 """
 
@@ -15,34 +20,28 @@ from __future__ import annotations
 
 import argparse
 import os
-import re
 import sys
 
+import pins
 from _stages import LOGS, ROOT, TARGET, Stage, run, sh
 
 DIST = TARGET / "dist"
 VENV = TARGET / "test-venv"
 VPY = VENV / "bin" / "python"
 PY = os.environ.get("PYTHON", sys.executable)
-PIP = sh(VPY, "-m", "pip", "install", "--quiet", "--disable-pip-version-check")
+PINS = ROOT / "scripts" / "pins.txt"
+PIP = sh(VPY, "-m", "pip", "install", "--quiet", "--disable-pip-version-check", "-c", PINS)
 JUNIT = LOGS / "pytest.xml"
 LINTED = ("python", "tests", "scripts")
+#: Every stage finds the venv's tools (maturin looks for zig through `python3 -m ziglang`).
+VENV_ENV = {"PATH": f"{VENV / 'bin'}{os.pathsep}{os.environ.get('PATH', '')}"}
+VENV_ENV["VIRTUAL_ENV"] = str(VENV)
 
 
 def test_extras() -> list[str]:
     """numpy and the `test` extra of pyproject.toml (the tools the tests compare against)."""
-    try:
-        import tomllib
-    except ImportError:  # Python < 3.11
-        import tomli as tomllib  # type: ignore[no-redef]
-    with open(ROOT / "pyproject.toml", "rb") as f:
-        meta = tomllib.load(f)["project"]
+    meta = pins.pyproject()["project"]
     return [*meta["dependencies"], *meta["optional-dependencies"]["test"]]
-
-
-def pinned(name: str) -> str:
-    """The requirement of `name` among the test extras, with its version pin."""
-    return next(r for r in test_extras() if re.split("[=<>~! ]", r)[0] == name)
 
 
 STAGES = [
@@ -54,7 +53,7 @@ STAGES = [
     Stage("fmt", "cargo fmt --check", what="cargo fmt --check"),
     Stage(
         "venv",
-        f"{sh(PY, '-m', 'venv', VENV)} && {PIP} {sh(pinned('maturin'), pinned('ziglang'))}",
+        f"{sh(PY, '-m', 'venv', '--clear', VENV)} && {PIP} {sh(*pins.BUILD_TOOLS)}",
         what="target/test-venv with maturin and zig, which the wheel needs",
     ),
     Stage(
@@ -74,6 +73,12 @@ STAGES = [
         f"nice -n 10 {PIP} {sh(*test_extras())}",
         after=("venv",),
         what="numpy and the test extras into target/test-venv",
+    ),
+    Stage(
+        "pins",
+        sh(VPY, ROOT / "scripts/pins.py", "check", VPY),
+        after=("deps",),
+        what="every package in target/test-venv at its version in scripts/pins.txt",
     ),
     Stage(
         "ruff",
@@ -104,7 +109,7 @@ STAGES = [
         f"{PIP} --no-deps --force-reinstall {sh(DIST)}/scenesample-*.whl"
         f" && {sh(VPY, '-m', 'pytest', '-n', '2', '--dist', 'worksteal', '-rs')}"
         f" --junitxml={sh(JUNIT)}",
-        after=("wheel", "deps", "system"),
+        after=("wheel", "deps", "pins", "system"),
         env={"PYOPENGL_PLATFORM": "egl"},
         what="pytest on both cores, against that wheel",
         junit=JUNIT,
@@ -127,6 +132,7 @@ def main() -> int:
         help="run only these stages (the stages they wait for count as passed)",
     )
     args = ap.parse_args()
+    os.environ.update(VENV_ENV)
     return run([s for s in STAGES if not args.only or s.name in args.only])
 
 

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Set up a fresh Debian/Ubuntu machine: system packages (Mesa's software Vulkan driver for the GPU
 # path, EGL for pyrender, libusb for Open3D), then scenesample built in release mode with the test
-# extras, as an editable install into the current Python (what `make demo` and `make check` use).
+# and demo extras, as an editable install into the current Python (`python3`, or $PYTHON): what
+# `make demo` and `make check` use. Python packages at the versions of scripts/pins.txt.
 # `--system`: the system packages only (`make test` builds and tests in target/test-venv).
 # Idempotent: installs only what is missing.
 set -euo pipefail
@@ -27,5 +28,12 @@ fi
 if [ "${1:-}" = "--system" ]; then exit 0; fi
 
 PY="${PYTHON:-python3}"
+# Every version from scripts/pins.txt. maturin is installed first and the build is not isolated,
+# so the pinned maturin builds it; its PEP 517 hook runs `maturin` from PATH, so the scripts
+# folder of PY's environment goes first (PY may be a venv's python whose bin is not on PATH).
+PIPI=("$PY" -m pip install --quiet --disable-pip-version-check -c scripts/pins.txt)
+PATH="$("$PY" -c 'import sysconfig; print(sysconfig.get_path("scripts"))'):$PATH"
+export PATH
+"${PIPI[@]}" maturin
 # Editable install: maturin builds the extension in release mode into python/scenesample/.
-"$PY" -m pip install --quiet --disable-pip-version-check -e ".[test]"
+"${PIPI[@]}" --no-build-isolation -e ".[test,demo]"
