@@ -130,3 +130,67 @@ def test_the_gallery_quick(tmp_path, gpu):
     img = np.asarray(Image.open(path).convert("RGB"))
     assert img.shape[0] > 400 and img.shape[1] > 800
     assert img.std() > 10  # panels, not a blank page
+
+
+#: Run before the demo in a subprocess: these top-level packages cannot be imported, as on a
+#: machine where only the wheel (and numpy) is installed.
+HIDE_PACKAGES = """
+import importlib.abc, sys
+class Hidden(importlib.abc.MetaPathFinder):
+    def find_spec(self, name, path, target=None):
+        if name.split(".")[0] in HIDDEN:
+            raise ModuleNotFoundError(f"No module named {name!r}", name=name)
+        return None
+sys.meta_path.insert(0, Hidden())
+"""
+
+
+@pytest.mark.parametrize(
+    "hidden, named",
+    [(("matplotlib",), ("the gallery (matplotlib)",)), (("matplotlib", "PIL"), ("(pillow)",))],
+)
+def test_the_demo_without_its_extras_does_the_rest_and_names_them_in_one_line(
+    tmp_path, gpu, hidden, named
+):
+    out = tmp_path / "out"
+    code = (
+        f"HIDDEN = {hidden!r}\n{HIDE_PACKAGES}\nimport runpy\n"
+        f"sys.argv = ['demo', '--quick', '--procedural', '--out', {str(out)!r}]\n"
+        "runpy.run_module('scenesample.demo', run_name='__main__')\n"
+    )
+    r = subprocess.run(
+        [sys.executable, "-c", code],
+        env=ci_environment(),
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    text = r.stdout + r.stderr
+    assert r.returncode == 0 and "Traceback" not in text, text[-3000:]
+    advice = [line for line in text.splitlines() if "pip install" in line]
+    assert len(advice) == 1, advice
+    assert advice[0].endswith("pip install 'scenesample[demo]'"), advice
+    assert all(n in advice[0] for n in named), advice
+    assert "| gallery: one panel per paper | skipped |" in r.stdout
+    for name in ("contact_sheet.png", "views.exr", "view0_lit.png"):
+        assert (out / name).stat().st_size > 1000, name
+    assert not (out / "gallery.png").exists()
+
+
+def test_a_missing_optional_package_is_a_typed_import_error_that_pickles():
+    import pickle
+
+    from scenesample import _optional
+
+    with pytest.raises(ss.MissingDependencyError) as caught:
+        _optional.require("matplotlib.no_such_module", "a test")
+    e = caught.value
+    assert isinstance(e, ImportError) and isinstance(e, ss.ScenesampleError)
+    assert str(e) == "a test needs matplotlib: pip install 'scenesample[demo]'"
+    again = pickle.loads(pickle.dumps(e))
+    assert (again.purpose, again.package, again.extra, str(again)) == (
+        "a test",
+        "matplotlib",
+        "demo",
+        str(e),
+    )

@@ -4,7 +4,9 @@ triangle ids with CPU ray casts, write EXR and PNG images, and print what each s
     python -m scenesample.demo [--scene PATH] [--out DIR] [--views N] [--size W H] [--quick]
 
 Without --scene it uses a real scene from ../shared/scenes when that folder is present (the toy
-car, else the bunny), otherwise a procedural one.
+car, else the bunny), otherwise a procedural one. With scenesample alone (numpy its only
+dependency) it does everything but the gallery (matplotlib) and the contact sheet's labels
+(Pillow), and says in one line how to get them: ``pip install 'scenesample[demo]'``.
 """
 
 from __future__ import annotations
@@ -19,12 +21,14 @@ import numpy as np
 
 import scenesample as ss
 from scenesample import gallery
+from scenesample.errors import MissingDependencyError
 from scenesample.imageio import (
     depth_to_rgb,
     ids_to_rgb,
     labelled_sheet,
     linear_to_srgb,
     normal_to_rgb,
+    plain_sheet,
     write_png,
 )
 
@@ -119,12 +123,22 @@ def main(argv: Optional[list[str]] = None) -> None:
             write_png(out / f"view{i}_{name}.png", tile)
         rows.append(list(tiles.values()))
     labels = [f"view {i}" for i in range(images.n)]
-    write_png(out / "contact_sheet.png", labelled_sheet(rows, columns, labels))
+    missing: list[MissingDependencyError] = []
+    try:
+        sheet = labelled_sheet(rows, columns, labels)
+    except MissingDependencyError as e:
+        sheet = plain_sheet(rows)
+        missing.append(e)
+    write_png(out / "contact_sheet.png", sheet)
     write_s = time.perf_counter() - start
 
     # One panel per paper, on one shared scene each (python -m scenesample.gallery).
     start = time.perf_counter()
-    gallery_path = gallery.make(out, gallery.QUICK if a.quick else gallery.SIZE)
+    try:
+        gallery_path: Optional[Path] = gallery.make(out, gallery.QUICK if a.quick else gallery.SIZE)
+    except MissingDependencyError as e:
+        gallery_path = None
+        missing.append(e)
     gallery_s = time.perf_counter() - start
 
     w, h = a.size
@@ -141,11 +155,22 @@ def main(argv: Optional[list[str]] = None) -> None:
     print(f"| cast_rays: trace {len(hits):,} rays | {hits.timings['trace']:.4f} |")
     print(f"| render {len(frames)} lit frames | {render_s:.4f} |")
     print(f"| write EXR + PNG | {write_s:.4f} |")
-    print(f"| gallery: one panel per paper | {gallery_s:.4f} |")
+    gallery_cell = "skipped" if gallery_path is None else f"{gallery_s:.4f}"
+    print(f"| gallery: one panel per paper | {gallery_cell} |")
     lit = "the scene's lights" if not frames[0].stats["default_light"] else "the default light"
     print(f"\nlit frames: {lit}, shown with auto exposure (Frame.to_srgb8('auto'))")
-    sheet = out / "contact_sheet.png"
-    print(f"wrote {out / 'views.exr'}, {sheet} (+ one PNG per view and field) and {gallery_path}")
+    wrote = [str(out / "views.exr"), f"{out / 'contact_sheet.png'} (+ one PNG per view and field)"]
+    print("wrote " + " and ".join(wrote + ([str(gallery_path)] if gallery_path else [])))
+    if missing:
+        print(skipped_line(missing))
+
+
+def skipped_line(missing: list[MissingDependencyError]) -> str:
+    """One line: what was skipped for want of which packages, and the command that brings them
+    (one extra for all of them)."""
+    parts = ", ".join(f"{e.purpose} ({e.package})" for e in missing)
+    extras = sorted({e.extra for e in missing})
+    return f"skipped {parts}: pip install 'scenesample[{','.join(extras)}]'"
 
 
 if __name__ == "__main__":

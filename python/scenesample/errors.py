@@ -16,6 +16,7 @@ __all__ = [
     "GpuUnavailableError",
     "GpuLimitError",
     "ExrError",
+    "MissingDependencyError",
     "SceneWarning",
 ]
 
@@ -52,6 +53,22 @@ class GpuLimitError(GpuError, ValueError):
 
 class ExrError(ScenesampleError, OSError):
     """An EXR file could not be written or read back."""
+
+
+class MissingDependencyError(ScenesampleError, ImportError):
+    """A function needs an optional package that is not installed (scenesample itself needs only
+    numpy). The message says what needs which package and the extra that brings it, e.g.
+    "the gallery needs matplotlib: pip install 'scenesample[demo]'"; ``purpose``, ``package``
+    and ``extra`` hold the three parts."""
+
+    def __init__(self, purpose: str, package: str, extra: str) -> None:
+        super().__init__(
+            f"{purpose} needs {package}: pip install 'scenesample[{extra}]'", name=package
+        )
+        self.purpose, self.package, self.extra = purpose, package, extra
+
+    def __reduce__(self) -> tuple[type, tuple[str, str, str]]:
+        return (type(self), (self.purpose, self.package, self.extra))
 
 
 class SceneWarning(UserWarning):

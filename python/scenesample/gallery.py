@@ -21,6 +21,7 @@ import numpy as np
 
 import scenesample as ss
 
+from ._optional import pyplot
 from .imageio import ids_to_rgb, linear_to_srgb
 
 #: The scene of each panel: a shared scene when present, else a procedural one.
@@ -183,12 +184,9 @@ def tradeoff_panel() -> dict[str, Any]:
 
 
 def make(out: Path, size: int = SIZE) -> Path:
-    """Compute every panel and write ``out/gallery.png``; returns its path."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    """Compute every panel and write ``out/gallery.png``; returns its path. Needs matplotlib
+    (:class:`~scenesample.errors.MissingDependencyError` without it, before any work)."""
+    plt = pyplot("the gallery")
     panels = [
         nonredundant_panel(size),
         reflections_panel(size),

@@ -9,6 +9,8 @@ from typing import Optional
 
 import numpy as np
 
+from ._optional import require
+
 __all__ = ["write_png", "depth_to_rgb", "normal_to_rgb", "linear_to_srgb", "ids_to_rgb"]
 
 
@@ -86,18 +88,26 @@ def ids_to_rgb(ids: np.ndarray) -> np.ndarray:
     return rgb
 
 
+def plain_sheet(rows: list[list[np.ndarray]]) -> np.ndarray:
+    """(H, W, 3) uint8: the tiles of ``rows`` (each (h, w, 3) uint8, all of one size) in a grid,
+    without labels (numpy only: what the demo writes when Pillow is missing)."""
+    if not rows or any(len(r) != len(rows[0]) for r in rows):
+        raise ValueError("plain_sheet: rows of equal length")
+    return np.concatenate([np.concatenate(r, axis=1) for r in rows], axis=0).astype(np.uint8)
+
+
 def labelled_sheet(
     rows: list[list[np.ndarray]], columns: list[str], row_labels: list[str]
 ) -> np.ndarray:
     """(H, W, 3) uint8: the tiles of ``rows`` (each (h, w, 3) uint8, all of one size) in a grid,
     each column's name above it and each row's at its left, in white on a dark margin.
 
-    The labels are drawn with Pillow (a test extra, which ``make demo`` installs); without it,
-    :class:`ImportError` says so."""
-    try:
-        from PIL import Image, ImageDraw, ImageFont
-    except ImportError as e:  # pragma: no cover - Pillow is installed by `make setup`
-        raise ImportError("labelled_sheet needs Pillow: pip install pillow") from e
+    The labels are drawn with Pillow (the ``demo`` extra); without it,
+    :class:`~scenesample.errors.MissingDependencyError` says so (:func:`plain_sheet` needs
+    nothing)."""
+    require("PIL", "the contact sheet's labels")
+    from PIL import Image, ImageDraw, ImageFont
+
     if not rows or any(len(r) != len(columns) for r in rows) or len(row_labels) != len(rows):
         raise ValueError("labelled_sheet: one label per row and per column, rows of equal length")
     h, w = rows[0][0].shape[:2]

@@ -6,6 +6,7 @@ from typing import Any, Optional
 
 import numpy as np
 
+from ._optional import require
 from .errors import InputError
 
 __all__ = ["tradeoff"]
@@ -22,7 +23,7 @@ def tradeoff(table: Any, *, ax: Optional[Any] = None, label: Optional[str] = Non
     """Error against time of a :func:`scenesample.tradeoff` table (DataFrame or structured
     array), every setting a point labelled by its knobs, the Pareto front joined and
     highlighted. Returns the matplotlib Axes."""
-    import matplotlib.pyplot as plt
+    plt = require("matplotlib.pyplot", "scenesample.plot")
 
     err, sec, front = (_column(table, k) for k in ("error", "seconds", "pareto"))
     names = list(table.columns) if hasattr(table, "columns") else list(table.dtype.names)

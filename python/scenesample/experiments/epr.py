@@ -24,6 +24,7 @@ import numpy as np
 
 import scenesample as ss
 
+from .._optional import pyplot
 from .._progress import steps
 from ..imageio import write_png
 from ._tables import write_csv
@@ -79,10 +80,7 @@ def tables(args: Any, out: Path) -> tuple[list[dict[str, Any]], Optional[dict[st
 def fig6(args: Any, out: Path) -> list[dict[str, Any]]:
     """Time vs RMSE (mirrors) of EPR as rho_scale varies, one point per eye distance (nearer
     eyes see larger reflectors)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot("the epr experiment's figures")
 
     rows = []
     for d in steps(args.distances, "epr: distances", "runs"):

@@ -28,6 +28,7 @@ import numpy as np
 
 import scenesample as ss
 
+from .._optional import pyplot
 from .._progress import steps
 from ..imageio import write_png
 from ._tables import write_csv
@@ -148,10 +149,7 @@ def _row(name, scene, label, imp, d, frac, view, ref, e) -> dict[str, Any]:
 
 
 def figures(name, scene, up, rows, built, multi_label, args, out: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot("the impostors experiment's figures")
 
     def error_vs_distance(series, xlabel: str, ylabel: str, title: str, path: Path) -> None:
         """One line per (label, rows) of error per foreground pixel against distance."""

@@ -22,6 +22,7 @@ import numpy as np
 
 import scenesample as ss
 
+from .._optional import pyplot
 from .._progress import steps
 from ..imageio import linear_to_srgb, write_png
 from ._tables import write_csv
@@ -136,10 +137,7 @@ def markdown(results: dict[str, dict[str, Any]], args: argparse.Namespace) -> st
 def fig7(out: Path, scene_name: str, resolutions: list[int], frames: int) -> None:
     """Redundant / disoccluded / useful (image 1 and 2 averaged) under pixel and visibility
     redundancy as resolution grows."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot("the sampling experiment's figures")
 
     scene, up, cull = scene_list([scene_name])[scene_name]
     rows = []

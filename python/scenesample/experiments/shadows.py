@@ -34,6 +34,7 @@ import numpy as np
 
 import scenesample as ss
 
+from .._optional import pyplot
 from .._progress import steps
 from ..imageio import write_png
 from ._tables import write_csv
@@ -222,10 +223,7 @@ def crossover(tris: list[int], ours: list[float], theirs: list[float]) -> Option
 def fig9(out: Path, blades: list[int], args: Any) -> str:
     """Frame time (all steps of Algorithm 5, eye image included) vs triangle count for the grass
     scene grown by blade count; writes fig9.csv and fig9.png and returns a markdown section."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot("the shadows experiment's figures")
 
     n = args.fig9_samples
     rows = []

@@ -41,6 +41,7 @@ import numpy as np
 
 import scenesample as ss
 
+from .._optional import pyplot
 from .._progress import steps
 from ..imageio import write_png
 from ._tables import write_csv
@@ -243,10 +244,7 @@ def figures(
     default_field: Any,
     out: Path,
 ) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot("the visibility_field experiment's figures")
 
     def series(res: int, ids: int, interp: str, key: str) -> list[float]:
         return [
