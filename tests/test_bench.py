@@ -6,7 +6,10 @@ from __future__ import annotations
 import pytest
 
 
-def test_bench_all_quick_writes_a_summary(tmp_path, capsys):
+def test_bench_all_quick_writes_a_summary_and_every_methods_row(tmp_path, capsys, gpu):
+    """`bench all --quick` writes the summary of every benchmark; its `bench methods` part
+    measures every method against its brute force on small shared scenes, with the summary and
+    one table per method (checked here rather than by a second run of the same benchmark)."""
     pytest.importorskip("embreex")
     pytest.importorskip("open3d")
     pytest.importorskip("pyrender")
@@ -30,7 +33,12 @@ def test_bench_all_quick_writes_a_summary(tmp_path, capsys):
     ):
         assert row in md, row
     assert md.count("| met |") + md.count("| NOT met |") >= 14
-    assert "wrote" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "wrote" in printed
+    # The methods report, as `bench methods` writes it, printed between the field's report
+    # and the summary.
+    methods = printed.split("# `python -m scenesample.bench methods`", 1)[1]
+    check_methods_report(methods.split("`python -m scenesample.bench all`", 1)[0])
 
 
 def test_bench_rays_quick_measures_every_shared_scene(tmp_path, capsys):
@@ -65,14 +73,8 @@ def test_bench_backends_quick_compares_gpu_cpu_and_auto(tmp_path, gpu):
     assert "Depth peeling, 4 layers" in md and "first difference not a tie |" in md
 
 
-def test_bench_methods_quick_writes_every_row(tmp_path, gpu):
-    """`bench methods --quick` measures every method against its brute force on small shared
-    scenes and writes the summary and one table per method."""
-    from scenesample import bench
-
-    out = tmp_path / "methods.md"
-    bench.main(["methods", "--quick", "--out", str(out)])
-    md = out.read_text()
+def check_methods_report(md: str) -> None:
+    """The report of `bench methods --quick`: every row and section, a verdict on each."""
     for label in (
         "field view / conventional, both on the GPU (>= 1M triangles)",
         "field view / conventional, both on the CPU (>= 1M triangles)",
