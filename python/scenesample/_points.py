@@ -99,12 +99,23 @@ def winding_number(
     2013): the signed solid angle of every triangle seen from the point, over 4 pi.
 
     Inside a closed mesh whose faces wind counter-clockwise seen from outside it is 1 (2 where
-    two such meshes overlap), outside 0; near the holes of an open mesh, or inside a soup of
-    triangles, it varies smoothly between, which is what makes it a robust inside test where
-    ray parity is not. Summed over the BVH: a node whose bounding sphere is more than 2 radii
-    away adds its dipole term (the area-weighted normals of its triangles; a small record per
-    node, made on first use and cached with the scene), nearer ones are opened, and triangles
-    add their exact solid angle. The result is within a few hundredths of the exact sum.
+    two such meshes overlap, -1 inside one wound the other way), outside 0; near the holes of
+    an open mesh, or inside a soup of triangles, it varies smoothly between, which is what
+    makes it a robust inside test where ray parity is not.
+
+    Two ways, chosen per scene (the answer depends on the scene and the point alone):
+
+    - A closed surface (vertices welded by position, every edge walked as often one way as the
+      other: checked once and cached with the scene; an STL triangle soup counts) has an integer
+      winding number off the surface, found exactly by one ray per point: the signed count of
+      the triangles it crosses, from the point out of the scene's bounds the short way (0 for a
+      point outside the bounds). A ray that meets an edge exactly, or whose point lies within
+      2^-16 of the scene's largest coordinate from the plane of a triangle it meets (a point
+      on or next to the surface), leaves that point to the sum below.
+    - Otherwise, summed over the BVH: a node whose bounding sphere is more than 2 radii away
+      adds its dipole term (the area-weighted normals of its triangles; a small record per node,
+      made on first use and cached with the scene), nearer ones are opened, and triangles add
+      their exact solid angle. The result is within a few hundredths of the exact sum.
 
     Returns
     -------
@@ -130,11 +141,12 @@ def occupancy(
     """1 where a point is inside the scene, 0 outside (``RaycastingScene.compute_occupancy``'s
     output): inside is a generalized winding number of at least 0.5 (:func:`winding_number`).
 
-    On a closed mesh this is the inside of the surface, as ray parity decides it; on an open
-    mesh (missing faces, cracks) a point counts as inside where more than half of the
-    directions around it see the mesh's back faces: a hole narrower than the surface around it
-    does not turn the inside out, as it does for ray parity. Faces must wind counter-clockwise
-    seen from outside; a mesh wound the other way is inside out (its winding number is -1).
+    On a closed mesh this is the inside of the surface, as ray parity decides it (by one ray
+    per point: see :func:`winding_number`); on an open mesh (missing faces, cracks) a point
+    counts as inside where more than half of the directions around it see the mesh's back
+    faces: a hole narrower than the surface around it does not turn the inside out, as it does
+    for ray parity. Faces must wind counter-clockwise seen from outside; a mesh wound the other
+    way is inside out (its winding number is -1).
 
     Returns
     -------

@@ -22,19 +22,7 @@ impl EdgeNeighbours {
     }
 
     fn build(scene: &Scene) -> Self {
-        let verts = scene.vertices();
-        // Weld: one id per distinct position (-0.0 and 0.0 are one).
-        let key = |i: u32| verts[i as usize].map(|x| (x + 0.0).to_bits());
-        let mut order: Vec<u32> = (0..verts.len() as u32).collect();
-        order.par_sort_unstable_by_key(|&i| key(i));
-        let mut weld = vec![0u32; verts.len()];
-        let mut id = 0u32;
-        for (k, &i) in order.iter().enumerate() {
-            if k > 0 && key(i) != key(order[k - 1]) {
-                id += 1;
-            }
-            weld[i as usize] = id;
-        }
+        let weld = weld(scene);
         // Every edge as (its two welded ends, low first; triangle * 3 + edge), sorted so that
         // the edges two triangles share lie side by side.
         let faces = scene.faces();
@@ -62,6 +50,67 @@ impl EdgeNeighbours {
             }
         }
         EdgeNeighbours(out)
+    }
+}
+
+/// One id per distinct vertex position (-0.0 and 0.0 are one), per vertex.
+fn weld(scene: &Scene) -> Vec<u32> {
+    let verts = scene.vertices();
+    let key = |i: u32| verts[i as usize].map(|x| (x + 0.0).to_bits());
+    let mut order: Vec<u32> = (0..verts.len() as u32).collect();
+    order.par_sort_unstable_by_key(|&i| key(i));
+    let mut weld = vec![0u32; verts.len()];
+    let mut id = 0u32;
+    for (k, &i) in order.iter().enumerate() {
+        if k > 0 && key(i) != key(order[k - 1]) {
+            id += 1;
+        }
+        weld[i as usize] = id;
+    }
+    weld
+}
+
+/// Whether the surface is closed: with vertices welded by position, every edge is walked as
+/// often from one end as from the other by the triangles that have it (corners taken in their
+/// counter-clockwise order; a triangle two of whose corners weld into one has no area and is
+/// left out). The triangles then form a cycle, with no border, so their generalized winding
+/// number is an integer everywhere off the surface: the signed count of the triangles any ray
+/// from the point to infinity crosses (+1 leaving through a triangle's front, −1 entering),
+/// 1 inside a closed mesh wound counter-clockwise seen from outside, 0 outside, −1 inside one
+/// wound the other way, 2 where two overlap. A triangle soup (an STL file: every triangle with
+/// corners of its own) is closed when its welded edges are.
+pub struct Closure {
+    pub closed: bool,
+}
+
+impl Closure {
+    /// The scene's closure, found once and kept on the scene.
+    pub fn of(scene: &Scene) -> Arc<Closure> {
+        scene.derived(|| Self::build(scene))
+    }
+
+    fn build(scene: &Scene) -> Self {
+        let weld = weld(scene);
+        // Every directed edge as its two welded ends, low first, with its direction in the
+        // lowest bit: sorted, the edges of one pair of ends lie side by side.
+        let mut edges: Vec<u64> = scene
+            .faces()
+            .par_iter()
+            .flat_map_iter(|f| {
+                let c = f.map(|i| weld[i as usize]);
+                let collapsed = c[0] == c[1] || c[1] == c[2] || c[2] == c[0];
+                (0..3).filter(move |_| !collapsed).map(move |k| {
+                    let (a, b) = (c[k], c[(k + 1) % 3]);
+                    (u64::from(a.min(b)) << 33) | (u64::from(a.max(b)) << 1) | u64::from(a > b)
+                })
+            })
+            .collect();
+        edges.par_sort_unstable();
+        let closed = edges.chunk_by(|x, y| x >> 1 == y >> 1).all(|run| {
+            let backward = run.iter().filter(|&&e| e & 1 == 1).count();
+            2 * backward == run.len()
+        });
+        Closure { closed }
     }
 }
 
@@ -93,5 +142,47 @@ mod tests {
         assert_eq!(n.0[1], [0, NONE, NONE]);
         assert_eq!(n.0[2], [NONE, NONE, 0]);
         assert_eq!(n.0[3], [NONE, NONE, NONE]);
+    }
+
+    /// A tetrahedron wound counter-clockwise seen from outside, its vertices split per face (a
+    /// triangle soup), and the same with one face reversed, with a face missing, with a face
+    /// doubled (an open sheet inside), and two tetrahedra sharing a vertex and an edge.
+    #[test]
+    fn closure_counts_each_welded_edge_both_ways() {
+        let p = [
+            [0.0f32, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+        ];
+        let faces = [[0u32, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]];
+        let soup = |faces: &[[u32; 3]]| {
+            let v: Vec<[f32; 3]> = faces
+                .iter()
+                .flat_map(|f| f.map(|i| p[i as usize]))
+                .collect();
+            let f: Vec<[u32; 3]> = (0..faces.len() as u32)
+                .map(|t| [3 * t, 3 * t + 1, 3 * t + 2])
+                .collect();
+            Closure::build(&Scene::from_arrays(v, f, None, None).unwrap()).closed
+        };
+        assert!(soup(&faces));
+        let mut flipped = faces;
+        flipped[3] = [1, 3, 2];
+        assert!(!soup(&flipped));
+        assert!(!soup(&faces[..3]));
+        assert!(!soup(&[faces.as_slice(), &faces[..1]].concat()));
+        // The whole tetrahedron reversed is closed (inside out); a collapsed triangle counts
+        // for nothing.
+        let reversed: Vec<[u32; 3]> = faces.iter().map(|f| [f[0], f[2], f[1]]).collect();
+        assert!(soup(&reversed));
+        assert!(soup(&[faces.as_slice(), &[[0, 1, 0]]].concat()));
+        // Two copies of the tetrahedron, one shifted to touch the other at a corner: a cycle.
+        let mut v: Vec<[f32; 3]> = p.to_vec();
+        v.extend(p.iter().map(|q| [q[0], q[1], q[2] - 1.0]));
+        let mut f: Vec<[u32; 3]> = faces.to_vec();
+        f.extend(faces.iter().map(|t| t.map(|i| i + 4)));
+        let s = Scene::from_arrays(v, f, None, None).unwrap();
+        assert!(Closure::build(&s).closed);
     }
 }

@@ -1037,13 +1037,13 @@ pub mod portable {
     pub fn tri4_scalar(b: &Tri4, ray: &Ray, t_far: f32) -> Tri4Hit {
         let mut h = Tri4Hit::NONE;
         for lane in 0..4 {
-            if let Some((t, [u, v])) =
+            if let Some(hit) =
                 watertight::intersect(&b.tri(lane), ray.o, &ray.shear, ray.t_min, t_far)
             {
                 h.mask |= 1 << lane;
-                h.t[lane] = t;
-                h.bu[lane] = u;
-                h.bv[lane] = v;
+                h.t[lane] = hit.t;
+                [h.bu[lane], h.bv[lane]] = hit.b;
+                h.det[lane] = hit.det;
             }
         }
         h

@@ -11,6 +11,7 @@
 pub mod avx2;
 pub mod build;
 pub mod bvh8;
+pub mod crossings;
 pub mod interleave;
 #[cfg(target_arch = "x86_64")]
 mod packet;
@@ -400,7 +401,7 @@ trait Chunks: Send + Sized {
     fn split(self, at: usize) -> (Self, Self);
 }
 
-impl Chunks for &mut [bool] {
+impl<T: Send> Chunks for &mut [T] {
     fn rays(&self, k: usize) -> usize {
         self.len() / k
     }
@@ -561,7 +562,7 @@ struct Traced {
 }
 
 impl Rays<'_> {
-    /// Trace rays `base + j` for `j` in `range`, each into a fresh sink from `sink`, handed to
+    /// Trace rays `base + j` for `j` in `range`, each into a fresh sink `sink(j)`, handed to
     /// `done(j, sink)` (not necessarily in order). Runs of eight coherent rays go as packets
     /// where the kernel and the sink can; the others one by one, or in turns (`interleave`)
     /// where the tree is large and the sink allows it ([`Sink::INTERLEAVE`]).
@@ -578,7 +579,7 @@ impl Rays<'_> {
         base: usize,
         range: std::ops::Range<usize>,
         scratch: &mut Scratch<K, S>,
-        sink: impl Fn() -> S,
+        sink: impl Fn(usize) -> S,
         mut done: impl FnMut(usize, S),
     ) {
         let turns = S::INTERLEAVE && self.interleave;
@@ -590,7 +591,7 @@ impl Rays<'_> {
                     (scratch.rays[i], scratch.dirs[i]) = self.traversal_ray(base + j + i);
                 }
                 if coherent(&scratch.rays, &scratch.dirs, self.origin_extent) {
-                    let mut sinks = [(); WIDTH].map(|_| sink());
+                    let mut sinks: [S; WIDTH] = std::array::from_fn(|i| sink(j + i));
                     let all = (1 << WIDTH) - 1;
                     if k.packet(
                         self.bvh,
@@ -610,7 +611,7 @@ impl Rays<'_> {
                     scratch.lone.extend(j as u32..(j + WIDTH) as u32);
                 } else {
                     for i in 0..WIDTH {
-                        let mut s = sink();
+                        let mut s = sink(j + i);
                         traverse(k, self.bvh, &scratch.rays[i], &mut s, &mut scratch.single);
                         done(j + i, s);
                     }
@@ -622,7 +623,7 @@ impl Rays<'_> {
                 scratch.lone.push(j as u32);
             } else {
                 let (ray, _) = self.traversal_ray(base + j);
-                let mut s = sink();
+                let mut s = sink(j);
                 traverse(k, self.bvh, &ray, &mut s, &mut scratch.single);
                 done(j, s);
             }
@@ -636,7 +637,10 @@ impl Rays<'_> {
                 0..lone.len(),
                 &mut scratch.flights,
                 #[inline(always)]
-                |i| (self.traversal_ray(base + lone[i] as usize).0, sink()),
+                |i| {
+                    let j = lone[i] as usize;
+                    (self.traversal_ray(base + j).0, sink(j))
+                },
                 #[inline(always)]
                 |i, s| done(lone[i] as usize, s),
             );
@@ -740,7 +744,7 @@ impl<S: Best> Job for ClosestJob<'_, S> {
                 start..end,
                 &mut scratch,
                 #[inline(always)]
-                || self.1,
+                |_| self.1,
                 // Inlined, so compiled with the kernel's instructions: a closure does not
                 // inherit its caller's target features, and a call from AVX2 code into this
                 // one, for every ray, spilled the traversal's registers around it.
@@ -780,7 +784,7 @@ impl Job for AnyJob<'_> {
         // The block that stopped the last ray, tried first on the next; none after a ray that
         // nothing stopped (`Any::hint`).
         let last = std::cell::Cell::new(None);
-        let any = || Any {
+        let any = |_| Any {
             t_far: self.0.range.1,
             hit: None,
             hint: last.get(),

@@ -78,15 +78,28 @@ fn lanes(v: Vec3A) -> [f32; 4] {
     [x, y, z, 0.0]
 }
 
-/// Intersect; returns `(t, [u, v])` for a hit with `t_min <= t < t_max`, both faces counting.
+/// A hit of [`intersect`]: `t`, and the barycentric numerators `[bu, bv]` over their common
+/// denominator `det` (barycentric (u, v) = (`bu / det`, `bv / det`)), whose sign says which
+/// face the ray meets ([`Hit::front`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    pub t: f32,
+    pub b: [f32; 2],
+    pub det: f32,
+}
+
+impl Hit {
+    /// Whether the ray meets the triangle's front (the side its corners wind counter-clockwise
+    /// seen from), by `det`'s sign: exact, since the hit's three edge functions share it.
+    #[inline(always)]
+    pub fn front(&self) -> bool {
+        self.det > 0.0
+    }
+}
+
+/// Intersect; returns the hit with `t_min <= t < t_max`, both faces counting.
 #[inline(always)]
-pub fn intersect(
-    tri: &Tri,
-    o: Vec3A,
-    ray: &RayShear,
-    t_min: f32,
-    t_max: f32,
-) -> Option<(f32, [f32; 2])> {
+pub fn intersect(tri: &Tri, o: Vec3A, ray: &RayShear, t_min: f32, t_max: f32) -> Option<Hit> {
     let [sx, sy, sz] = ray.s;
     let [ax, ay, az] = ray.permute(tri.v[0] - o);
     let [bx, by, bz] = ray.permute(tri.v[1] - o);
@@ -122,7 +135,7 @@ pub fn intersect(
     if !(t >= t_min && t < t_max) {
         return None;
     }
-    Some((t, [v / det, w / det]))
+    Some(Hit { t, b: [v, w], det })
 }
 
 #[cfg(test)]
@@ -168,9 +181,37 @@ mod tests {
             ],
         };
         let o = Vec3A::new(0.5, 0.25, 3.0);
-        let (tt, [u, v]) = intersect(&t, o, &RayShear::new(Vec3A::NEG_Z), 0.0, 10.0).unwrap();
+        let h = intersect(&t, o, &RayShear::new(Vec3A::NEG_Z), 0.0, 10.0).unwrap();
+        let (tt, [u, v]) = (h.t, h.b.map(|b| b / h.det));
         assert!((tt - 3.0).abs() < 1e-6);
         let p = t.v[0] * (1.0 - u - v) + t.v[1] * u + t.v[2] * v;
         assert!((p - Vec3A::new(0.5, 0.25, 0.0)).length() < 1e-6);
+    }
+
+    #[test]
+    fn the_determinant_says_which_face_the_ray_meets() {
+        // Counter-clockwise seen from +z: the front faces +z.
+        let t = Tri {
+            v: [
+                Vec3A::new(0., 0., 0.),
+                Vec3A::new(2., 0., 0.),
+                Vec3A::new(0., 2., 0.),
+            ],
+        };
+        for (o, d, front) in [
+            (Vec3A::new(0.5, 0.25, 3.0), Vec3A::NEG_Z, true),
+            (Vec3A::new(0.5, 0.25, -3.0), Vec3A::Z, false),
+            (Vec3A::new(-1.0, 0.3, 1.0), Vec3A::new(1.5, 0.1, -1.2), true),
+            (
+                Vec3A::new(-1.0, 0.3, -1.0),
+                Vec3A::new(1.5, 0.1, 1.2),
+                false,
+            ),
+            (Vec3A::new(3.0, 0.4, 0.5), Vec3A::new(-2.5, 0.2, -0.8), true),
+        ] {
+            let h = intersect(&t, o, &RayShear::new(d), 0.0, 10.0).unwrap();
+            assert_eq!(h.front(), front, "{o} {d}: det {}", h.det);
+            assert!(h.b[0] * h.det > 0.0 && h.b[1] * h.det > 0.0);
+        }
     }
 }
