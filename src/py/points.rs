@@ -6,7 +6,7 @@ use pyo3::types::PyDict;
 use super::convert::{array, borrow_rows, rows_array_of, rows_owned};
 use super::errors::IntoPy;
 use super::scene::PyScene;
-use crate::trace::{points, Threads};
+use crate::trace::{points, winding, Threads};
 
 /// The closest surface point of each point (rows (N, 3), read in place when float32).
 #[pyfunction]
@@ -54,7 +54,7 @@ pub fn winding_numbers<'py>(
     let threads = Threads::from_count(threads).py_err(py)?;
     let s = scene.inner.clone();
     let w = super::rays::on_threads(py, threads, progress, || {
-        points::winding_numbers(&s, p, threads)
+        winding::winding_numbers(&s, p, threads)
     })?;
     let n = w.len();
     array(py, w, &[n])

@@ -165,6 +165,6 @@ pub fn bvh_stats<'py>(py: Python<'py>, scene: &PyScene) -> PyResult<Bound<'py, P
     d.set_item("depth", st.depth)?;
     d.set_item("sah", st.sah)?;
     d.set_item("build_seconds", st.build_seconds)?;
-    d.set_item("winding_bytes", trace::points::winding_bytes(&s))?;
+    d.set_item("winding_bytes", trace::winding::winding_bytes(&s))?;
     Ok(d)
 }

@@ -18,6 +18,7 @@ mod packet;
 pub mod points;
 pub mod refine;
 pub mod watertight;
+pub mod winding;
 
 use std::num::NonZeroUsize;
 use std::sync::Arc;
