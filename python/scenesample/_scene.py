@@ -225,6 +225,16 @@ class Scene:
         return self._core.degenerate_count
 
     @property
+    def closed(self) -> bool:
+        """Whether the surface is closed: with vertices welded by position, every edge is walked
+        as often from one end as from the other by the triangles that have it (an STL triangle
+        soup of a closed solid counts; a mesh wound inside out is closed too). Its winding
+        number is then an integer off the surface, and :func:`scenesample.winding_number`,
+        :func:`~scenesample.occupancy` and :func:`~scenesample.signed_distance` answer with one
+        ray per point. Found on first use and kept with the scene."""
+        return self._core.closed
+
+    @property
     def bounds(self) -> np.ndarray:
         """(2, 3) float32 ``[min, max]`` of the vertices that faces use."""
         return self._core.bounds

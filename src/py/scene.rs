@@ -132,6 +132,11 @@ impl PyScene {
         self.inner.degenerate_count()
     }
     #[getter]
+    fn closed(&self, py: Python<'_>) -> bool {
+        let scene = &self.inner;
+        py.detach(|| crate::scene::adjacency::Closure::of(scene).closed)
+    }
+    #[getter]
     fn bounds<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         rows_array(py, &self.inner.bounds(), &[2, 3])
     }
