@@ -79,8 +79,17 @@ fn weld(scene: &Scene) -> Vec<u32> {
 /// 1 inside a closed mesh wound counter-clockwise seen from outside, 0 outside, −1 inside one
 /// wound the other way, 2 where two overlap. A triangle soup (an STL file: every triangle with
 /// corners of its own) is closed when its welded edges are.
+///
+/// An open surface gets a cap: triangles that close it. Each edge walked more often one way
+/// than the other is walked back as often by a cap triangle to the apex of its border (the
+/// mean of the border's vertices; a border is a connected set of such edges), so the surface
+/// and its cap together form a cycle. The winding number of the surface is then that of the
+/// two together, an integer found by one ray, less the cap's own (Jacobson et al. 2013 note
+/// that any surface spanning the holes closes them; the cap is one).
 pub struct Closure {
     pub closed: bool,
+    /// The triangles that close an open surface (none for a closed one).
+    pub cap: Option<Scene>,
 }
 
 impl Closure {
@@ -106,12 +115,82 @@ impl Closure {
             })
             .collect();
         edges.par_sort_unstable();
-        let closed = edges.chunk_by(|x, y| x >> 1 == y >> 1).all(|run| {
-            let backward = run.iter().filter(|&&e| e & 1 == 1).count();
-            2 * backward == run.len()
-        });
-        Closure { closed }
+        // The cap's edges: each unmatched walk of an edge, walked back.
+        let mut border: Vec<[u32; 2]> = Vec::new();
+        for run in edges.chunk_by(|x, y| x >> 1 == y >> 1) {
+            let backward = run.iter().filter(|&&e| e & 1 == 1).count() as i64;
+            let net = run.len() as i64 - 2 * backward;
+            let (lo, hi) = ((run[0] >> 33) as u32, (run[0] >> 1) as u32);
+            let back = if net > 0 { [hi, lo] } else { [lo, hi] };
+            border.extend(std::iter::repeat_n(back, net.unsigned_abs() as usize));
+        }
+        if border.is_empty() {
+            return Closure {
+                closed: true,
+                cap: None,
+            };
+        }
+        Closure {
+            closed: false,
+            cap: cap(scene, &weld, &border),
+        }
     }
+}
+
+/// The cap of a surface whose unmatched edges, walked back, are `border` (welded ids): one
+/// triangle from each to the apex of its border. `None` if the triangles make no valid scene.
+fn cap(scene: &Scene, weld: &[u32], border: &[[u32; 2]]) -> Option<Scene> {
+    // A position per welded id.
+    let mut at = vec![[0.0f32; 3]; weld.iter().max().map_or(0, |&m| m as usize + 1)];
+    for (v, &w) in scene.vertices().iter().zip(weld) {
+        at[w as usize] = *v;
+    }
+    // The borders: connected sets of edges, by union-find over their ends.
+    let mut parent: std::collections::HashMap<u32, u32> = std::collections::HashMap::new();
+    fn root(parent: &mut std::collections::HashMap<u32, u32>, mut x: u32) -> u32 {
+        while let Some(&p) = parent.get(&x).filter(|&&p| p != x) {
+            let g = parent.get(&p).copied().unwrap_or(p);
+            parent.insert(x, g);
+            x = p;
+        }
+        x
+    }
+    for &[a, b] in border {
+        parent.entry(a).or_insert(a);
+        parent.entry(b).or_insert(b);
+        let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
+        if ra != rb {
+            parent.insert(ra.max(rb), ra.min(rb));
+        }
+    }
+    // Each border's apex: the mean of its vertices, in f64. Vertices in id order, so the sum's
+    // order (and its rounding) depends on the scene alone.
+    let mut ids: Vec<u32> = parent.keys().copied().collect();
+    ids.sort_unstable();
+    let mut sums: std::collections::BTreeMap<u32, (glam::DVec3, f64)> = Default::default();
+    for &v in &ids {
+        let r = root(&mut parent, v);
+        let e = sums.entry(r).or_insert((glam::DVec3::ZERO, 0.0));
+        e.0 += glam::DVec3::from(at[v as usize].map(f64::from));
+        e.1 += 1.0;
+    }
+    // The cap's vertices: the border's, then the apexes.
+    let index: std::collections::HashMap<u32, u32> = ids
+        .iter()
+        .enumerate()
+        .map(|(i, &v)| (v, i as u32))
+        .collect();
+    let mut vertices: Vec<[f32; 3]> = ids.iter().map(|&v| at[v as usize]).collect();
+    let mut apex = std::collections::HashMap::new();
+    for (&r, &(sum, n)) in &sums {
+        apex.insert(r, vertices.len() as u32);
+        vertices.push((sum / n).as_vec3().to_array());
+    }
+    let faces: Vec<[u32; 3]> = border
+        .iter()
+        .map(|&[a, b]| [index[&a], index[&b], apex[&root(&mut parent, a)]])
+        .collect();
+    Scene::from_arrays(vertices, faces, None, None).ok()
 }
 
 #[cfg(test)]
@@ -184,5 +263,62 @@ mod tests {
         f.extend(faces.iter().map(|t| t.map(|i| i + 4)));
         let s = Scene::from_arrays(v, f, None, None).unwrap();
         assert!(Closure::build(&s).closed);
+    }
+
+    /// The vertices of a cap's triangles other than their apexes (their third corners).
+    fn border_vertices(cap: &Scene) -> usize {
+        let mut v: Vec<u32> = cap.faces().iter().flat_map(|f| [f[0], f[1]]).collect();
+        v.sort_unstable();
+        v.dedup();
+        v.len()
+    }
+
+    /// An open surface and its cap together are closed: a tetrahedron missing a face (one
+    /// border of three edges), a quad strip (one border of eight), two disjoint triangles (two
+    /// borders, two apexes), and a soup of them all.
+    #[test]
+    fn an_open_surface_and_its_cap_are_closed() {
+        let closes = |v: Vec<[f32; 3]>, f: Vec<[u32; 3]>, borders: usize| {
+            let s = Scene::from_arrays(v.clone(), f.clone(), None, None).unwrap();
+            let c = Closure::build(&s);
+            assert!(!c.closed);
+            let cap = c.cap.expect("a cap");
+            // One apex per border.
+            assert_eq!(cap.vertices().len(), border_vertices(&cap) + borders);
+            let n = v.len() as u32;
+            let mut verts = v;
+            verts.extend_from_slice(cap.vertices());
+            let mut faces = f;
+            faces.extend(cap.faces().iter().map(|t| t.map(|i| i + n)));
+            let both = Scene::from_arrays(verts, faces, None, None).unwrap();
+            assert!(Closure::build(&both).closed);
+            cap.faces().len()
+        };
+        let p = vec![
+            [0.0f32, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+        ];
+        assert_eq!(
+            closes(p.clone(), vec![[0, 2, 1], [0, 1, 3], [0, 3, 2]], 1),
+            3
+        );
+        let strip: Vec<[f32; 3]> = (0..10)
+            .map(|i| [(i / 2) as f32, (i % 2) as f32, 0.1 * i as f32])
+            .collect();
+        let faces: Vec<[u32; 3]> = (0..8u32)
+            .map(|i| {
+                if i % 2 == 0 {
+                    [i, i + 1, i + 2]
+                } else {
+                    [i + 1, i, i + 2]
+                }
+            })
+            .collect();
+        assert_eq!(closes(strip, faces, 1), 10);
+        let mut two = p.clone();
+        two.extend(p.iter().map(|q| [q[0] + 3.0, q[1], q[2]]));
+        assert_eq!(closes(two, vec![[0, 1, 2], [4, 5, 7]], 2), 6);
     }
 }
