@@ -137,60 +137,77 @@ impl Closure {
     }
 }
 
-/// The cap of a surface whose unmatched edges, walked back, are `border` (welded ids): one
-/// triangle from each to the apex of its border. `None` if the triangles make no valid scene.
+/// The cap of a surface whose unmatched edges, walked back, are `border` (welded ids). The edges
+/// are walked into cycles (each vertex has as many cap edges in as out), and each cycle is
+/// triangulated by thirds: a triangle on its first vertex and those a third and two thirds of
+/// the way round, then each of the three arcs between them the same way. The triangles are
+/// small along the border and few across it, so the cap's tree separates them (a fan from one
+/// apex gave every triangle the border's size, and every point near the cap had to open them
+/// all). `None` if the triangles make no valid scene.
 fn cap(scene: &Scene, weld: &[u32], border: &[[u32; 2]]) -> Option<Scene> {
-    // A position per welded id.
     let mut at = vec![[0.0f32; 3]; weld.iter().max().map_or(0, |&m| m as usize + 1)];
     for (v, &w) in scene.vertices().iter().zip(weld) {
         at[w as usize] = *v;
     }
-    // The borders: connected sets of edges, by union-find over their ends.
-    let mut parent: std::collections::HashMap<u32, u32> = std::collections::HashMap::new();
-    fn root(parent: &mut std::collections::HashMap<u32, u32>, mut x: u32) -> u32 {
-        while let Some(&p) = parent.get(&x).filter(|&&p| p != x) {
-            let g = parent.get(&p).copied().unwrap_or(p);
-            parent.insert(x, g);
-            x = p;
-        }
-        x
-    }
+    // The cap edges by their start, in order (border is sorted by ends: a deterministic walk).
+    let mut out: std::collections::BTreeMap<u32, Vec<u32>> = Default::default();
     for &[a, b] in border {
-        parent.entry(a).or_insert(a);
-        parent.entry(b).or_insert(b);
-        let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
-        if ra != rb {
-            parent.insert(ra.max(rb), ra.min(rb));
+        out.entry(a).or_default().push(b);
+    }
+    for ends in out.values_mut() {
+        ends.reverse(); // popped from the back: the lowest end first
+    }
+    let mut faces: Vec<[u32; 3]> = Vec::with_capacity(border.len());
+    let starts: Vec<u32> = out.keys().copied().collect();
+    for start in starts {
+        while let Some(cycle) = walk(&mut out, start) {
+            thirds(&cycle, &mut faces);
         }
     }
-    // Each border's apex: the mean of its vertices, in f64. Vertices in id order, so the sum's
-    // order (and its rounding) depends on the scene alone.
-    let mut ids: Vec<u32> = parent.keys().copied().collect();
-    ids.sort_unstable();
-    let mut sums: std::collections::BTreeMap<u32, (glam::DVec3, f64)> = Default::default();
-    for &v in &ids {
-        let r = root(&mut parent, v);
-        let e = sums.entry(r).or_insert((glam::DVec3::ZERO, 0.0));
-        e.0 += glam::DVec3::from(at[v as usize].map(f64::from));
-        e.1 += 1.0;
+    // Compact the vertices to those the cap uses.
+    let mut index: std::collections::HashMap<u32, u32> = Default::default();
+    let mut vertices = Vec::new();
+    for f in faces.iter_mut() {
+        for v in f.iter_mut() {
+            *v = *index.entry(*v).or_insert_with(|| {
+                vertices.push(at[*v as usize]);
+                vertices.len() as u32 - 1
+            });
+        }
     }
-    // The cap's vertices: the border's, then the apexes.
-    let index: std::collections::HashMap<u32, u32> = ids
-        .iter()
-        .enumerate()
-        .map(|(i, &v)| (v, i as u32))
-        .collect();
-    let mut vertices: Vec<[f32; 3]> = ids.iter().map(|&v| at[v as usize]).collect();
-    let mut apex = std::collections::HashMap::new();
-    for (&r, &(sum, n)) in &sums {
-        apex.insert(r, vertices.len() as u32);
-        vertices.push((sum / n).as_vec3().to_array());
-    }
-    let faces: Vec<[u32; 3]> = border
-        .iter()
-        .map(|&[a, b]| [index[&a], index[&b], apex[&root(&mut parent, a)]])
-        .collect();
     Scene::from_arrays(vertices, faces, None, None).ok()
+}
+
+/// One cycle of the edges left in `out` from `start`, taking them as it goes (a closed walk:
+/// each vertex has as many edges in as out, so a walk from `start` returns to it); `None` when
+/// no edge leaves `start`.
+fn walk(out: &mut std::collections::BTreeMap<u32, Vec<u32>>, start: u32) -> Option<Vec<u32>> {
+    let mut cycle = vec![start];
+    let mut at = start;
+    loop {
+        let next = out.get_mut(&at)?.pop()?;
+        if next == start {
+            return Some(cycle);
+        }
+        cycle.push(next);
+        at = next;
+    }
+}
+
+/// Triangles whose boundary is the closed polygon `p` (p[0] → p[1] → ... → p[0]), by thirds.
+fn thirds(p: &[u32], faces: &mut Vec<[u32; 3]>) {
+    let n = p.len();
+    if n < 3 {
+        return;
+    }
+    let (b, c) = (n / 3, 2 * n / 3);
+    let (b, c) = (b.max(1), c.max(b.max(1) + 1));
+    faces.push([p[0], p[b], p[c]]);
+    thirds(&p[..=b], faces);
+    thirds(&p[b..=c], faces);
+    let mut last = p[c..].to_vec();
+    last.push(p[0]);
+    thirds(&last, faces);
 }
 
 #[cfg(test)]
@@ -265,26 +282,16 @@ mod tests {
         assert!(Closure::build(&s).closed);
     }
 
-    /// The vertices of a cap's triangles other than their apexes (their third corners).
-    fn border_vertices(cap: &Scene) -> usize {
-        let mut v: Vec<u32> = cap.faces().iter().flat_map(|f| [f[0], f[1]]).collect();
-        v.sort_unstable();
-        v.dedup();
-        v.len()
-    }
-
     /// An open surface and its cap together are closed: a tetrahedron missing a face (one
-    /// border of three edges), a quad strip (one border of eight), two disjoint triangles (two
-    /// borders, two apexes), and a soup of them all.
+    /// border of three edges: the cap is that face), a quad strip (one border of ten edges: a
+    /// polygon of ten corners, eight triangles), two disjoint triangles (two borders).
     #[test]
     fn an_open_surface_and_its_cap_are_closed() {
-        let closes = |v: Vec<[f32; 3]>, f: Vec<[u32; 3]>, borders: usize| {
+        let closes = |v: Vec<[f32; 3]>, f: Vec<[u32; 3]>| {
             let s = Scene::from_arrays(v.clone(), f.clone(), None, None).unwrap();
             let c = Closure::build(&s);
             assert!(!c.closed);
             let cap = c.cap.expect("a cap");
-            // One apex per border.
-            assert_eq!(cap.vertices().len(), border_vertices(&cap) + borders);
             let n = v.len() as u32;
             let mut verts = v;
             verts.extend_from_slice(cap.vertices());
@@ -300,10 +307,7 @@ mod tests {
             [0.0, 1.0, 0.0],
             [0.0, 0.0, 1.0],
         ];
-        assert_eq!(
-            closes(p.clone(), vec![[0, 2, 1], [0, 1, 3], [0, 3, 2]], 1),
-            3
-        );
+        assert_eq!(closes(p.clone(), vec![[0, 2, 1], [0, 1, 3], [0, 3, 2]]), 1);
         let strip: Vec<[f32; 3]> = (0..10)
             .map(|i| [(i / 2) as f32, (i % 2) as f32, 0.1 * i as f32])
             .collect();
@@ -316,9 +320,16 @@ mod tests {
                 }
             })
             .collect();
-        assert_eq!(closes(strip, faces, 1), 10);
+        assert_eq!(closes(strip, faces), 8);
         let mut two = p.clone();
         two.extend(p.iter().map(|q| [q[0] + 3.0, q[1], q[2]]));
-        assert_eq!(closes(two, vec![[0, 1, 2], [4, 5, 7]], 2), 6);
+        assert_eq!(closes(two, vec![[0, 1, 2], [4, 5, 7]]), 2);
+        // A border polygon of many corners: n - 2 triangles.
+        for n in [3usize, 4, 5, 7, 64, 1000] {
+            let mut faces = Vec::new();
+            let cycle: Vec<u32> = (0..n as u32).collect();
+            thirds(&cycle, &mut faces);
+            assert_eq!(faces.len(), n - 2, "{n}");
+        }
     }
 }
