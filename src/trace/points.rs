@@ -58,6 +58,10 @@ pub fn closest_points(
             threads,
             points,
             bvh.tree.nodes.len() > 1,
+            // Inlined into `dispatch`'s AVX2 copy: a closure does not inherit the target
+            // features of the function that calls it, and compiled apart it ran the 8-lane box
+            // tests on SSE and called out for each triangle's closest point.
+            #[inline(always)]
             |s, p| match closest(&bvh.tree, s, p, limit * limit) {
                 Some(n) => (
                     n.point.as_vec3().to_array(),
@@ -234,7 +238,8 @@ fn dispatch<T>(chunk: &[[f32; 3]], f: &impl Fn(&mut Scratch, [f32; 3]) -> T) -> 
 }
 
 /// Rust never fuses a multiply and an add on its own, so the results are the portable path's
-/// bit for bit.
+/// bit for bit. A plain loop, not an iterator's `map`: the closure `map` takes would be compiled
+/// apart, without AVX2, and `f` (inlined into it) with it.
 ///
 /// # Safety
 /// The CPU must support AVX2.
@@ -245,7 +250,11 @@ unsafe fn map_avx2<T>(
     s: &mut Scratch,
     f: &impl Fn(&mut Scratch, [f32; 3]) -> T,
 ) -> Vec<T> {
-    chunk.iter().map(|&p| f(s, p)).collect()
+    let mut out = Vec::with_capacity(chunk.len());
+    for &p in chunk {
+        out.push(f(s, p));
+    }
+    out
 }
 
 /// The best candidate so far.
@@ -389,7 +398,7 @@ fn closest(bvh: &Bvh8, s: &mut Scratch, q: [f32; 3], limit2: f64) -> Option<Near
 /// The point of triangle (a, b, c) closest to `p`, and its barycentric (u, v) (the point is
 /// (1−u−v)·a + u·b + v·c), by the Voronoi region of the triangle `p` lies in. A degenerate
 /// triangle (a segment or a point) gets the closest point of its edges.
-#[inline]
+#[inline(always)]
 pub fn closest_on_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> (DVec3, f64, f64) {
     let (ab, ac, ap) = (b - a, c - a, p - a);
     let (d1, d2) = (ab.dot(ap), ac.dot(ap));

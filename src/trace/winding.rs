@@ -89,9 +89,14 @@ fn summed(
     beta: f64,
 ) -> Result<Vec<f64>> {
     let data = scene.derived(|| WindingData::of(bvh));
-    chunked(threads, points, bvh.nodes.len() > 1, |s, p| {
-        winding(bvh, &data, s, p, beta)
-    })
+    chunked(
+        threads,
+        points,
+        bvh.nodes.len() > 1,
+        // Inlined into the AVX2 copy of `dispatch` (see `points::closest_points`).
+        #[inline(always)]
+        |s, p| winding(bvh, &data, s, p, beta),
+    )
 }
 
 /// Sum `scene` again with [`BETA_FINE`] at the points whose answer in `w` lies within
