@@ -101,3 +101,35 @@ def check_methods_report(md: str) -> None:
     assert md.count("| met |") + md.count("| NOT met |") == 8
     assert md.count("| khr_simple_instancing |") >= 4  # field, NR, impostors, shadows
     assert md.count("| reflective_room |") >= 5  # and EPR
+
+
+def test_bench_points_quick_splits_closed_and_open_scenes_and_reports_every_target(tmp_path):
+    """`bench points` measures each query against every peer on closed and open scenes (here
+    one of each, small) and reports a verdict for every target."""
+    for peer in ("open3d", "fcpw", "igl", "point_cloud_utils", "trimesh"):
+        pytest.importorskip(peer)
+    import scenesample as ss
+    from scenesample import bench
+
+    files = ss.scenes.shared_scene_files()
+    if not {"khr_clearcoat_car_paint", "khr_cameras"} <= set(files):
+        pytest.skip("shared scenes not present")
+    out = tmp_path / "points.md"
+    bench.main(["points", "--quick", "--scenes", "clearcoat,cameras", "--out", str(out)])
+    md = out.read_text()
+    assert "## Closed scenes: khr_clearcoat_car_paint" in md
+    assert "## Open scenes: khr_cameras" in md
+    for label in (
+        "closest points, surface: fastest peer's time / ours",
+        "closed scenes, box: occupancy, Open3D time / ours",
+        "closed scenes, surface: signs agreeing with Open3D's",
+        "open scenes, surface: signed distance, libigl fast winding number time / ours",
+        "open scenes, box: signs agreeing with the float64 winding number's",
+    ):
+        assert f"| {label} |" in md, label
+    # Every target has a verdict: three for closest points and three per group, per set.
+    assert md.count("| met |") + md.count("| NOT met |") == 2 * (3 + 3 + 3)
+    # Each peer's closest-point column is filled for both scenes.
+    for name in ("khr_clearcoat_car_paint", "khr_cameras"):
+        row = next(line for line in md.splitlines() if line.startswith(f"| {name} |"))
+        assert "—" not in row.split("|")[4:8], row

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import scenesample as ss
 from conftest import SHARED, load_quiet
-from scenesample._bench_points import brute_distances
+from scenesample._bench_points import brute_distances, exact_winding
 
 
 def brute(scene: ss.Scene, pts: np.ndarray) -> np.ndarray:
@@ -16,25 +16,6 @@ def brute(scene: ss.Scene, pts: np.ndarray) -> np.ndarray:
     plane when inside, onto the three edges otherwise (unlike the package's Voronoi-region
     closest point)."""
     return brute_distances(scene, pts)
-
-
-def exact_winding(scene: ss.Scene, pts: np.ndarray) -> np.ndarray:
-    """The generalized winding number in float64, every triangle's solid angle summed (Van
-    Oosterom and Strackee), point by point: the reference of the fast paths."""
-    tri = scene.vertices.astype(np.float64)[scene.faces.astype(np.int64)]
-    out = np.zeros(len(pts))
-    for i, p in enumerate(np.asarray(pts, np.float64)):
-        a, b, c = (tri[:, k] - p for k in range(3))
-        la, lb, lc = (np.linalg.norm(x, axis=1) for x in (a, b, c))
-        det = np.einsum("ij,ij->i", a, np.cross(b, c))
-        div = (
-            la * lb * lc
-            + np.einsum("ij,ij->i", a, b) * lc
-            + np.einsum("ij,ij->i", b, c) * la
-            + np.einsum("ij,ij->i", c, a) * lb
-        )
-        out[i] = 2 * np.arctan2(det, div).sum() / (4 * np.pi)
-    return out
 
 
 def soup(scene: ss.Scene) -> ss.Scene:

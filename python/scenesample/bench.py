@@ -468,7 +468,9 @@ def main(argv: Optional[list[str]] = None) -> None:
     p.add_argument("--quick", action="store_true", help="small scene and images (smoke test)")
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--rounds", type=int, help="rays: interleaved rounds (default 5, quick 1)")
-    p.add_argument("--scenes", help="rays: only scenes whose names contain one of these (a,b)")
+    p.add_argument(
+        "--scenes", help="rays, points: only scenes whose names contain one of these (a,b)"
+    )
     p.add_argument("--json", help="also write the raw figures to this file")
     a = p.parse_args(argv)
     size = 256 if a.quick else 1024
@@ -479,7 +481,7 @@ def main(argv: Optional[list[str]] = None) -> None:
         _emit(_bench_rays.report(r), a.out or "docs/bench/rays.md", r, a.json)
         return
     if a.which == "points":
-        r = _bench_points.run(a.quick, a.rounds)
+        r = _bench_points.run(a.quick, a.rounds, a.scenes.split(",") if a.scenes else None)
         _emit(_bench_points.report(r), a.out or "docs/bench/points.md", r, a.json)
         return
     if a.which == "methods":
