@@ -113,6 +113,7 @@ def test_every_returned_dict_matches_its_stub(recorded, gpu, tmp_path):
     ss.cast_rays(scene, o, d)
     ss.occluded(scene, o, d)
     ss.all_hits(scene, o, d)
+    ss.count_hits(scene, o, d)
     ss.closest_points(scene, o)
     ss.render(scene, eye, effects=[])
     ss.bvh_stats(scene)

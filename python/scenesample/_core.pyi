@@ -18,6 +18,7 @@ __all__ = [
     "check_memory",
     "choose_backend",
     "closest_points",
+    "count_hits",
     "default_slab",
     "device_info",
     "discretize_conventional",
@@ -368,6 +369,10 @@ class _AllHitsDict(TypedDict):
     barycentric: np.ndarray
     timings: dict[str, float]
 
+class _CountDict(TypedDict):
+    count: np.ndarray
+    timings: dict[str, float]
+
 class _ClosestDict(TypedDict):
     point: np.ndarray
     distance: np.ndarray
@@ -594,6 +599,15 @@ def all_hits(
     threads: Optional[int] = None,
     progress: Optional[Callable[[int, int], object]] = None,
 ) -> _AllHitsDict: ...
+def count_hits(
+    scene: Scene,
+    origins: ArrayLike,
+    directions: ArrayLike,
+    t_min: float = 0.0,
+    t_max: float = ...,
+    threads: Optional[int] = None,
+    progress: Optional[Callable[[int, int], object]] = None,
+) -> _CountDict: ...
 def closest_points(
     scene: Scene,
     points: ArrayLike,

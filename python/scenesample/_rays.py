@@ -254,15 +254,24 @@ def count_hits(
     (``RaycastingScene.count_intersections``; coincident hits count once, as in
     :func:`all_hits`).
 
+    The same traversal and rule as :func:`all_hits` (so ``count_hits(...)`` equals
+    ``all_hits(...).count``), keeping only the count: no memory for the hits.
+
     Returns
     -------
     (...) int64
         In the rays' batch shape.
     """
-    hits = all_hits(
-        scene, origins, directions, t_min=t_min, t_max=t_max, threads=threads, progress=progress
-    )
-    return hits.count
+    o, d, shape = _rays(origins, directions)
+    with Bar(progress, "rays", "rays") as bar:
+        r = _indexed(
+            shape,
+            lambda: _core.count_hits(
+                core_of(scene), o, d, float(t_min), float(t_max), _threads(threads),
+                bar.callback,
+            ),
+        )  # fmt: skip
+    return r["count"].reshape(shape)
 
 
 def bvh_stats(scene: Scene) -> dict[str, Any]:

@@ -153,6 +153,37 @@ pub fn all_hits<'py>(
     Ok(d)
 }
 
+/// How many distinct hits each ray has: `count` (N,) int64.
+#[pyfunction]
+#[pyo3(signature = (scene, origins, directions, t_min=0.0, t_max=f32::INFINITY, threads=None, progress=None))]
+#[allow(clippy::too_many_arguments)]
+pub fn count_hits<'py>(
+    py: Python<'py>,
+    scene: &PyScene,
+    origins: &Bound<'py, PyAny>,
+    directions: &Bound<'py, PyAny>,
+    t_min: f32,
+    t_max: f32,
+    threads: Option<usize>,
+    progress: Option<Py<PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    rays!(origins, directions);
+    let q = query(py, t_min, t_max, threads)?;
+    let s = scene.inner.clone();
+    let r = on_threads(py, q.threads, progress, || {
+        trace::count_hits(&s, origins, directions, &q)
+    })?;
+    let n = r.count.len();
+    let count: Vec<i64> = r.count.into_iter().map(i64::from).collect();
+    let d = PyDict::new(py);
+    d.set_item("count", array(py, count, &[n])?)?;
+    d.set_item(
+        "timings",
+        timings(py, r.bvh_build_seconds, r.trace_seconds)?,
+    )?;
+    Ok(d)
+}
+
 #[pyfunction]
 pub fn bvh_stats<'py>(py: Python<'py>, scene: &PyScene) -> PyResult<Bound<'py, PyDict>> {
     let s = scene.inner.clone();

@@ -869,6 +869,65 @@ impl Job for AllJob<'_> {
     }
 }
 
+/// How many hits [`all_hits`] would give each ray, without keeping them.
+struct CountJob<'a>(&'a Rays<'a>);
+
+impl Job for CountJob<'_> {
+    type Out<'o> = &'o mut [u32];
+
+    #[inline(always)]
+    fn chunk<K: Kernel>(&self, k: K, base: usize, out: &mut [u32]) {
+        let mut found = Vec::new();
+        let mut stack = Stack::new();
+        for (j, n) in out.iter_mut().enumerate() {
+            let r = self.0.ray(base + j);
+            found.clear();
+            let mut sink = Nearest {
+                rays: self.0,
+                r: &r,
+                want: usize::MAX,
+                found: &mut found,
+                t_far: r.t_far,
+                front_only: false,
+            };
+            traverse(k, self.0.bvh, &r.ray, &mut sink, &mut stack);
+            *n = found.len() as u32;
+        }
+    }
+}
+
+/// Results of [`count_hits`].
+#[derive(Debug, Default)]
+pub struct HitCounts {
+    pub count: Vec<u32>,
+    pub bvh_build_seconds: f64,
+    pub trace_seconds: f64,
+}
+
+/// How many distinct hits each ray has in `[t_min, t_max)`: the length of its [`all_hits`]
+/// (coincident hits counting once), found the same way but with no memory for the hits.
+pub fn count_hits(
+    scene: &Scene,
+    origins: &[[f32; 3]],
+    directions: &[[f32; 3]],
+    q: &Query,
+) -> Result<HitCounts> {
+    on_threads(q.threads, || {
+        let (bvh, built) = prepare(scene, origins, directions, q)?;
+        let start = Instant::now();
+        let mut count = vec![0u32; origins.len()];
+        let job = Rays::new(&bvh.tree, origins, directions, q);
+        run(q, &mut count[..], 1, |base, out| {
+            dispatch(&CountJob(&job), base, out)
+        })?;
+        Ok(HitCounts {
+            count,
+            bvh_build_seconds: built,
+            trace_seconds: start.elapsed().as_secs_f64(),
+        })
+    })?
+}
+
 /// Every hit of every ray, ragged: ray i's hits are `splits[i]..splits[i + 1]`.
 #[derive(Debug, Default)]
 pub struct AllHits {
