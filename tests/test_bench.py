@@ -58,7 +58,10 @@ def test_bench_rays_quick_measures_every_shared_scene(tmp_path, capsys):
     for name in names:
         assert md.count(name) >= 5, name  # one row per table
     rows = _bench_rays.summary_rows(_bench_rays.run(True, 1, ["shapes"]))
-    assert len(rows) == 10 and all(r[2] > 0 for r in rows)
+    # Two per ray set, occluded against the closest hit, count and list of hits, build, memory.
+    assert len(rows) == 13 and all(r[2] > 0 for r in rows)
+    assert "| 1 thread to all cores: ours | Open3D |" in md
+    assert "count_hits vs Open3D's count_intersections" in md
 
 
 def test_bench_backends_quick_compares_gpu_cpu_and_auto(tmp_path, gpu):

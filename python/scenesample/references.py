@@ -237,9 +237,12 @@ class Open3DReference:
         rays = np.concatenate([origins, directions], axis=1).astype(np.float32)
         return self._o3d.core.Tensor(rays)
 
-    def cast(self, origins: np.ndarray, directions: np.ndarray) -> dict[str, np.ndarray]:
-        """Closest hits: ``t`` (+inf on a miss), ``triangle`` (-1), ``barycentric`` (u, v)."""
-        r = self._scene.cast_rays(self._rays(origins, directions))
+    def cast(
+        self, origins: np.ndarray, directions: np.ndarray, threads: int = 0
+    ) -> dict[str, np.ndarray]:
+        """Closest hits: ``t`` (+inf on a miss), ``triangle`` (-1), ``barycentric`` (u, v), on
+        ``threads`` threads (0: every core)."""
+        r = self._scene.cast_rays(self._rays(origins, directions), nthreads=threads)
         ids = r["primitive_ids"].numpy()
         hit = ids != np.iinfo(np.uint32).max
         return {
@@ -248,10 +251,23 @@ class Open3DReference:
             "barycentric": np.where(hit[:, None], r["primitive_uvs"].numpy(), 0),
         }
 
-    def occluded(self, origins: np.ndarray, directions: np.ndarray, t_max: float) -> np.ndarray:
-        """(N,) bool: anything on each ray within ``0 <= t < t_max``."""
-        r = self._scene.test_occlusions(self._rays(origins, directions), tfar=t_max)
+    def occluded(
+        self, origins: np.ndarray, directions: np.ndarray, t_max: float, threads: int = 0
+    ) -> np.ndarray:
+        """(N,) bool: anything on each ray within ``0 <= t < t_max``, on ``threads`` threads."""
+        r = self._scene.test_occlusions(
+            self._rays(origins, directions), tfar=t_max, nthreads=threads
+        )
         return r.numpy().astype(bool)
+
+    def count_hits(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """``count_intersections``: (N,) int32, every hit along each whole ray."""
+        return self._scene.count_intersections(self._rays(origins, directions)).numpy()
+
+    def all_hits(self, origins: np.ndarray, directions: np.ndarray) -> dict[str, np.ndarray]:
+        """``list_intersections``: ``ray_splits``, ``t_hit``, ``primitive_ids`` (ragged)."""
+        r = self._scene.list_intersections(self._rays(origins, directions))
+        return {k: r[k].numpy() for k in ("ray_splits", "t_hit", "primitive_ids")}
 
     def commit(self) -> None:
         """Build the BVH now (Open3D builds it on the first query)."""
