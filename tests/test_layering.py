@@ -1,5 +1,6 @@
 """The house has floors: no import cycle between the top-level Rust modules of src/, nor between
-the Python modules of the package (function-local imports included)."""
+the files of one Rust folder, nor between the Python modules of the package (function-local
+imports included)."""
 
 import ast
 import re
@@ -59,6 +60,25 @@ def rust_graph() -> dict[str, set[str]]:
     return edges
 
 
+def sibling_graph(folder: Path) -> dict[str, set[str]]:
+    """Which files of one Rust folder name which others (`super::x`, `crate::<folder>::x`,
+    tests included). The folder's `mod.rs` is its facade, which re-exports and which every
+    file may lean on, so it is left out."""
+    files = {p.stem: p for p in folder.glob("*.rs") if p.stem not in ("mod", "lib")}
+    path = "::".join(folder.relative_to(ROOT / "src").parts)
+    edges: dict[str, set[str]] = {m: set() for m in files}
+    for m, f in files.items():
+        text = re.sub(r"//.*", "", f.read_text())
+        text = re.sub(r"(?m)^\s*(pub(\([^)]*\))?\s+)?mod\s+\w+\s*;", "", text)
+        groups = re.findall(r"\bsuper::(\{[^}]*\}|\w+)", text)
+        if path:
+            groups += re.findall(r"\bcrate::" + re.escape(path) + r"::(\{[^}]*\}|\w+)", text)
+        for g in groups:
+            names = re.findall(r"(?:^|[{,]\s*)(\w+)", g) if g.startswith("{") else [g]
+            edges[m] |= {n for n in names if n in files and n != m}
+    return edges
+
+
 def python_graph() -> dict[str, set[str]]:
     names = {
         ".".join(p.relative_to(PACKAGE.parent).with_suffix("").parts): p
@@ -100,6 +120,16 @@ def test_rust_modules_form_no_cycle():
     # The shared types sit below every room; the scene names none of its users.
     assert edges["types"] <= {"camera", "error", "scene"}
     assert edges["scene"] <= {"camera", "error"}
+
+
+def test_the_files_of_each_rust_folder_form_no_cycle():
+    folders = [p for p in (ROOT / "src").rglob("*") if p.is_dir()]
+    found = {str(f.relative_to(ROOT)): c for f in folders if (c := cycles(sibling_graph(f)))}
+    assert found == {}
+    # The graph sees the edges it must: the raster rule takes its rays from `pixels`.
+    discretize = sibling_graph(ROOT / "src" / "discretize")
+    assert "pixels" in discretize["raster_rule"]
+    assert "raster_rule" not in discretize["pixels"]
 
 
 def test_python_modules_form_no_cycle():

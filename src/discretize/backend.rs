@@ -404,28 +404,6 @@ pub fn discretize_with(
     Ok((images, decision))
 }
 
-/// `layers` depth-peeling layers from `camera` on the requested backend (the model counts
-/// them as `layers` images: the GPU draws a pass per layer, the CPU gathers a pixel's layers
-/// in one traversal, which costs about as much).
-pub fn peeling_with(
-    scene: &Scene,
-    camera: &Camera,
-    layers: usize,
-    cull_backfaces: bool,
-    choice: BackendChoice,
-) -> Result<(DepthImages, Decision)> {
-    super::nonredundant::check_layers(camera, layers)?;
-    let cams = vec![camera.clone(); layers];
-    let decision = decide(scene, &cams, choice)?;
-    let images = match decision.backend {
-        Backend::Gpu => super::discretize_peeling(scene, camera, layers, cull_backfaces),
-        Backend::Cpu => {
-            super::nonredundant::discretize_peeling_traced(scene, camera, layers, cull_backfaces)
-        }
-    }?;
-    Ok((images, decision))
-}
-
 /// The backend for a request of `cameras`: the requested one, or the one the machine's model
 /// predicts is faster for this scene and these cameras. It depends on nothing else, so every
 /// method that makes "the conventional images of these cameras" (non-redundant rendering's

@@ -6,30 +6,23 @@
 //! on the hardware depth buffer, nor on f32 interpolation, nor on the scene's distance from the
 //! world origin.
 
-use std::sync::Arc;
 use std::time::Instant;
 
-use glam::{DVec3, Vec3};
+use glam::DVec3;
 use rayon::prelude::*;
 
+use super::pixels::{
+    pixel_rays_f32, resolve_ids, resolve_into, PixelRays, SurfacePlane, TraceFrame, ViewRays,
+};
+use super::raster_rule;
 use super::redundancy::Sample;
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gpu;
 use crate::input_err;
 use crate::scene::Scene;
-use crate::trace::{nearest_hits_facing, Query};
+use crate::trace::nearest_hits_facing;
 use crate::types::{DepthImages, Timings};
-
-/// Every triangle's [`SurfacePlane`], in face order: a scene's cached resolve data.
-pub(crate) struct ScenePlanes(pub Vec<SurfacePlane>);
-
-impl std::ops::Deref for ScenePlanes {
-    type Target = [SurfacePlane];
-    fn deref(&self) -> &[SurfacePlane] {
-        &self.0
-    }
-}
 
 /// Render one conventional depth image per camera. Cameras may differ in pose and projection
 /// but must share a resolution. No back-face culling unless `cull_backfaces`.
@@ -155,15 +148,13 @@ pub fn discretize_traced(
 /// where none; centres on an edge decided by the raster's rule), and the seconds spent
 /// building the BVH (`bvh`, 0 when it was built), casting (`trace`) and on the edges (`edges`).
 fn traced_ids(scene: &Scene, cam: &Camera, cull_backfaces: bool) -> Result<(Vec<i32>, Timings)> {
-    let (near, far) = cam.clip_range(scene.bounds());
-    let frame = TraceFrame::of(scene)?;
-    let (origins, dirs) = pixel_rays_f32(cam, &frame);
-    let range = Query::new(near as f32, (far as f32).max(near as f32));
-    let target = frame.scene(scene);
-    let hits = nearest_hits_facing(target, &origins, &dirs, 1, &range, cull_backfaces)?;
+    let view = ViewRays::of(scene, cam)?;
+    let (origins, dirs) = pixel_rays_f32(cam, &view.frame);
+    let target = view.target(scene);
+    let hits = nearest_hits_facing(target, &origins, &dirs, 1, &view.range(), cull_backfaces)?;
     let mut out = hits.triangle;
     let (changes, edge_seconds) =
-        super::raster_rule::settle_edges(scene, cam, cull_backfaces, &frame, &out, None)?;
+        raster_rule::settle_edges(scene, cam, cull_backfaces, &view.frame, &out, None)?;
     for (p, t) in changes {
         out[p] = t;
     }
@@ -175,40 +166,6 @@ fn traced_ids(scene: &Scene, cam: &Camera, cull_backfaces: bool) -> Result<(Vec<
             ("edges", edge_seconds),
         ]),
     ))
-}
-
-/// Every pixel-centre ray of `cam` in `frame` (origin on the camera, direction with camera z
-/// −1, so `t` is the depth), rounded to f32 for the ray caster, row-major.
-pub(crate) fn pixel_rays_f32(cam: &Camera, frame: &TraceFrame) -> (Vec<[f32; 3]>, Vec<[f32; 3]>) {
-    let rays = PixelRays::new(cam);
-    (0..cam.width as usize * cam.height as usize)
-        .into_par_iter()
-        .map(|p| ray_f32(&rays, cam, frame, p))
-        .unzip()
-}
-
-/// [`pixel_rays_f32`] of the pixels `pixels` (row-major indices) only.
-pub(crate) fn pixel_rays_f32_at(
-    cam: &Camera,
-    frame: &TraceFrame,
-    pixels: &[usize],
-) -> (Vec<[f32; 3]>, Vec<[f32; 3]>) {
-    let rays = PixelRays::new(cam);
-    pixels
-        .par_iter()
-        .map(|&p| ray_f32(&rays, cam, frame, p))
-        .unzip()
-}
-
-/// Pixel `p`'s ray as [`pixel_rays_f32`] gives it.
-#[inline]
-fn ray_f32(rays: &PixelRays, cam: &Camera, frame: &TraceFrame, p: usize) -> ([f32; 3], [f32; 3]) {
-    let w = cam.width as usize;
-    let (o, d) = rays.ray(p % w, p / w);
-    (
-        (o - frame.shift).as_vec3().to_array(),
-        d.as_vec3().to_array(),
-    )
 }
 
 /// How [`walk`] walks: culling back faces or not, up to which depth, and in which frame.
@@ -315,62 +272,6 @@ pub(crate) fn walk(
     Ok(walked)
 }
 
-/// Where the CPU backend casts its rays. A scene far from the origin (its centre farther than
-/// its diagonal) is traced in a copy centred on the origin, as the GPU path rasterizes it
-/// relative to its centre: float32 ray origins and vertices then keep the precision of the
-/// scene's own extent instead of its distance from the origin. The copy (and its BVH) is made
-/// once and kept on the scene.
-pub(crate) struct TraceFrame {
-    centred: Option<Scene>,
-    pub(crate) shift: DVec3,
-}
-
-impl TraceFrame {
-    pub(crate) fn of(scene: &Scene) -> Result<Arc<TraceFrame>> {
-        let centre = scene.center();
-        if centre.length() <= scene.diagonal() {
-            return Ok(scene.derived(|| TraceFrame {
-                centred: None,
-                shift: DVec3::ZERO,
-            }));
-        }
-        let mut failed = None;
-        let frame = scene.derived(|| {
-            let vertices = scene
-                .vertices()
-                .iter()
-                .map(|v| {
-                    (Vec3::from_array(*v).as_dvec3() - centre)
-                        .as_vec3()
-                        .to_array()
-                })
-                .collect();
-            match Scene::from_arrays(vertices, scene.faces().to_vec(), None, None) {
-                Ok(s) => TraceFrame {
-                    centred: Some(s),
-                    shift: centre,
-                },
-                Err(e) => {
-                    failed = Some(e);
-                    TraceFrame {
-                        centred: None,
-                        shift: DVec3::ZERO,
-                    }
-                }
-            }
-        });
-        match failed {
-            Some(e) => Err(e),
-            None => Ok(frame),
-        }
-    }
-
-    /// The scene the rays are cast in: the centred copy, or `scene` itself.
-    pub(crate) fn scene<'a>(&'a self, scene: &'a Scene) -> &'a Scene {
-        self.centred.as_ref().unwrap_or(scene)
-    }
-}
-
 /// The body every GPU discretization shares: `raster` renders the cameras' triangle ids and
 /// hands each chunk of images to its callback as it arrives; each chunk is resolved here while
 /// the GPU renders the next. `total` started when the call did.
@@ -455,299 +356,6 @@ pub(crate) fn check_cameras(cameras: &[Camera]) -> Result<()> {
         );
     }
     crate::limits::check_views("the depth images", cameras, crate::limits::IMAGE_BYTES)
-}
-
-/// Depth images from per-pixel triangle ids (row-major, image after image, −1 where empty):
-/// every field resolved in f64 from the pixel-centre ray and the triangle, as for conventional
-/// images. Returns the images and the resolve time.
-pub(crate) fn resolve_ids(
-    scene: &Scene,
-    cameras: &[Camera],
-    ids: Vec<i32>,
-) -> Result<(DepthImages, f64)> {
-    let start = Instant::now();
-    let planes = SurfacePlane::of(scene);
-    let mut img = DepthImages::allocate(cameras)?;
-    let rays: Vec<PixelRays> = cameras.iter().map(PixelRays::new).collect();
-    let n = ids.len();
-    img.triangle = ids;
-    resolve_into(&mut img, 0..n, &rays, &planes);
-    Ok((img, start.elapsed().as_secs_f64()))
-}
-
-/// Per-camera constants of the pixel-centre rays (see `Camera::ray_z1`): the ray through pixel
-/// (x, y) is `origin(x, y) + t·dir(x, y)` with camera-space z of `dir` equal to −1, so `t` is
-/// the depth.
-pub(crate) struct PixelRays {
-    eye: DVec3,
-    /// World-space steps per pixel along x and y, and the ray at pixel (0, 0)'s corner.
-    dx: DVec3,
-    dy: DVec3,
-    corner: DVec3,
-    orthographic: bool,
-    forward: DVec3,
-}
-
-impl PixelRays {
-    pub(crate) fn new(cam: &Camera) -> Self {
-        let (o00, d00) = cam.ray_z1(glam::DVec2::ZERO);
-        let (o10, d10) = cam.ray_z1(glam::DVec2::X);
-        let (o01, d01) = cam.ray_z1(glam::DVec2::Y);
-        let orthographic = matches!(
-            cam.projection,
-            crate::camera::Projection::Orthographic { .. }
-        );
-        if orthographic {
-            Self {
-                eye: o00,
-                dx: o10 - o00,
-                dy: o01 - o00,
-                corner: o00,
-                orthographic,
-                forward: d00,
-            }
-        } else {
-            Self {
-                eye: o00,
-                dx: d10 - d00,
-                dy: d01 - d00,
-                corner: d00,
-                orthographic,
-                forward: cam.forward(),
-            }
-        }
-    }
-
-    pub(crate) fn ray(&self, x: usize, y: usize) -> (DVec3, DVec3) {
-        self.ray_at(x as f64 + 0.5, y as f64 + 0.5)
-    }
-
-    /// The ray through image point `(x, y)` in pixels from the top-left corner (pixel centres
-    /// at half-integers).
-    pub(crate) fn ray_at(&self, x: f64, y: f64) -> (DVec3, DVec3) {
-        let p = self.corner + self.dx * x + self.dy * y;
-        if self.orthographic {
-            (p, self.forward)
-        } else {
-            (self.eye, p)
-        }
-    }
-}
-
-impl DepthImages {
-    /// Output buffers for one image per camera. Zeroed allocations are lazily mapped pages: the
-    /// resolve pass is the first and only writer of every pixel (misses included).
-    /// Zeroed images for `cameras`; an error, not an abort, when the host cannot hold them.
-    fn allocate(cameras: &[Camera]) -> Result<Self> {
-        let (w, h) = (cameras[0].width, cameras[0].height);
-        let total = w as usize * h as usize * cameras.len();
-        let bytes = total as u128 * 44;
-        let too_big = || {
-            Error::GpuLimit(format!(
-                "{} images of {w}x{h} need {bytes} bytes of host memory, which could not be \
-                 allocated; use fewer or smaller images",
-                cameras.len()
-            ))
-        };
-        // Probe once for the whole amount, then allocate with `vec!`, whose zeroed memory comes
-        // from the kernel lazily (filling it here would double the cost of large images).
-        let mut probe: Vec<u8> = Vec::new();
-        probe
-            .try_reserve_exact(usize::try_from(bytes).map_err(|_| too_big())?)
-            .map_err(|_| too_big())?;
-        drop(probe);
-        Ok(Self {
-            n: cameras.len(),
-            width: w,
-            height: h,
-            depth: vec![0.0; total],
-            triangle: vec![0; total],
-            normal: vec![[0.0; 3]; total],
-            position: vec![[0.0; 3]; total],
-            color: vec![[0.0; 3]; total],
-            cameras: cameras.to_vec(),
-            method: "conventional".into(),
-            timings: Timings::new(),
-        })
-    }
-}
-
-/// Resolve the pixels `range` (whole rows) of `img` from their triangle ids, parallel over rows.
-fn resolve_into(
-    img: &mut DepthImages,
-    range: std::ops::Range<usize>,
-    rays: &[PixelRays],
-    planes: &[SurfacePlane],
-) {
-    let (w, h) = (img.width as usize, img.height as usize);
-    let first_row = range.start / w;
-    let ids = &img.triangle[range.clone()];
-    img.depth[range.clone()]
-        .par_chunks_mut(w)
-        .zip(img.position[range.clone()].par_chunks_mut(w))
-        .zip(img.normal[range.clone()].par_chunks_mut(w))
-        .zip(img.color[range].par_chunks_mut(w))
-        .enumerate()
-        .for_each(|(r, (((depth, pos), nrm), col))| {
-            let row = first_row + r;
-            let cam = &rays[row / h];
-            for x in 0..w {
-                let px = (&mut depth[x], &mut pos[x], &mut nrm[x], &mut col[x]);
-                resolve_one(ids[r * w + x], cam, x, row % h, planes, px);
-            }
-        });
-}
-
-/// Pixel (x, y) of one image, seeing triangle `id` (−1: nothing).
-#[inline(always)]
-fn resolve_one(
-    id: i32,
-    cam: &PixelRays,
-    x: usize,
-    y: usize,
-    planes: &[SurfacePlane],
-    (depth, pos, nrm, col): (&mut f32, &mut [f32; 3], &mut [f32; 3], &mut [f32; 3]),
-) {
-    let Ok(t) = usize::try_from(id) else {
-        *depth = f32::INFINITY;
-        *pos = [f32::NAN; 3];
-        *nrm = [0.0; 3];
-        *col = [0.0; 3];
-        return;
-    };
-    let (o, d) = cam.ray(x, y);
-    let s = planes[t].intersect(o, d, cam.forward);
-    *depth = s.depth as f32;
-    *pos = s.point.as_vec3().to_array();
-    *nrm = planes[t].normal.as_vec3().to_array();
-    *col = s.color;
-}
-
-/// Give the pixels `changed` (flat indices over all images) of resolved images `img` the
-/// triangle ids `ids` holds for them, and resolve those pixels again; every other pixel is
-/// kept. The same values as [`resolve_ids`] over everything, at the cost of the few pixels.
-pub(crate) fn resolve_pixels(
-    scene: &Scene,
-    cameras: &[Camera],
-    img: &mut DepthImages,
-    ids: &[i32],
-    changed: &[usize],
-) -> f64 {
-    let start = Instant::now();
-    let planes = SurfacePlane::of(scene);
-    let rays: Vec<PixelRays> = cameras.iter().map(PixelRays::new).collect();
-    let (w, h) = (img.width as usize, img.height as usize);
-    for &p in changed {
-        img.triangle[p] = ids[p];
-        let (i, y, x) = (p / (w * h), p / w % h, p % w);
-        let px = (
-            &mut img.depth[p],
-            &mut img.position[p],
-            &mut img.normal[p],
-            &mut img.color[p],
-        );
-        resolve_one(ids[p], &rays[i], x, y, &planes, px);
-    }
-    start.elapsed().as_secs_f64()
-}
-
-/// Per-triangle data for resolving pixels, in f64: a corner, the unit normal, the gradients of
-/// the barycentrics over the plane, and the corner colours. Computed once per scene (cached on
-/// it), so a pixel costs a few dot products on one contiguous record.
-#[derive(Debug, Clone)]
-pub(crate) struct SurfacePlane {
-    a: DVec3,
-    normal: DVec3,
-    /// b1 = (p − a)·g1 and b2 = (p − a)·g2 for a point p on the plane.
-    g1: DVec3,
-    g2: DVec3,
-    colors: [Vec3; 3],
-    /// Degenerate triangles have no plane: their centroid stands in.
-    centroid: Option<DVec3>,
-}
-
-impl SurfacePlane {
-    fn new(scene: &Scene, i: usize) -> Self {
-        let [a, b, c] = scene.triangle(i);
-        let (e1, e2) = (b - a, c - a);
-        let n = e1.cross(e2);
-        let nn = n.length_squared();
-        let colors = scene.faces()[i].map(|k| Vec3::from(scene.colors()[k as usize]));
-        let degenerate = scene.is_degenerate(i) || nn == 0.0 || !nn.is_finite();
-        Self {
-            a,
-            normal: if degenerate {
-                DVec3::ZERO
-            } else {
-                n / nn.sqrt()
-            },
-            g1: if degenerate {
-                DVec3::ZERO
-            } else {
-                e2.cross(n) / nn
-            },
-            g2: if degenerate {
-                DVec3::ZERO
-            } else {
-                n.cross(e1) / nn
-            },
-            colors,
-            centroid: degenerate.then(|| (a + b + c) / 3.0),
-        }
-    }
-
-    /// The scene's planes, built in parallel on first use and cached on the scene.
-    pub(crate) fn of(scene: &Scene) -> Arc<ScenePlanes> {
-        scene.derived(|| {
-            ScenePlanes(
-                (0..scene.triangle_count())
-                    .into_par_iter()
-                    .map(|i| Self::new(scene, i))
-                    .collect(),
-            )
-        })
-    }
-
-    /// The `t` at which the ray `o + t·d` meets the plane (the depth, when camera-space z of `d`
-    /// is −1); not finite for an edge-on or degenerate triangle.
-    pub(crate) fn ray_depth(&self, o: DVec3, d: DVec3) -> f64 {
-        self.normal.dot(self.a - o) / self.normal.dot(d)
-    }
-
-    /// Where the ray `o + t·d` (camera-space z of `d` is −1, so `t` is depth) meets the plane.
-    /// The rasteriser said the triangle covers this pixel centre, so the ray meets the plane
-    /// unless the triangle is edge-on or degenerate; then the centroid stands in.
-    fn intersect(&self, o: DVec3, d: DVec3, forward: DVec3) -> SurfacePoint {
-        let t = self.ray_depth(o, d);
-        let (point, depth, b1, b2) = match self.centroid {
-            Some(c) => (c, (c - o).dot(forward), 1.0 / 3.0, 1.0 / 3.0),
-            None if t.is_finite() => {
-                let p = o + d * t;
-                let r = p - self.a;
-                (p, t, r.dot(self.g1), r.dot(self.g2))
-            }
-            None => {
-                let c = self.a;
-                (c, (c - o).dot(forward), 0.0, 0.0)
-            }
-        };
-        // Clamped to the triangle: only colour interpolation uses them.
-        let (b1, b2) = (b1.clamp(0.0, 1.0) as f32, b2.clamp(0.0, 1.0) as f32);
-        let s = (b1 + b2).max(1.0);
-        let (b1, b2) = (b1 / s, b2 / s);
-        let [ca, cb, cc] = self.colors;
-        SurfacePoint {
-            depth,
-            point,
-            color: (ca * (1.0 - b1 - b2) + cb * b1 + cc * b2).to_array(),
-        }
-    }
-}
-
-struct SurfacePoint {
-    depth: f64,
-    point: DVec3,
-    color: [f32; 3],
 }
 
 #[cfg(test)]

@@ -30,8 +30,10 @@ use glam::DVec3;
 
 use super::backend::{self, Backend, BackendChoice, Decision};
 use super::conventional::{
-    check_cameras, discretize_conventional, discretize_traced, pixel_rays_f32, resolve_ids,
-    resolve_pixels, resolve_streamed, walk, PixelRays, SurfacePlane, TraceFrame, Walk,
+    check_cameras, discretize_conventional, discretize_traced, resolve_streamed, walk, Walk,
+};
+use super::pixels::{
+    pixel_rays_f32, resolve_ids, resolve_pixels, PixelRays, SurfacePlane, TraceFrame,
 };
 use super::redundancy::{self, Redundancy, Sample};
 use crate::camera::Camera;
@@ -104,6 +106,26 @@ pub fn discretize_peeling(
     )?;
     merge_same_surfaces(&mut img);
     Ok(img)
+}
+
+/// `layers` depth-peeling layers from `camera` on the requested backend (the model counts
+/// them as `layers` images: the GPU draws a pass per layer, the CPU gathers a pixel's layers
+/// in one traversal, which costs about as much).
+pub fn peeling_with(
+    scene: &Scene,
+    camera: &Camera,
+    layers: usize,
+    cull_backfaces: bool,
+    choice: BackendChoice,
+) -> Result<(DepthImages, Decision)> {
+    check_layers(camera, layers)?;
+    let cams = vec![camera.clone(); layers];
+    let decision = backend::decide(scene, &cams, choice)?;
+    let images = match decision.backend {
+        Backend::Gpu => discretize_peeling(scene, camera, layers, cull_backfaces),
+        Backend::Cpu => discretize_peeling_traced(scene, camera, layers, cull_backfaces),
+    }?;
+    Ok((images, decision))
 }
 
 /// `layers` peeling layers of `camera`'s images: at least one, and within the memory limit

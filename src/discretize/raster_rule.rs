@@ -22,7 +22,7 @@
 use glam::Vec4;
 use rayon::prelude::*;
 
-use super::conventional::{PixelRays, SurfacePlane, TraceFrame};
+use super::pixels::{PixelRays, SurfacePlane, TraceFrame};
 use crate::camera::Camera;
 use crate::error::Result;
 use crate::scene::Scene;

@@ -20,8 +20,8 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::camera::Camera;
-use crate::discretize::conventional::resolve_ids;
 use crate::discretize::discretize_conventional;
+use crate::discretize::pixels::resolve_ids;
 use crate::discretize::redundancy::{self, pixel_redundant, Redundancy, Sample};
 use crate::error::Result;
 use crate::gpu;

@@ -152,7 +152,13 @@ pub fn discretize_peeling<'py>(
         .map_err(|e| super::errors::to_pyerr(py, e))?;
     let s = scene.inner.clone();
     let (img, decision) = super::run(py, || {
-        crate::discretize::backend::peeling_with(&s, &camera.inner, layers, cull_backfaces, choice)
+        crate::discretize::nonredundant::peeling_with(
+            &s,
+            &camera.inner,
+            layers,
+            cull_backfaces,
+            choice,
+        )
     })?;
     let d = images_dict(py, img)?;
     d.set_item("backend", decision.backend.name())?;

@@ -4,8 +4,8 @@
 //! bit-identical hits; it is only faster.
 //!
 //! Its methods are `#[inline(always)]` and must be inlined into a function compiled with
-//! `#[target_feature(enable = "avx2")]` (see `trace::dispatch`); the [`Avx2`] token, which
-//! only [`Avx2::detect`] makes, proves the CPU has the instructions.
+//! `#[target_feature(enable = "avx2")]` (see `trace::dispatch`); the [`Avx2`] token
+//! (`token`), which only [`Avx2::detect`] makes, proves the CPU has the instructions.
 
 use std::arch::x86_64::*;
 
@@ -16,16 +16,7 @@ use super::bvh8::{
     WIDTH,
 };
 use super::refine::{self, moller_trumbore, Lane, Pending};
-
-/// Proof that the running CPU supports AVX2.
-#[derive(Clone, Copy, Debug)]
-pub struct Avx2(());
-
-impl Avx2 {
-    pub fn detect() -> Option<Self> {
-        is_x86_feature_detected!("avx2").then_some(Self(()))
-    }
-}
+pub use super::token::Avx2;
 
 impl Kernel for Avx2 {
     const PACKETS: bool = true;

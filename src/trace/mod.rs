@@ -17,6 +17,7 @@ pub mod interleave;
 mod packet;
 pub mod points;
 pub mod refine;
+pub mod token;
 pub mod watertight;
 pub mod winding;
 

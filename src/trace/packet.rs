@@ -10,10 +10,10 @@
 
 use std::arch::x86_64::*;
 
-use super::avx2::Avx2;
 use super::bvh8::{
     leaf_blocks, node_at, Bvh8, Kernel, Lanes, PacketStack, Ray, EMPTY, LEAF, STACK, WIDTH,
 };
+use super::token::Avx2;
 
 /// Traverse `bvh` with the eight `rays` (lanes not in `active` hold copies and are ignored),
 /// giving each lane's leaf hits to `sinks`.
@@ -96,21 +96,7 @@ pub fn traverse<S: Lanes>(
                     continue 'visit;
                 }
             } else {
-                let mut m = mask;
-                while m != 0 {
-                    let lane = m.trailing_zeros() as usize;
-                    m &= m - 1;
-                    let ray = &rays[lane];
-                    for b in leaf_blocks(cur) {
-                        let block = bvh.blocks.get_unchecked(b);
-                        let h = k.tri4(block, ray, ray, t_far[lane]);
-                        if h.mask != 0 && sinks.take(bvh, lane, b, &h) {
-                            active &= !(1 << lane);
-                            break;
-                        }
-                    }
-                    t_far[lane] = sinks.t_far(lane);
-                }
+                leaf(k, bvh, rays, (cur, mask), &mut active, sinks, &mut t_far);
             }
             // Pop the next entry some active lane still needs.
             loop {
@@ -125,5 +111,36 @@ pub fn traverse<S: Lanes>(
                 }
             }
         }
+    }
+}
+
+/// Test leaf `cur`'s triangles against each lane of `mask`, ray by ray with the single-ray
+/// kernel; a lane whose sink is done leaves `active`, and each lane's `t_far` follows its
+/// sink.
+#[inline(always)]
+fn leaf<S: Lanes>(
+    k: Avx2,
+    bvh: &Bvh8,
+    rays: &[Ray; WIDTH],
+    (cur, mask): (u32, u32),
+    active: &mut u32,
+    sinks: &mut S,
+    t_far: &mut [f32; WIDTH],
+) {
+    let mut m = mask;
+    while m != 0 {
+        let lane = m.trailing_zeros() as usize;
+        m &= m - 1;
+        let ray = &rays[lane];
+        for b in leaf_blocks(cur) {
+            // SAFETY: a leaf's blocks are blocks of its BVH.
+            let block = unsafe { bvh.blocks.get_unchecked(b) };
+            let h = k.tri4(block, ray, ray, t_far[lane]);
+            if h.mask != 0 && sinks.take(bvh, lane, b, &h) {
+                *active &= !(1 << lane);
+                break;
+            }
+        }
+        t_far[lane] = sinks.t_far(lane);
     }
 }

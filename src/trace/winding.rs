@@ -149,22 +149,14 @@ const EXITS: [[f32; 3]; 6] = [
     [-0.0149, 0.0083, 1.0],
 ];
 
-/// The winding numbers of a closed surface, or of an open one closed by `cap`: the signed
-/// crossings of one ray from each point through the surface and the cap ([`super::crossings`];
-/// 0 outside the bounds, which hold the cap too), less the cap's summed winding number. Rays are
-/// grouped by the way they leave the bounds and in Morton order within a group, so that
-/// neighbouring rays travel together (as packets where the kernel has them). A ray that cannot
-/// tell (an edge met exactly, or the point next to a triangle's plane) leaves its point to the
-/// surface's own sum ([`summed_winding`]). Each answer depends on its point alone.
-fn crossing_winding(
-    scene: &Scene,
-    bvh: &Bvh8,
-    cap: Option<&Scene>,
-    points: &[[f32; 3]],
-    threads: Threads,
-) -> Result<Vec<f64>> {
+/// A point outside the bounds, in [`exit_keys`]: sorts last.
+const OUTSIDE: u32 = 6 << 27;
+
+/// Each point's exit, the nearest face of the bounds (the high bits), and, with `sort`, its
+/// cell of a 512^3 grid over the bounds in Morton order (the low 27 bits); [`OUTSIDE`] for a
+/// point outside the bounds.
+fn exit_keys(scene: &Scene, points: &[[f32; 3]], sort: bool, threads: Threads) -> Vec<u32> {
     let [lo, hi] = scene.bounds();
-    let scale = (0..3).fold(0.0f32, |m, a| m.max(lo[a].abs()).max(hi[a].abs()));
     let cells: [f32; 3] = std::array::from_fn(|a| {
         let extent = f64::from(hi[a]) - f64::from(lo[a]);
         if extent > 0.0 {
@@ -173,11 +165,6 @@ fn crossing_winding(
             0.0
         }
     });
-    // Each point's exit (the high bits) and, where the rays are sorted, its cell of a 512^3 grid
-    // over the bounds in Morton order (the low 27 bits); OUTSIDE, which sorts last, for a point
-    // outside the bounds.
-    const OUTSIDE: u32 = 6 << 27;
-    let sort = bvh.bytes() > SORT_BYTES;
     let key = |p: &[f32; 3]| -> u32 {
         if (0..3).any(|a| p[a] < lo[a] || p[a] > hi[a]) {
             return OUTSIDE;
@@ -199,11 +186,31 @@ fn crossing_winding(
         }
         (exit as u32) << 27 | code
     };
-    let keys: Vec<u32> = if threads == Threads::One {
+    if threads == Threads::One {
         points.iter().map(key).collect()
     } else {
         points.par_iter().map(key).collect()
-    };
+    }
+}
+
+/// The winding numbers of a closed surface, or of an open one closed by `cap`: the signed
+/// crossings of one ray from each point through the surface and the cap ([`super::crossings`];
+/// 0 outside the bounds, which hold the cap too), less the cap's summed winding number. Rays are
+/// grouped by the way they leave the bounds and in Morton order within a group, so that
+/// neighbouring rays travel together (as packets where the kernel has them). A ray that cannot
+/// tell (an edge met exactly, or the point next to a triangle's plane) leaves its point to the
+/// surface's own sum ([`summed_winding`]). Each answer depends on its point alone.
+fn crossing_winding(
+    scene: &Scene,
+    bvh: &Bvh8,
+    cap: Option<&Scene>,
+    points: &[[f32; 3]],
+    threads: Threads,
+) -> Result<Vec<f64>> {
+    let [lo, hi] = scene.bounds();
+    let scale = (0..3).fold(0.0f32, |m, a| m.max(lo[a].abs()).max(hi[a].abs()));
+    let sort = bvh.bytes() > SORT_BYTES;
+    let keys = exit_keys(scene, points, sort, threads);
     let order = if sort {
         radix_order(&keys)
     } else {
@@ -672,6 +679,28 @@ mod tests {
             .iter()
             .zip(&all)
             .all(|(a, b)| a.to_bits() == b.to_bits()));
+    }
+
+    #[test]
+    fn one_point_at_a_time_gives_what_the_batch_gives() {
+        // The batch sorts its points and may take the ray or the sum per point; neither the
+        // order nor the company of other points may change an answer (closed and open).
+        let (v, f) = crate::trace::tests::icosphere(3);
+        let open: Vec<[u32; 3]> = f
+            .iter()
+            .copied()
+            .filter(|t| t.iter().map(|&i| v[i as usize][2]).sum::<f32>() / 3.0 < 0.8)
+            .collect();
+        for faces in [f.clone(), open] {
+            let scene = Scene::from_arrays(v.clone(), faces, None, None).unwrap();
+            let mut pts = probes(&scene);
+            pts.extend_from_within(..50);
+            let all = winding_numbers(&scene, &pts, Threads::All).unwrap();
+            for (i, p) in pts.iter().enumerate().step_by(5) {
+                let one = winding_numbers(&scene, &[*p], Threads::One).unwrap();
+                assert_eq!(one[0].to_bits(), all[i].to_bits(), "{i} {p:?}");
+            }
+        }
     }
 
     /// The float64 winding number: every triangle's solid angle.
