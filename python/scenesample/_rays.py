@@ -61,6 +61,35 @@ def _threads(threads: Optional[int]) -> Optional[int]:
     return None if threads is None else check_integer("threads", threads)
 
 
+def _query(
+    name: str,
+    label: str,
+    scene: Scene,
+    origins: Any,
+    directions: Any,
+    t_min: float,
+    t_max: float,
+    threads: Optional[int],
+    progress: Progress,
+    *own: Any,
+) -> tuple[dict[str, Any], tuple[int, ...]]:
+    """The boundary every ray query shares, written once: the rays broadcast to rows, the
+    core's query ``name`` (``_core.<name>(scene, origins, directions, t_min, t_max, *own,
+    threads, progress)``) under a progress bar of ``label``, a bad row named by its index in
+    the batch; the core's dict and the batch shape."""
+    o, d, shape = _rays(origins, directions)
+    call = getattr(_core, name)
+    with Bar(progress, label, "rays") as bar:
+        r = _indexed(
+            shape,
+            lambda: call(
+                core_of(scene), o, d, float(t_min), float(t_max), *own, _threads(threads),
+                bar.callback,
+            ),
+        )  # fmt: skip
+    return r, shape
+
+
 def cast_rays(
     scene: Scene,
     origins: Any,
@@ -122,15 +151,9 @@ def cast_rays(
         1 or not an integer, rays x ``max_hits`` over the memory limit.
     """
     k = check_integer("max_hits", max_hits)
-    o, d, shape = _rays(origins, directions)
-    with Bar(progress, "rays", "rays") as bar:
-        r = _indexed(
-            shape,
-            lambda: _core.cast_rays(
-                core_of(scene), o, d, float(t_min), float(t_max), k, _threads(threads),
-                bar.callback,
-            ),
-        )  # fmt: skip
+    r, shape = _query(
+        "cast_rays", "rays", scene, origins, directions, t_min, t_max, threads, progress, k
+    )
     hits = () if k == 1 else (k,)
     return RayHits(
         t=r["t"].reshape((*shape, *hits)),
@@ -175,15 +198,9 @@ def occluded(
     (...) bool
         True where the ray hits a triangle in range.
     """
-    o, d, shape = _rays(origins, directions)
-    with Bar(progress, "occlusion rays", "rays") as bar:
-        r = _indexed(
-            shape,
-            lambda: _core.occluded(
-                core_of(scene), o, d, float(t_min), float(t_max), _threads(threads),
-                bar.callback,
-            ),
-        )  # fmt: skip
+    r, shape = _query(
+        "occluded", "occlusion rays", scene, origins, directions, t_min, t_max, threads, progress
+    )
     return r["hit"].reshape(shape)
 
 
@@ -221,15 +238,9 @@ def all_hits(
         ``ray_splits`` (N + 1,) int64, ``t`` (H,) float32, ``triangle`` (H,) int32,
         ``barycentric`` (H, 2) float32, ``ray_ids`` and ``count`` (per ray, batch shape).
     """
-    o, d, shape = _rays(origins, directions)
-    with Bar(progress, "rays", "rays") as bar:
-        r = _indexed(
-            shape,
-            lambda: _core.all_hits(
-                core_of(scene), o, d, float(t_min), float(t_max), _threads(threads),
-                bar.callback,
-            ),
-        )  # fmt: skip
+    r, shape = _query(
+        "all_hits", "rays", scene, origins, directions, t_min, t_max, threads, progress
+    )
     return AllHits(
         ray_splits=r["ray_splits"],
         t=r["t"],
@@ -262,15 +273,9 @@ def count_hits(
     (...) int64
         In the rays' batch shape.
     """
-    o, d, shape = _rays(origins, directions)
-    with Bar(progress, "rays", "rays") as bar:
-        r = _indexed(
-            shape,
-            lambda: _core.count_hits(
-                core_of(scene), o, d, float(t_min), float(t_max), _threads(threads),
-                bar.callback,
-            ),
-        )  # fmt: skip
+    r, shape = _query(
+        "count_hits", "rays", scene, origins, directions, t_min, t_max, threads, progress
+    )
     return r["count"].reshape(shape)
 
 

@@ -51,137 +51,103 @@ fn timings<'py>(py: Python<'py>, build: f64, trace: f64) -> PyResult<Bound<'py, 
     Ok(t)
 }
 
-#[pyfunction]
-#[pyo3(signature = (scene, origins, directions, t_min=0.0, t_max=f32::INFINITY, max_hits=1, threads=None, progress=None))]
-#[allow(clippy::too_many_arguments)]
-pub fn cast_rays<'py>(
-    py: Python<'py>,
-    scene: &PyScene,
-    origins: &Bound<'py, PyAny>,
-    directions: &Bound<'py, PyAny>,
-    t_min: f32,
-    t_max: f32,
-    max_hits: usize,
-    threads: Option<usize>,
-    progress: Option<Py<PyAny>>,
-) -> PyResult<Bound<'py, PyDict>> {
-    rays!(origins, directions);
-    let q = query(py, t_min, t_max, threads)?;
-    let s = scene.inner.clone();
-    let hits = on_threads(py, q.threads, progress, || {
-        trace::nearest_hits(&s, origins, directions, max_hits, &q)
-    })?;
-    let n = origins.len();
-    // One hit per ray keeps the flat shapes (N,), (N, 2); k hits add an axis.
-    let (shape, bary): (Vec<usize>, Vec<usize>) = if max_hits == 1 {
-        (vec![n], vec![n, 2])
-    } else {
-        (vec![n, max_hits], vec![n, max_hits, 2])
+/// One ray query's binding, written once: `scene, origins, directions, t_min=0.0,
+/// t_max=inf`, the query's own arguments, `threads=None, progress=None`; the rays borrowed in
+/// place, the core call (`|scene, origins, directions, query| ...`) on the threads asked for,
+/// and the result's arrays (`|py, result, dict| ...`) followed by its `timings`. The stubs in
+/// `_core.pyi` declare the same signature once (`_RayQuery`).
+macro_rules! ray_query {
+    (
+        $(#[$doc:meta])*
+        fn $name:ident($($extra:ident: $ty:ty = $default:tt),*)
+        |$s:ident, $o:ident, $d:ident, $q:ident| $call:expr;
+        |$py:ident, $r:ident, $out:ident| $fill:block
+    ) => {
+        $(#[$doc])*
+        #[pyfunction]
+        #[pyo3(signature = (
+            scene, origins, directions, t_min=0.0, t_max=f32::INFINITY,
+            $($extra=$default,)* threads=None, progress=None
+        ))]
+        #[allow(clippy::too_many_arguments)]
+        pub fn $name<'py>(
+            $py: Python<'py>,
+            scene: &PyScene,
+            origins: &Bound<'py, PyAny>,
+            directions: &Bound<'py, PyAny>,
+            t_min: f32,
+            t_max: f32,
+            $($extra: $ty,)*
+            threads: Option<usize>,
+            progress: Option<Py<PyAny>>,
+        ) -> PyResult<Bound<'py, PyDict>> {
+            rays!(origins, directions);
+            let ($o, $d) = (origins, directions);
+            let $q = query($py, t_min, t_max, threads)?;
+            let $s = scene.inner.clone();
+            let $r = on_threads($py, $q.threads, progress, || $call)?;
+            let $out = PyDict::new($py);
+            $fill;
+            let t = timings($py, $r.bvh_build_seconds, $r.trace_seconds)?;
+            $out.set_item("timings", t)?;
+            Ok($out)
+        }
     };
-    let d = PyDict::new(py);
-    d.set_item("t", array(py, hits.t, &shape)?)?;
-    d.set_item("triangle", array(py, hits.triangle, &shape)?)?;
-    d.set_item("barycentric", rows_owned(py, hits.barycentric, &bary)?)?;
-    d.set_item(
-        "timings",
-        timings(py, hits.bvh_build_seconds, hits.trace_seconds)?,
-    )?;
-    Ok(d)
 }
 
-#[pyfunction]
-#[pyo3(signature = (scene, origins, directions, t_min=0.0, t_max=f32::INFINITY, threads=None, progress=None))]
-#[allow(clippy::too_many_arguments)]
-pub fn occluded<'py>(
-    py: Python<'py>,
-    scene: &PyScene,
-    origins: &Bound<'py, PyAny>,
-    directions: &Bound<'py, PyAny>,
-    t_min: f32,
-    t_max: f32,
-    threads: Option<usize>,
-    progress: Option<Py<PyAny>>,
-) -> PyResult<Bound<'py, PyDict>> {
-    rays!(origins, directions);
-    let q = query(py, t_min, t_max, threads)?;
-    let s = scene.inner.clone();
-    let r = on_threads(py, q.threads, progress, || {
-        trace::occluded(&s, origins, directions, &q)
-    })?;
-    let n = r.hit.len();
-    let d = PyDict::new(py);
-    d.set_item("hit", array(py, r.hit, &[n])?)?;
-    d.set_item(
-        "timings",
-        timings(py, r.bvh_build_seconds, r.trace_seconds)?,
-    )?;
-    Ok(d)
+ray_query! {
+    /// The closest hit of each ray, or its `max_hits` nearest: `t`, `triangle`, `barycentric`
+    /// ((N,) and (N, 2), or (N, k) and (N, k, 2)).
+    fn cast_rays(max_hits: usize = 1)
+    |s, o, d, q| trace::nearest_hits(&s, o, d, max_hits, &q);
+    |py, hits, out| {
+        let n = o.len();
+        // One hit per ray keeps the flat shapes (N,), (N, 2); k hits add an axis.
+        let (shape, bary): (Vec<usize>, Vec<usize>) = if max_hits == 1 {
+            (vec![n], vec![n, 2])
+        } else {
+            (vec![n, max_hits], vec![n, max_hits, 2])
+        };
+        out.set_item("t", array(py, hits.t, &shape)?)?;
+        out.set_item("triangle", array(py, hits.triangle, &shape)?)?;
+        out.set_item("barycentric", rows_owned(py, hits.barycentric, &bary)?)?;
+    }
 }
 
-/// Every hit of each ray, ragged: `ray_splits` (N + 1,) offsets into `t`, `triangle`,
-/// `barycentric`.
-#[pyfunction]
-#[pyo3(signature = (scene, origins, directions, t_min=0.0, t_max=f32::INFINITY, threads=None, progress=None))]
-#[allow(clippy::too_many_arguments)]
-pub fn all_hits<'py>(
-    py: Python<'py>,
-    scene: &PyScene,
-    origins: &Bound<'py, PyAny>,
-    directions: &Bound<'py, PyAny>,
-    t_min: f32,
-    t_max: f32,
-    threads: Option<usize>,
-    progress: Option<Py<PyAny>>,
-) -> PyResult<Bound<'py, PyDict>> {
-    rays!(origins, directions);
-    let q = query(py, t_min, t_max, threads)?;
-    let s = scene.inner.clone();
-    let r = on_threads(py, q.threads, progress, || {
-        trace::all_hits(&s, origins, directions, &q)
-    })?;
-    let (n, h) = (r.splits.len(), r.t.len());
-    let splits: Vec<i64> = r.splits.into_iter().map(|x| x as i64).collect();
-    let d = PyDict::new(py);
-    d.set_item("ray_splits", array(py, splits, &[n])?)?;
-    d.set_item("t", array(py, r.t, &[h])?)?;
-    d.set_item("triangle", array(py, r.triangle, &[h])?)?;
-    d.set_item("barycentric", rows_owned(py, r.barycentric, &[h, 2])?)?;
-    d.set_item(
-        "timings",
-        timings(py, r.bvh_build_seconds, r.trace_seconds)?,
-    )?;
-    Ok(d)
+ray_query! {
+    /// Whether anything lies on each ray: `hit` (N,) bool.
+    fn occluded()
+    |s, o, d, q| trace::occluded(&s, o, d, &q);
+    |py, r, out| {
+        let n = r.hit.len();
+        out.set_item("hit", array(py, r.hit, &[n])?)?;
+    }
 }
 
-/// How many distinct hits each ray has: `count` (N,) int64.
-#[pyfunction]
-#[pyo3(signature = (scene, origins, directions, t_min=0.0, t_max=f32::INFINITY, threads=None, progress=None))]
-#[allow(clippy::too_many_arguments)]
-pub fn count_hits<'py>(
-    py: Python<'py>,
-    scene: &PyScene,
-    origins: &Bound<'py, PyAny>,
-    directions: &Bound<'py, PyAny>,
-    t_min: f32,
-    t_max: f32,
-    threads: Option<usize>,
-    progress: Option<Py<PyAny>>,
-) -> PyResult<Bound<'py, PyDict>> {
-    rays!(origins, directions);
-    let q = query(py, t_min, t_max, threads)?;
-    let s = scene.inner.clone();
-    let r = on_threads(py, q.threads, progress, || {
-        trace::count_hits(&s, origins, directions, &q)
-    })?;
-    let n = r.count.len();
-    let count: Vec<i64> = r.count.into_iter().map(i64::from).collect();
-    let d = PyDict::new(py);
-    d.set_item("count", array(py, count, &[n])?)?;
-    d.set_item(
-        "timings",
-        timings(py, r.bvh_build_seconds, r.trace_seconds)?,
-    )?;
-    Ok(d)
+ray_query! {
+    /// Every hit of each ray, ragged: `ray_splits` (N + 1,) offsets into `t`, `triangle`,
+    /// `barycentric`.
+    fn all_hits()
+    |s, o, d, q| trace::all_hits(&s, o, d, &q);
+    |py, r, out| {
+        let (n, h) = (r.splits.len(), r.t.len());
+        let splits: Vec<i64> = r.splits.into_iter().map(|x| x as i64).collect();
+        out.set_item("ray_splits", array(py, splits, &[n])?)?;
+        out.set_item("t", array(py, r.t, &[h])?)?;
+        out.set_item("triangle", array(py, r.triangle, &[h])?)?;
+        out.set_item("barycentric", rows_owned(py, r.barycentric, &[h, 2])?)?;
+    }
+}
+
+ray_query! {
+    /// How many distinct hits each ray has: `count` (N,) int64.
+    fn count_hits()
+    |s, o, d, q| trace::count_hits(&s, o, d, &q);
+    |py, r, out| {
+        let n = r.count.len();
+        let count: Vec<i64> = r.count.into_iter().map(i64::from).collect();
+        out.set_item("count", array(py, count, &[n])?)?;
+    }
 }
 
 #[pyfunction]
