@@ -339,115 +339,124 @@ def plan(
     if camera is not None and not isinstance(camera, Camera):
         raise InputError(f"camera must be a scenesample.Camera, got {type(camera).__name__}")
     q = QUALITY[quality]
-    tris = scene.triangle_count
-    rate = rates(tris)
+    rate = rates(scene.triangle_count)
     px = _pixels(camera)
-    diag = scene_diagonal(scene)
-    out: list[Effect] = []
     lights = [(name, a, "emissive object") for name, a in emissive_lights(scene)]
     lights += [
         (f"area light {k}", a, "area light added by the user") for k, a in enumerate(area_lights)
     ]
-    for name, light, why in lights:
-        nu, nv = q["soft_samples"]
-        res = q["soft_resolution"]
-        # Non-redundant (Algorithm 5): four corner images and their offset images; each light
-        # sample shadow-maps the reconstruction (about two triangles per covered pixel of the
-        # four images).
-        recon = 2 * 4 * res * res * 0.5
-        nonredundant = _estimate(
-            {
-                "raster_triangles": 8 * tris,
-                "shadow_triangles": nu * nv * recon,
-                "pixels": 8 * res * res + nu * nv * res * res,
-                "shadow_tests": nu * nv * px,
-            },
-            rate,
-        )
-        # Ray traced: one occlusion ray per pixel and light sample, exact. Without a fast GPU
-        # it is the cheaper one by far (docs/bench/methods.md: 30-50x on lavapipe), and the
-        # cheaper of the two is run, never a method that loses.
-        raytraced = _estimate({"rays": nu * nv * px}, rate)
-        if raytraced["seconds"] <= nonredundant["seconds"]:
-            method, estimate, other = "raytraced", raytraced, nonredundant
-        else:
-            method, estimate, other = "nonredundant", nonredundant, raytraced
-        out.append(
-            Effect(
-                "soft_shadows",
-                name,
-                f"{why} {name!r} emits light over an area: its shadows are soft; {method} "
-                f"(estimated {estimate['seconds']:.3g} s on this machine, against "
-                f"{other['seconds']:.3g} s the other way)",
-                {
-                    "light": light,
-                    "samples": (nu, nv),
-                    "resolution": res,
-                    "discretization": method,
-                    "estimated_seconds": {
-                        "raytraced": raytraced["seconds"],
-                        "nonredundant": nonredundant["seconds"],
-                    },
-                },
-                estimate,
-            )
-        )
-    for k, light in enumerate(scene.lights):
-        kind = light["type"]
-        label = light.get("name") or f"light {k}"
-        if kind == "directional":
-            continue
-        s = q["omni_samples"]
-        faces = 6 * s
-        work = {
-            "raster_triangles": faces * tris,
-            "pixels": faces * 256 * 256,
-            "shadow_tests": faces * px,
-        }
-        if q["omni_method"] == "epr":
-            work["splat_pairs"] = 2.0 * s * px
-        out.append(
-            Effect(
-                "omni_shadows" if kind == "point" else "spot_shadows",
-                f"{label} ({kind})",
-                (
-                    f"{kind} light {label!r} shines in every direction: six shadow views per sample"
-                    if kind == "point"
-                    else f"spot light {label!r}: shadows inside its cone"
-                ),
-                {
-                    "light": light,
-                    "index": k,
-                    "samples": s,
-                    "radius": q["light_radius"] * diag,
-                    "method": q["omni_method"],
-                },
-                _estimate(work, rate),
-            )
-        )
+    out = [_soft_shadows(scene, name, light, why, q, rate, px) for name, light, why in lights]
+    out += [
+        _point_shadows(scene, k, light, q, rate, px)
+        for k, light in enumerate(scene.lights)
+        if light["type"] != "directional"
+    ]
     try:
         refl = reflectors_of(scene)
     except InputError:  # no object with a mirror material
         refl = []
     if refl:
-        views = 6 * len(refl)
-        work = {
-            "splat_pairs": views * px * q["rho_scale"] ** 2 / 4,
-            "raster_triangles": tris,
-            "shading": 25 * px * 0.2,
-        }
-        out.append(
-            Effect(
-                "reflections",
-                f"{len(refl)} reflective object(s)",
-                "objects with mirror-like materials (metallic >= 0.9, roughness <= 0.1): "
-                + ", ".join(r.name for r in refl[:5])
-                + (" ..." if len(refl) > 5 else ""),
-                {"reflectors": refl, "rho_scale": q["rho_scale"], "bounces": q["bounces"]},
-                _estimate(work, rate),
-            )
-        )
+        out.append(_reflections(scene, refl, q, rate, px))
     return out
+
+
+def _soft_shadows(
+    scene: Scene, name: str, light: AreaLight, why: str, q: dict, rate: dict, px: float
+) -> Effect:
+    """The soft shadows of one area light, by the cheaper of Algorithm 5 and ray tracing."""
+    tris = scene.triangle_count
+    nu, nv = q["soft_samples"]
+    res = q["soft_resolution"]
+    # Non-redundant (Algorithm 5): four corner images and their offset images; each light
+    # sample shadow-maps the reconstruction (about two triangles per covered pixel of the
+    # four images).
+    recon = 2 * 4 * res * res * 0.5
+    nonredundant = _estimate(
+        {
+            "raster_triangles": 8 * tris,
+            "shadow_triangles": nu * nv * recon,
+            "pixels": 8 * res * res + nu * nv * res * res,
+            "shadow_tests": nu * nv * px,
+        },
+        rate,
+    )
+    # Ray traced: one occlusion ray per pixel and light sample, exact. Without a fast GPU
+    # it is the cheaper one by far (docs/bench/methods.md: 30-50x on lavapipe), and the
+    # cheaper of the two is run, never a method that loses.
+    raytraced = _estimate({"rays": nu * nv * px}, rate)
+    if raytraced["seconds"] <= nonredundant["seconds"]:
+        method, estimate, other = "raytraced", raytraced, nonredundant
+    else:
+        method, estimate, other = "nonredundant", nonredundant, raytraced
+    return Effect(
+        "soft_shadows",
+        name,
+        f"{why} {name!r} emits light over an area: its shadows are soft; {method} "
+        f"(estimated {estimate['seconds']:.3g} s on this machine, against "
+        f"{other['seconds']:.3g} s the other way)",
+        {
+            "light": light,
+            "samples": (nu, nv),
+            "resolution": res,
+            "discretization": method,
+            "estimated_seconds": {
+                "raytraced": raytraced["seconds"],
+                "nonredundant": nonredundant["seconds"],
+            },
+        },
+        estimate,
+    )
+
+
+def _point_shadows(scene: Scene, k: int, light: dict, q: dict, rate: dict, px: float) -> Effect:
+    """The shadows of punctual light ``k`` (point: omnidirectional; spot: inside its cone)."""
+    kind = light["type"]
+    label = light.get("name") or f"light {k}"
+    s = q["omni_samples"]
+    faces = 6 * s
+    work = {
+        "raster_triangles": faces * scene.triangle_count,
+        "pixels": faces * 256 * 256,
+        "shadow_tests": faces * px,
+    }
+    if q["omni_method"] == "epr":
+        work["splat_pairs"] = 2.0 * s * px
+    return Effect(
+        "omni_shadows" if kind == "point" else "spot_shadows",
+        f"{label} ({kind})",
+        (
+            f"{kind} light {label!r} shines in every direction: six shadow views per sample"
+            if kind == "point"
+            else f"spot light {label!r}: shadows inside its cone"
+        ),
+        {
+            "light": light,
+            "index": k,
+            "samples": s,
+            "radius": q["light_radius"] * scene_diagonal(scene),
+            "method": q["omni_method"],
+        },
+        _estimate(work, rate),
+    )
+
+
+def _reflections(scene: Scene, refl: list, q: dict, rate: dict, px: float) -> Effect:
+    """Cube-mapped reflections of the reflective objects ``refl``."""
+    views = 6 * len(refl)
+    work = {
+        "splat_pairs": views * px * q["rho_scale"] ** 2 / 4,
+        "raster_triangles": scene.triangle_count,
+        "shading": 25 * px * 0.2,
+    }
+    return Effect(
+        "reflections",
+        f"{len(refl)} reflective object(s)",
+        "objects with mirror-like materials (metallic >= 0.9, roughness <= 0.1): "
+        + ", ".join(r.name for r in refl[:5])
+        + (" ..." if len(refl) > 5 else ""),
+        {"reflectors": refl, "rho_scale": q["rho_scale"], "bounces": q["bounces"]},
+        _estimate(work, rate),
+    )
 
 
 def _select(planned: list[Effect], effects: Any) -> list[Effect]:

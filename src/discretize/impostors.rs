@@ -483,6 +483,16 @@ fn crop(full_color: &[[u8; 4]], full_depth: &[f32], res: usize) -> Cropped {
     }
 }
 
+/// The colour and depth of every uncropped image (`cells x views` images of `res²` texels)
+/// within the memory limit.
+fn check_images(cells: usize, views: usize, res: usize) -> Result<()> {
+    crate::limits::check(
+        || format!("{cells} cells x {views} views x {res}x{res} texels of impostor images"),
+        crate::limits::product(&[cells as u64, views as u64, res as u64, res as u64]),
+        8,
+    )
+}
+
 /// Render every cell's images (§3.1 step 4).
 pub fn build(scene: &Scene, opts: &ImpostorOptions) -> Result<Impostors> {
     let total = Instant::now();
@@ -500,15 +510,7 @@ pub fn build(scene: &Scene, opts: &ImpostorOptions) -> Result<Impostors> {
 
     let res = opts.resolution as usize;
     let d_count = directions.len();
-    // Colour and depth of every uncropped image.
-    crate::limits::check(
-        || {
-            let c = cells.len();
-            format!("{c} cells x {d_count} views x {res}x{res} texels of impostor images")
-        },
-        crate::limits::product(&[cells.len() as u64, d_count as u64, res as u64, res as u64]),
-        8,
-    )?;
+    check_images(cells.len(), d_count, res)?;
     let start = Instant::now();
     let mut full_color = vec![[0u8; 4]; cells.len() * d_count * res * res];
     let mut full_depth = vec![f32::INFINITY; cells.len() * d_count * res * res];

@@ -221,6 +221,49 @@ fn splat_cubes(
     Ok(cubes)
 }
 
+/// The reflectors' cube maps (§4.1): rendered (MVR), or splatted from points made at the
+/// eye's density (EPR) or at the maps' own (iVIR); and how many points.
+fn cube_maps(
+    scene: &Scene,
+    eye: &Camera,
+    reflectors: &[Reflector],
+    opts: &ReflectionOptions,
+    timings: &mut Timings,
+) -> Result<(Vec<Cube>, usize)> {
+    let start = Instant::now();
+    let density = match opts.method {
+        Method::Mvr => {
+            let cubes = mvr_cubes(scene, reflectors, &opts.resolutions)?;
+            timings.add("views", start.elapsed().as_secs_f64());
+            return Ok((cubes, 0));
+        }
+        Method::Epr => Density::Eye {
+            rho_scale: opts.rho_scale,
+        },
+        Method::Ivir => Density::OffScreen,
+    };
+    let res = &opts.resolutions;
+    let points = epr::generate(scene, eye, reflectors, res, density, opts.seed)?;
+    timings.add("points", start.elapsed().as_secs_f64());
+    let start = Instant::now();
+    let cubes = splat_cubes(scene, reflectors, res, &points)?;
+    timings.add("views", start.elapsed().as_secs_f64());
+    Ok((cubes, points.len()))
+}
+
+/// The bytes a method's buffers hold for `texels` cube-map texels and `points` points.
+fn buffer_bytes(method: Method, texels: usize, points: usize, cubes: usize) -> usize {
+    match method {
+        // Index buffers of 64-bit keys, and the points (centre, length, triangle, normal,
+        // material, one visibility word per 64 views).
+        Method::Epr | Method::Ivir => {
+            texels * 8 + points * (12 + 4 + 4 + 12 + 4 + 8 * (6 * cubes).div_ceil(64))
+        }
+        // G-buffer (triangle id, position) and colour with its mip chain (4/3).
+        Method::Mvr => texels * (4 + 12) + texels * 12 * 4 / 3,
+    }
+}
+
 /// Render reflections of `reflectors` seen from `eye`.
 pub fn reflections(
     scene: &Scene,
@@ -250,37 +293,7 @@ pub fn reflections(
         }
     }
 
-    // The cube maps' samples.
-    let start = Instant::now();
-    let cubes: Vec<Cube>;
-    let mut point_count = 0usize;
-    match opts.method {
-        Method::Mvr => {
-            cubes = mvr_cubes(scene, reflectors, &opts.resolutions)?;
-            timings.add("views", start.elapsed().as_secs_f64());
-        }
-        Method::Epr | Method::Ivir => {
-            let density = match opts.method {
-                Method::Epr => Density::Eye {
-                    rho_scale: opts.rho_scale,
-                },
-                _ => Density::OffScreen,
-            };
-            let points = epr::generate(
-                scene,
-                eye,
-                reflectors,
-                &opts.resolutions,
-                density,
-                opts.seed,
-            )?;
-            point_count = points.len();
-            timings.add("points", start.elapsed().as_secs_f64());
-            let start = Instant::now();
-            cubes = splat_cubes(scene, reflectors, &opts.resolutions, &points)?;
-            timings.add("views", start.elapsed().as_secs_f64());
-        }
-    }
+    let (cubes, point_count) = cube_maps(scene, eye, reflectors, opts, &mut timings)?;
     let texels: usize = cubes.iter().map(|c| c.triangle.len()).sum();
 
     let lights = shading::lights(scene, eye);
@@ -312,15 +325,7 @@ pub fn reflections(
         }
     };
     let reflective: Vec<bool> = pixels.iter().map(|p| p.reflector >= 0).collect();
-    let buffer_bytes = match opts.method {
-        // Index buffers of 64-bit keys, and the points (centre, length, triangle, normal,
-        // material, one visibility word per 64 views).
-        Method::Epr | Method::Ivir => {
-            texels * 8 + point_count * (12 + 4 + 4 + 12 + 4 + 8 * (6 * cubes.len()).div_ceil(64))
-        }
-        // G-buffer (triangle id, position) and colour with its mip chain (4/3).
-        Method::Mvr => texels * (4 + 12) + texels * 12 * 4 / 3,
-    };
+    let buffer_bytes = buffer_bytes(opts.method, texels, point_count, cubes.len());
     stats.set("points", point_count as f64);
     stats.set("shading_ops", shading_ops as f64);
     stats.set("offscreen_pixels", texels as f64);

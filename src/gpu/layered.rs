@@ -285,6 +285,29 @@ struct Resources {
     passes: Vec<wgpu::RenderPipeline>,
 }
 
+/// The projections of world space into each earlier image's pixels (`projection_into`), as a
+/// uniform buffer.
+fn projections_into(
+    device: &wgpu::Device,
+    cameras: &[Camera],
+    clip: &[DMat4],
+    centre: DVec3,
+) -> wgpu::Buffer {
+    use wgpu::util::DeviceExt;
+    let (w, h) = (cameras[0].width, cameras[0].height);
+    let mut project_into = [[[0f32; 4]; 4]; VARYING_IMAGES as usize];
+    for (m, (cam, clip)) in project_into.iter_mut().zip(cameras.iter().zip(clip)) {
+        *m = projection_into(cam, clip, centre, w, h)
+            .as_mat4()
+            .to_cols_array_2d();
+    }
+    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("projections into earlier images"),
+        contents: bytemuck::cast_slice(&project_into),
+        usage: wgpu::BufferUsages::UNIFORM,
+    })
+}
+
 impl Resources {
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -343,17 +366,7 @@ impl Resources {
             dimension: Some(wgpu::TextureViewDimension::D2Array),
             ..Default::default()
         });
-        let mut project_into = [[[0f32; 4]; 4]; VARYING_IMAGES as usize];
-        for (m, (cam, clip)) in project_into.iter_mut().zip(cameras.iter().zip(&clip)) {
-            *m = projection_into(cam, clip, centre, w, h)
-                .as_mat4()
-                .to_cols_array_2d();
-        }
-        let project_into_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("projections into earlier images"),
-            contents: bytemuck::cast_slice(&project_into),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
+        let project_into_buf = projections_into(device, cameras, &clip, centre);
         let binds = [1, 0].map(|other: usize| {
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("layered.wgsl bindings"),

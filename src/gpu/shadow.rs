@@ -52,6 +52,57 @@ impl ShadowPipeline {
             label: Some("shadow.wgsl"),
             source: wgpu::ShaderSource::Wgsl(SHADER.into()),
         });
+        let (layout, raster_layout) = Self::layouts(device);
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("shadow.wgsl layout"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let raster_pipeline_layout =
+            device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("shadow.wgsl raster layout"),
+                bind_group_layouts: &[Some(&raster_layout)],
+                immediate_size: 0,
+            });
+        let depth = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("shadow map"),
+            layout: Some(&raster_pipeline_layout),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs_depth"),
+                compilation_options: Default::default(),
+                buffers: &[Some(POSITIONS)],
+            },
+            primitive: wgpu::PrimitiveState {
+                topology: wgpu::PrimitiveTopology::TriangleList,
+                cull_mode: None,
+                ..Default::default()
+            },
+            depth_stencil: Some(reversed_depth()),
+            multisample: Default::default(),
+            fragment: None,
+            multiview_mask: None,
+            cache: None,
+        });
+        let test = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("shadow test"),
+            layout: Some(&pipeline_layout),
+            module: &module,
+            entry_point: Some("cs_test"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        Self {
+            layout,
+            raster_layout,
+            depth,
+            test,
+        }
+    }
+
+    /// The test's bindings (light uniform, points, normals, shadow map, bits) and the raster
+    /// pass's (the light uniform only, since the map is its attachment).
+    fn layouts(device: &wgpu::Device) -> (wgpu::BindGroupLayout, wgpu::BindGroupLayout) {
         let buffer =
             |binding, visibility, ty, dynamic, min: Option<u64>| wgpu::BindGroupLayoutEntry {
                 binding,
@@ -96,11 +147,6 @@ impl ShadowPipeline {
                 ),
             ],
         });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("shadow.wgsl layout"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
         let raster_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("shadow.wgsl raster bindings"),
             entries: &[buffer(
@@ -111,46 +157,7 @@ impl ShadowPipeline {
                 Some(LIGHT_SIZE),
             )],
         });
-        let raster_pipeline_layout =
-            device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some("shadow.wgsl raster layout"),
-                bind_group_layouts: &[Some(&raster_layout)],
-                immediate_size: 0,
-            });
-        let depth = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("shadow map"),
-            layout: Some(&raster_pipeline_layout),
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("vs_depth"),
-                compilation_options: Default::default(),
-                buffers: &[Some(POSITIONS)],
-            },
-            primitive: wgpu::PrimitiveState {
-                topology: wgpu::PrimitiveTopology::TriangleList,
-                cull_mode: None,
-                ..Default::default()
-            },
-            depth_stencil: Some(reversed_depth()),
-            multisample: Default::default(),
-            fragment: None,
-            multiview_mask: None,
-            cache: None,
-        });
-        let test = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("shadow test"),
-            layout: Some(&pipeline_layout),
-            module: &module,
-            entry_point: Some("cs_test"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
-        Self {
-            layout,
-            raster_layout,
-            depth,
-            test,
-        }
+        (layout, raster_layout)
     }
 }
 
@@ -344,6 +351,33 @@ fn test_bindings(
     })
 }
 
+/// The light samples' uniforms, the visibility bits (`out_bytes`) and their readback buffer.
+fn visibility_buffers(
+    device: &wgpu::Device,
+    uniforms: &[u8],
+    out_bytes: u64,
+) -> (wgpu::Buffer, wgpu::Buffer, wgpu::Buffer) {
+    use wgpu::util::DeviceExt;
+    let uniform_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("light samples"),
+        contents: uniforms,
+        usage: wgpu::BufferUsages::UNIFORM,
+    });
+    let out = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("visibility bits"),
+        size: out_bytes,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    });
+    let readback = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("visibility readback"),
+        size: out_bytes,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    (uniform_buf, out, readback)
+}
+
 /// Visibility bits of every point from every light sample: `lights[s]` is the shadow camera of
 /// sample s (all of one square resolution, positioned at the sample); occluders are
 /// `vertices`/`faces`; `points` and `normals` (unit, facing the viewer; zero where there is no
@@ -376,8 +410,6 @@ pub fn visibility(
     let start = Instant::now();
     let device = &ctx.device;
     let pipeline = ctx.shadow_pipeline();
-    use wgpu::util::DeviceExt;
-
     let stride = align(
         LIGHT_SIZE,
         ctx.limits.min_uniform_buffer_offset_alignment as u64,
@@ -391,23 +423,7 @@ pub fn visibility(
         words,
         diagonal,
     )?;
-    let uniform_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("light samples"),
-        contents: &uniforms,
-        usage: wgpu::BufferUsages::UNIFORM,
-    });
-    let out = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("visibility bits"),
-        size: out_bytes,
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-        mapped_at_creation: false,
-    });
-    let readback = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("visibility readback"),
-        size: out_bytes,
-        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
+    let (uniform_buf, out, readback) = visibility_buffers(device, &uniforms, out_bytes);
     let map = texture_2d(
         device,
         "shadow map",

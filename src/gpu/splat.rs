@@ -325,6 +325,54 @@ struct SplatInputs<'a> {
     lists: &'a PairLists,
 }
 
+/// The splat pass's key buffer of `bytes` (zeroed before each pass) and its readback.
+fn key_buffers(device: &wgpu::Device, bytes: u64) -> (wgpu::Buffer, wgpu::Buffer) {
+    let target = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("splat buffers"),
+        size: bytes,
+        usage: wgpu::BufferUsages::STORAGE
+            | wgpu::BufferUsages::COPY_SRC
+            | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let readback = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("splat readback"),
+        size: bytes,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    (target, readback)
+}
+
+/// The splat pass's bindings for one geometry texture.
+fn splat_bind(
+    ctx: &GpuContext,
+    uniforms: &wgpu::Buffer,
+    geometry: &wgpu::TextureView,
+    lists: &wgpu::TextureView,
+    target: &wgpu::Buffer,
+) -> wgpu::BindGroup {
+    ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("splat.wgsl bindings"),
+        layout: &ctx.splat_pipeline().layout,
+        entries: &[
+            uniform_window(0, uniforms, VIEW_SIZE),
+            wgpu::BindGroupEntry {
+                binding: 1,
+                resource: wgpu::BindingResource::TextureView(geometry),
+            },
+            wgpu::BindGroupEntry {
+                binding: 2,
+                resource: wgpu::BindingResource::TextureView(lists),
+            },
+            wgpu::BindGroupEntry {
+                binding: 3,
+                resource: target.as_entire_binding(),
+            },
+        ],
+    })
+}
+
 /// Encodes and submits one chunk of views (§4.1's splat pass over the points each view lists),
 /// and starts the readback of its key buffers; `at` is the chunk's first pixel in the output.
 fn submit_views(
@@ -380,43 +428,10 @@ fn submit_views(
         usage: wgpu::BufferUsages::UNIFORM,
     });
     let bytes = offset as u64 * 8;
-    let target = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("splat buffers"),
-        size: bytes,
-        usage: wgpu::BufferUsages::STORAGE
-            | wgpu::BufferUsages::COPY_SRC
-            | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    let readback = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("splat readback"),
-        size: bytes,
-        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
+    let (target, readback) = key_buffers(device, bytes);
     let binds: Vec<wgpu::BindGroup> = geometry
         .iter()
-        .map(|g| {
-            device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("splat.wgsl bindings"),
-                layout: &ctx.splat_pipeline().layout,
-                entries: &[
-                    uniform_window(0, &uniform_buf, VIEW_SIZE),
-                    wgpu::BindGroupEntry {
-                        binding: 1,
-                        resource: wgpu::BindingResource::TextureView(g),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 2,
-                        resource: wgpu::BindingResource::TextureView(&list_view),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 3,
-                        resource: target.as_entire_binding(),
-                    },
-                ],
-            })
-        })
+        .map(|g| splat_bind(ctx, &uniform_buf, g, &list_view, &target))
         .collect();
     let mut encoder = device.create_command_encoder(&Default::default());
     // Zero is "empty": the shader stores complemented keys with atomicMax.

@@ -541,78 +541,7 @@ impl Loader<'_> {
                     continue;
                 }
             }
-            let Some(pos_acc) = prim.get(&gltf::Semantic::Positions) else {
-                return Err(self.err(format!("{what} has no POSITION attribute")));
-            };
-            self.check_accessor(
-                &pos_acc,
-                &format!("{what} POSITION"),
-                &[Dimensions::Vec3],
-                &[DataType::F32],
-            )?;
-            let buffers = &self.buffers;
-            let reader = prim.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
-            let positions: Vec<[f32; 3]> = reader
-                .read_positions()
-                .ok_or_else(|| {
-                    self.err(format!(
-                        "{what}: POSITION accessor {} could not be read",
-                        pos_acc.index()
-                    ))
-                })?
-                .collect();
-            if let Some(k) = positions
-                .iter()
-                .position(|p| p.iter().any(|x| !x.is_finite()))
-            {
-                return Err(self.err(format!(
-                    "{what}: POSITION accessor {} has a non-finite vertex at index {k}: {:?}",
-                    pos_acc.index(),
-                    positions[k]
-                )));
-            }
-            let indices: Vec<u32> = match prim.indices() {
-                Some(acc) => {
-                    self.check_accessor(
-                        &acc,
-                        &format!("{what} indices"),
-                        &[Dimensions::Scalar],
-                        &[DataType::U8, DataType::U16, DataType::U32],
-                    )?;
-                    let idx: Vec<u32> = reader
-                        .read_indices()
-                        .ok_or_else(|| {
-                            self.err(format!(
-                                "{what}: index accessor {} could not be read",
-                                acc.index()
-                            ))
-                        })?
-                        .into_u32()
-                        .collect();
-                    if let Some(k) = idx.iter().position(|&i| i as usize >= positions.len()) {
-                        return Err(self.err(format!(
-                            "{what}: index accessor {} has index {} at position {k}, but POSITION has {} vertices",
-                            acc.index(),
-                            idx[k],
-                            positions.len()
-                        )));
-                    }
-                    idx
-                }
-                None => (0..positions.len() as u32).collect(),
-            };
-            let colors: Option<Vec<[f32; 4]>> = match prim.get(&gltf::Semantic::Colors(0)) {
-                Some(acc) => {
-                    self.check_accessor(
-                        &acc,
-                        &format!("{what} COLOR_0"),
-                        &[Dimensions::Vec3, Dimensions::Vec4],
-                        &[DataType::F32, DataType::U8, DataType::U16],
-                    )?;
-                    reader.read_colors(0).map(|c| c.into_rgba_f32().collect())
-                }
-                None => None,
-            };
+            let (positions, indices, colors) = self.read_primitive(&prim, &what)?;
             let material = prim.material().index().map_or(-1, |i| i as i32);
             let base = material_color(&self.parts.materials, material);
             let offset = self.parts.vertices.len() as u32;
@@ -636,6 +565,89 @@ impl Loader<'_> {
             }
         }
         Ok(())
+    }
+
+    /// A triangle primitive's positions (finite), indices (in range; every vertex in order
+    /// when it has none) and COLOR_0, checked.
+    #[allow(clippy::type_complexity)]
+    fn read_primitive(
+        &self,
+        prim: &gltf::Primitive,
+        what: &str,
+    ) -> Result<(Vec<[f32; 3]>, Vec<u32>, Option<Vec<[f32; 4]>>)> {
+        let Some(pos_acc) = prim.get(&gltf::Semantic::Positions) else {
+            return Err(self.err(format!("{what} has no POSITION attribute")));
+        };
+        self.check_accessor(
+            &pos_acc,
+            &format!("{what} POSITION"),
+            &[Dimensions::Vec3],
+            &[DataType::F32],
+        )?;
+        let buffers = &self.buffers;
+        let reader = prim.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
+        let positions: Vec<[f32; 3]> = reader
+            .read_positions()
+            .ok_or_else(|| {
+                self.err(format!(
+                    "{what}: POSITION accessor {} could not be read",
+                    pos_acc.index()
+                ))
+            })?
+            .collect();
+        if let Some(k) = positions
+            .iter()
+            .position(|p| p.iter().any(|x| !x.is_finite()))
+        {
+            return Err(self.err(format!(
+                "{what}: POSITION accessor {} has a non-finite vertex at index {k}: {:?}",
+                pos_acc.index(),
+                positions[k]
+            )));
+        }
+        let indices: Vec<u32> = match prim.indices() {
+            Some(acc) => {
+                self.check_accessor(
+                    &acc,
+                    &format!("{what} indices"),
+                    &[Dimensions::Scalar],
+                    &[DataType::U8, DataType::U16, DataType::U32],
+                )?;
+                let idx: Vec<u32> = reader
+                    .read_indices()
+                    .ok_or_else(|| {
+                        self.err(format!(
+                            "{what}: index accessor {} could not be read",
+                            acc.index()
+                        ))
+                    })?
+                    .into_u32()
+                    .collect();
+                if let Some(k) = idx.iter().position(|&i| i as usize >= positions.len()) {
+                    return Err(self.err(format!(
+                        "{what}: index accessor {} has index {} at position {k}, but POSITION has {} vertices",
+                        acc.index(),
+                        idx[k],
+                        positions.len()
+                    )));
+                }
+                idx
+            }
+            None => (0..positions.len() as u32).collect(),
+        };
+        let colors: Option<Vec<[f32; 4]>> = match prim.get(&gltf::Semantic::Colors(0)) {
+            Some(acc) => {
+                self.check_accessor(
+                    &acc,
+                    &format!("{what} COLOR_0"),
+                    &[Dimensions::Vec3, Dimensions::Vec4],
+                    &[DataType::F32, DataType::U8, DataType::U16],
+                )?;
+                reader.read_colors(0).map(|c| c.into_rgba_f32().collect())
+            }
+            None => None,
+        };
+        Ok((positions, indices, colors))
     }
 
     fn light(&mut self, light: &gltf::khr_lights_punctual::Light, world: DMat4) {
