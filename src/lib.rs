@@ -20,6 +20,7 @@ pub mod shadows;
 pub mod splat;
 pub mod trace;
 pub mod types;
+pub mod visibility_field;
 
 #[cfg(feature = "python")]
 mod py;

@@ -2,10 +2,22 @@
 # with mypy.stubtest.
 from collections.abc import Sequence
 from os import PathLike
-from typing import Any, Callable, Literal, Optional, TypedDict, Union, final
+from typing import (
+    Any,
+    Callable,
+    Literal,
+    Optional,
+    Protocol,
+    TypedDict,
+    TypeVar,
+    Union,
+    final,
+)
 
 import numpy as np
 from numpy.typing import ArrayLike
+
+_R = TypeVar("_R", covariant=True)
 
 __all__ = [
     "Camera",
@@ -532,6 +544,7 @@ def field_view(
     fallback: bool,
     trust: int,
     backend: Literal["gpu", "cpu"],
+    reference: bool = False,
 ) -> _FieldViewDict: ...
 def render_cells(
     sorted_scene: Scene,
@@ -571,6 +584,21 @@ def shade_frame(
     areas: Sequence[tuple[ArrayLike, Optional[ArrayLike]]],
 ) -> tuple[np.ndarray, bool]: ...
 def impostor_directions(handle: Impostors, camera: Camera) -> list[int]: ...
+
+class _RayQuery(Protocol[_R]):
+    """Every ray query's signature (src/py/rays.rs's `ray_query!`), declared once."""
+
+    def __call__(
+        self,
+        scene: Scene,
+        origins: ArrayLike,
+        directions: ArrayLike,
+        t_min: float = 0.0,
+        t_max: float = ...,
+        threads: Optional[int] = None,
+        progress: Optional[Callable[[int, int], object]] = None,
+    ) -> _R: ...
+
 def cast_rays(
     scene: Scene,
     origins: ArrayLike,
@@ -581,33 +609,11 @@ def cast_rays(
     threads: Optional[int] = None,
     progress: Optional[Callable[[int, int], object]] = None,
 ) -> _HitsDict: ...
-def occluded(
-    scene: Scene,
-    origins: ArrayLike,
-    directions: ArrayLike,
-    t_min: float = 0.0,
-    t_max: float = ...,
-    threads: Optional[int] = None,
-    progress: Optional[Callable[[int, int], object]] = None,
-) -> _OcclusionDict: ...
-def all_hits(
-    scene: Scene,
-    origins: ArrayLike,
-    directions: ArrayLike,
-    t_min: float = 0.0,
-    t_max: float = ...,
-    threads: Optional[int] = None,
-    progress: Optional[Callable[[int, int], object]] = None,
-) -> _AllHitsDict: ...
-def count_hits(
-    scene: Scene,
-    origins: ArrayLike,
-    directions: ArrayLike,
-    t_min: float = 0.0,
-    t_max: float = ...,
-    threads: Optional[int] = None,
-    progress: Optional[Callable[[int, int], object]] = None,
-) -> _CountDict: ...
+
+occluded: _RayQuery[_OcclusionDict]
+all_hits: _RayQuery[_AllHitsDict]
+count_hits: _RayQuery[_CountDict]
+
 def closest_points(
     scene: Scene,
     points: ArrayLike,

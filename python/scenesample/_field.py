@@ -553,6 +553,7 @@ def field_view(
     fallback: bool = True,
     trust: Optional[int] = None,
     backend: str = "gpu",
+    resampler: str = "blocks",
 ) -> FieldView:
     """Render ``camera``'s view from a visibility field (visibility-field.txt §4, Fig. 4).
 
@@ -563,10 +564,9 @@ def field_view(
     the near end. The cells stored at the sample holding (u, v, s, t) are marked
     (``interpolate="uv"``: also the 2 x 2 samples around (u, v); ``"st"``: around (s, t);
     ``"uv+st"``: the 16 around both, §4.1); several slabs' answers are merged (with
-    ``fallback``, a block of 8 x 8 pixels or fewer that earlier slabs answered is not read
-    again). A slab answers only when every sample it reads for the line hit at most
-    ``trust`` cells, and only its answers mark cells (with ``fallback``; without it every
-    read marks). A pixel no slab
+    ``fallback``, a pixel that earlier slabs answered is not read again). A slab answers only
+    when every sample it reads for the line hit at most ``trust`` cells, and only its answers
+    mark cells (with ``fallback``; without it every read marks). A pixel no slab
     answers is traced instead (``fallback``): its ray is cast through the scene and the cell
     it hits is marked (and, when it lies on a triangle's edge, the cells of four rays a 32nd
     of a pixel around it, as the raster may pick the neighbour). Then only the marked cells'
@@ -609,6 +609,10 @@ def field_view(
         backends mark the same cells, and their images agree as the two backends of
         conventional images do (up to edge pixels where the GPU's float32 transform rounds a
         vertex differently). Resampling and the fallback run on the CPU either way.
+    resampler : {"blocks", "pixels"}
+        ``"blocks"`` (default): pixels whose lines read the same samples are taken a block at a
+        time. ``"pixels"``: the plain reference, each pixel's line read on its own, slower. The
+        two mark the same cells and leave the same pixels to the fallback (tested).
 
     Returns
     -------
@@ -635,6 +639,8 @@ def field_view(
         raise InputError(f"fallback must be True or False, got {fallback!r}")
     if backend not in ("gpu", "cpu"):
         raise InputError(f"backend must be 'gpu' or 'cpu', got {backend!r}")
+    if resampler not in ("blocks", "pixels"):
+        raise InputError(f"resampler must be 'blocks' or 'pixels', got {resampler!r}")
     if trust is None:
         trust = field_.settings.get("trust") or field_.ids.shape[-1]
     if isinstance(trust, bool) or not isinstance(trust, (int, np.integer)) or trust < 1:
@@ -667,6 +673,7 @@ def field_view(
         bool(fallback),
         int(min(trust, 65535)),
         backend,
+        resampler == "pixels",
     )
     img = DepthImages._from_core(d["image"], [camera], False)
     img.backend, img.backend_reason = backend, "requested"

@@ -8,8 +8,7 @@ use super::camera::PyCamera;
 use super::convert::{array, rows_f64};
 use super::errors::{input, IntoPy};
 use super::scene::PyScene;
-use crate::discretize::visibility_field::{self as vf, Grouping, Rect, Slab};
-use crate::reconstruct::field::{self as rf, Interpolate};
+use crate::visibility_field::{self as vf, Grouping, Interpolate, Rect, Slab};
 
 /// A slab from a (2, 3, 3) array: uv then st, each (origin, u edge, v edge).
 fn slab(py: Python<'_>, obj: &Bound<'_, PyAny>) -> PyResult<Slab> {
@@ -101,44 +100,35 @@ pub fn visibility_field<'py>(
         .iter()
         .map(|s| slab(py, s))
         .collect::<PyResult<Vec<_>>>()?;
-    if slabs.is_empty() {
-        return Err(input(py, "at least one slab is needed".to_string()));
-    }
+    let grid = match cell_size {
+        // `grid` bounds the cells per axis when they are sized.
+        Some(size) => vf::Grid::Size {
+            size,
+            max: grid.0.max(grid.1).max(grid.2),
+        },
+        None => vf::Grid::Cells([grid.0, grid.1, grid.2]),
+    };
     let s = scene.inner.clone();
-    let (cells, fields, sorted, cell_seconds, bvh_seconds) =
-        super::run_with(py, progress, || -> crate::error::Result<_> {
-            let start = std::time::Instant::now();
-            let grid = match cell_size {
-                // `grid` bounds the cells per axis when they are sized.
-                Some(size) => vf::Grid::Size {
-                    size,
-                    max: grid.0.max(grid.1).max(grid.2),
-                },
-                None => vf::Grid::Cells([grid.0, grid.1, grid.2]),
-            };
-            let cells = vf::cells(&s, grid, grouping)?;
-            let sorted = s.permuted(&cells.triangles)?;
-            let cell_seconds = start.elapsed().as_secs_f64();
-            let fields = vf::sample(
-                &s,
-                &slabs,
-                [uv.0, uv.1],
-                [st.0, st.1],
-                &cells,
-                ids_per_sample,
-                supersample,
-            )?;
-            // The fallback traces the cell-sorted scene: its BVH is part of the precomputation.
-            let start = std::time::Instant::now();
-            rf::prepare_fallback(&sorted)?;
-            Ok((
-                cells,
-                fields,
-                sorted,
-                cell_seconds,
-                start.elapsed().as_secs_f64(),
-            ))
-        })?;
+    let (uv, st) = ([uv.0, uv.1], [st.0, st.1]);
+    let built = super::run_with(py, progress, || {
+        vf::build(
+            &s,
+            &slabs,
+            uv,
+            st,
+            grid,
+            grouping,
+            ids_per_sample,
+            supersample,
+        )
+    })?;
+    let vf::Built {
+        cells,
+        sorted,
+        fields,
+        cell_seconds,
+        bvh_seconds,
+    } = built;
     let d = PyDict::new(py);
     let c = cells.table.len();
     d.set_item("cell_of", array(py, cells.cell_of, &[s.triangle_count()])?)?;
@@ -160,7 +150,7 @@ pub fn visibility_field<'py>(
     // All slabs share their dimensions: one (K, U, V, S, T, n) array of ids, one (K, U, V, S,
     // T) of the cells each sample's rays hit.
     let k = fields.len();
-    let dims = [uv.0, uv.1, st.0, st.1].map(|x| x as usize);
+    let dims = [uv[0], uv[1], st[0], st[1]].map(|x| x as usize);
     let rays: u64 = fields.iter().map(|f| f.rays).sum();
     let mut timings = crate::types::Timings::new();
     for f in &fields {
@@ -180,7 +170,7 @@ pub fn visibility_field<'py>(
 /// Resample the fields from a camera, trace the pixels they cannot answer (with `fallback`),
 /// and render the marked cells.
 #[pyfunction]
-#[pyo3(signature = (sorted_scene, triangles, offsets, slabs, ids, cells_hit, camera, interpolate, subsample, fallback, trust, backend))]
+#[pyo3(signature = (sorted_scene, triangles, offsets, slabs, ids, cells_hit, camera, interpolate, subsample, fallback, trust, backend, reference=false))]
 #[allow(clippy::too_many_arguments)]
 pub fn field_view<'py>(
     py: Python<'py>,
@@ -196,6 +186,7 @@ pub fn field_view<'py>(
     fallback: bool,
     trust: u32,
     backend: &str,
+    reference: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
     let traced = match backend {
         "gpu" => false,
@@ -214,57 +205,33 @@ pub fn field_view<'py>(
         ));
     };
     let fields = fields(py, &slabs, &ids, &cells_hit)?;
-    let triangles = triangles.as_array().to_vec();
-    let offsets = offsets.as_array().to_vec();
-    let cell_count = offsets.len().saturating_sub(1);
-    let scene = sorted_scene.inner.clone();
-    let cam = camera.inner.clone();
-    let how = rf::Resampling {
+    let (order, offsets) = (triangles.as_array().to_vec(), offsets.as_array().to_vec());
+    let how = vf::ViewOptions {
         interpolate: interp,
         subsample,
-        conservative: fallback.then(|| rf::scene_box(&scene)),
+        fallback,
         trust,
+        cpu: traced,
+        reference,
     };
-    let (marks, added, img, drawn, borders, seconds) =
-        super::run(py, || -> crate::error::Result<_> {
-            let start = std::time::Instant::now();
-            let mut marks = rf::resample(&fields, cell_count, &cam, how)?;
-            let resample_seconds = start.elapsed().as_secs_f64();
-            let start = std::time::Instant::now();
-            let pixels = std::mem::take(&mut marks.fallback);
-            let (added, known) =
-                rf::trace_fallback(&scene, &offsets, &cam, pixels, &mut marks.marked)?;
-            let fallback_seconds = start.elapsed().as_secs_f64();
-            let start = std::time::Instant::now();
-            let (img, drawn, borders) = rf::draw_view(
-                &scene,
-                &triangles,
-                &offsets,
-                &mut marks.marked,
-                &cam,
-                &known,
-                traced,
-                fallback,
-            )?;
-            let seconds = [
-                resample_seconds,
-                fallback_seconds,
-                start.elapsed().as_secs_f64(),
-            ];
-            Ok((marks, added, img, drawn, borders, seconds))
-        })?;
+    let (scene, cam) = (&sorted_scene.inner, &camera.inner);
+    let v = super::run(py, || {
+        let sorted = vf::SortedScene::new(scene, &order, &offsets)?;
+        vf::view(&sorted, &fields, cam, &how)
+    })?;
     let d = PyDict::new(py);
-    d.set_item("marked", array(py, marks.marked, &[cell_count])?)?;
-    d.set_item("pixels", marks.pixels)?;
-    d.set_item("outside", marks.outside)?;
-    d.set_item("overflowed", marks.overflowed)?;
-    d.set_item("fallback_cells", added)?;
-    d.set_item("border_cells", borders)?;
-    d.set_item("triangles_drawn", drawn)?;
-    d.set_item("resample_seconds", seconds[0])?;
-    d.set_item("fallback_seconds", seconds[1])?;
-    d.set_item("render_seconds", seconds[2])?;
-    d.set_item("image", super::render::images_dict(py, img)?)?;
+    let cells = v.marks.marked.len();
+    d.set_item("marked", array(py, v.marks.marked, &[cells])?)?;
+    d.set_item("pixels", v.marks.pixels)?;
+    d.set_item("outside", v.marks.outside)?;
+    d.set_item("overflowed", v.marks.overflowed)?;
+    d.set_item("fallback_cells", v.fallback_cells)?;
+    d.set_item("border_cells", v.border_cells)?;
+    d.set_item("triangles_drawn", v.triangles_drawn)?;
+    d.set_item("resample_seconds", v.seconds.resample)?;
+    d.set_item("fallback_seconds", v.seconds.fallback)?;
+    d.set_item("render_seconds", v.seconds.render)?;
+    d.set_item("image", super::render::images_dict(py, v.image)?)?;
     Ok(d)
 }
 
@@ -275,7 +242,7 @@ fn fields<'a>(
     slabs: &[Bound<'_, PyAny>],
     ids: &'a PyReadonlyArrayDyn<'_, i32>,
     hits: &'a PyReadonlyArrayDyn<'_, u16>,
-) -> PyResult<Vec<(Slab, rf::Samples<'a>)>> {
+) -> PyResult<Vec<(Slab, vf::Samples<'a>)>> {
     let shape = ids.shape().to_vec();
     if shape.len() != 6 || shape[0] != slabs.len() || hits.shape() != &shape[..5] {
         return Err(input(
@@ -297,7 +264,7 @@ fn fields<'a>(
     let per = shape[1..5].iter().product::<usize>();
     let mut out = Vec::with_capacity(slabs.len());
     for (k, s) in slabs.iter().enumerate() {
-        let f = rf::Samples {
+        let f = vf::Samples {
             dims: [shape[1], shape[2], shape[3], shape[4]].map(|d| d as u32),
             n: shape[5] as u32,
             ids: &all_ids[k * per * shape[5]..(k + 1) * per * shape[5]],
@@ -320,13 +287,15 @@ pub fn render_cells<'py>(
     marked: PyReadonlyArray1<'py, bool>,
     camera: &PyCamera,
 ) -> PyResult<(Bound<'py, PyDict>, usize)> {
-    let triangles = triangles.as_array().to_vec();
-    let offsets = offsets.as_array().to_vec();
+    let (order, offsets) = (triangles.as_array().to_vec(), offsets.as_array().to_vec());
     let marked = marked.as_array().to_vec();
-    let scene = sorted_scene.inner.clone();
-    let cam = camera.inner.clone();
+    let (scene, cam) = (&sorted_scene.inner, &camera.inner);
     let (img, drawn) = super::run(py, || {
-        rf::render_marked(&scene, &triangles, &offsets, &marked, &cam)
+        vf::render_marked(
+            &vf::SortedScene::new(scene, &order, &offsets)?,
+            &marked,
+            cam,
+        )
     })?;
     Ok((super::render::images_dict(py, img)?, drawn))
 }

@@ -1,10 +1,8 @@
 //! Surfaces rebuilt from depth-image samples (non-redundant-rendering.txt §4): the conventional
 //! depth-image `mesh`, the `hybrid` reconstruction of Algorithm 4, and oriented square `points`.
 //! All three read the same per-sample data — world position, geometric normal, triangle id and
-//! the camera — and return one triangle soup with, per face, the sample it came from. `field`
-//! renders a view from the visibility field instead (visibility-field.txt §4).
+//! the camera — and return one triangle soup with, per face, the sample it came from.
 
-pub mod field;
 pub mod hybrid;
 pub mod impostors;
 pub mod mesh;

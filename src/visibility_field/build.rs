@@ -115,6 +115,20 @@ impl CrossFrom {
         let b = self.b0 + lambda * d.dot(self.gb);
         (lambda.is_finite() && a.is_finite() && b.is_finite()).then_some((lambda, DVec2::new(a, b)))
     }
+
+    /// The crossing as four terms affine in `d` (and in the point, for lines parallel to
+    /// each other): the denominator `d·n`, the rectangle coordinates times it, and the plane's
+    /// offset `c`, so that λ = c / (d·n) and (a, b) = (terms[1], terms[2]) / (d·n).
+    #[inline]
+    pub fn terms(&self, d: DVec3) -> [f64; 4] {
+        let dn = d.dot(self.normal);
+        [
+            dn,
+            self.a0 * dn + self.c * d.dot(self.ga),
+            self.b0 * dn + self.c * d.dot(self.gb),
+            self.c,
+        ]
+    }
 }
 
 /// Two rectangles parameterizing lines (§3): uv first, st second.
@@ -255,6 +269,12 @@ impl SlabFrom {
             .then_some((q, [l_uv, l_st]))
     }
 
+    /// Both planes' [`CrossFrom::terms`] for the line along `d`: uv's, then st's.
+    #[inline]
+    pub fn terms(&self, d: DVec3) -> ([f64; 4], [f64; 4]) {
+        (self.uv.terms(d), self.st.terms(d))
+    }
+
     /// See [`Slab::answers`].
     #[inline]
     pub fn answers(&self, d: DVec3, seen: [f64; 2], box_from: f64) -> Option<[f64; 4]> {
@@ -305,6 +325,55 @@ pub struct Cells {
     pub offsets: Vec<u32>,
     pub triangles: Vec<u32>,
     pub groups: usize,
+}
+
+/// A scene with its faces sorted by cell, as a field's views draw it: sorted face `i` is the
+/// scene's face `order[i]`, and cell `c` holds sorted faces `offsets[c]..offsets[c + 1]`.
+#[derive(Debug, Clone, Copy)]
+pub struct SortedScene<'a> {
+    pub scene: &'a Scene,
+    pub order: &'a [u32],
+    pub offsets: &'a [u32],
+}
+
+impl<'a> SortedScene<'a> {
+    /// Checked: one `order` entry per face, and offsets rising from 0 to the face count.
+    pub fn new(scene: &'a Scene, order: &'a [u32], offsets: &'a [u32]) -> Result<Self> {
+        let faces = scene.triangle_count();
+        let rising = offsets.windows(2).all(|w| w[0] <= w[1]);
+        if order.len() != faces
+            || offsets.first() != Some(&0)
+            || offsets.last().map(|&o| o as usize) != Some(faces)
+            || !rising
+        {
+            return input_err!(
+                "the cells do not match the cell-sorted scene: {} faces, {} sorted ids, offsets \
+                 from {:?} to {:?}",
+                faces,
+                order.len(),
+                offsets.first(),
+                offsets.last()
+            );
+        }
+        Ok(SortedScene {
+            scene,
+            order,
+            offsets,
+        })
+    }
+
+    /// How many cells.
+    pub fn cells(&self) -> usize {
+        self.offsets.len() - 1
+    }
+
+    /// One mark per cell.
+    pub fn check_marks(&self, marked: &[bool]) -> Result<()> {
+        if marked.len() != self.cells() {
+            return input_err!("{} marks for {} cells", marked.len(), self.cells());
+        }
+        Ok(())
+    }
 }
 
 /// Group ids per triangle: connected components (triangles sharing a vertex position).
@@ -487,6 +556,52 @@ pub struct Field {
     pub timings: Timings,
 }
 
+/// A field built for a scene ([`build`]): its cells, the cell-sorted scene its views draw
+/// (sorted face `i` is the scene's `cells.triangles[i]`), one field per slab, and the seconds
+/// spent on the cells and on what the fallback traces.
+pub struct Built {
+    pub cells: Cells,
+    pub sorted: Scene,
+    pub fields: Vec<Field>,
+    pub cell_seconds: f64,
+    pub bvh_seconds: f64,
+}
+
+/// The cells of `scene` (§3.2) and a field per slab (§3.3), with `n` ids per sample; and the
+/// cell-sorted scene's trace frame, BVH and edge neighbours, which the fallback of every view
+/// uses, so that the first view does not pay for them.
+#[allow(clippy::too_many_arguments)]
+pub fn build(
+    scene: &Scene,
+    slabs: &[Slab],
+    uv: [u32; 2],
+    st: [u32; 2],
+    grid: Grid,
+    grouping: Grouping,
+    n: u32,
+    supersample: Supersample,
+) -> Result<Built> {
+    if slabs.is_empty() {
+        return input_err!("at least one slab is needed");
+    }
+    let start = Instant::now();
+    let cells = cells(scene, grid, grouping)?;
+    let sorted = scene.permuted(&cells.triangles)?;
+    let cell_seconds = start.elapsed().as_secs_f64();
+    let fields = sample(scene, slabs, uv, st, &cells, n, supersample)?;
+    let start = Instant::now();
+    let frame = crate::discretize::pixels::TraceFrame::of(&sorted)?;
+    crate::trace::Bvh::of(frame.scene(&sorted));
+    crate::scene::adjacency::EdgeNeighbours::of(&sorted);
+    Ok(Built {
+        cells,
+        sorted,
+        fields,
+        cell_seconds,
+        bvh_seconds: start.elapsed().as_secs_f64(),
+    })
+}
+
 /// How a sample's rays are placed in its uv and st cells.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Supersample {
@@ -494,6 +609,27 @@ pub struct Supersample {
     pub per_axis: u32,
     /// `Some(seed)`: a seeded random point in each sub-cell; `None`: sub-cell centres.
     pub jitter: Option<u64>,
+}
+
+/// The `ss²` sub-positions of cell `cell` of a `dims` grid over `rect`: offsets `a(j)` along
+/// its first axis (outer) and `b(j)` along its second (inner), in cells.
+fn sub_positions(
+    rect: &Rect,
+    cell: [usize; 2],
+    dims: [usize; 2],
+    ss: usize,
+    a: impl Fn(usize) -> f64,
+    b: impl Fn(usize) -> f64,
+) -> Vec<DVec3> {
+    let mut out = Vec::with_capacity(ss * ss);
+    for oa in (0..ss).map(&a) {
+        for ob in (0..ss).map(&b) {
+            let x = (cell[0] as f64 + oa) / dims[0] as f64;
+            let y = (cell[1] as f64 + ob) / dims[1] as f64;
+            out.push(rect.point(x, y));
+        }
+    }
+    out
 }
 
 /// The rays of one uv sample `(iu, iv)` (§3.3, pre-filtering): from `ss²` sub-positions in
@@ -514,20 +650,26 @@ fn beam_rays(
         for it in 0..dt {
             // A distinct stream of jitter per sample and axis.
             let at = ((((iu * dv + iv) * ds + is) * dt + it) * 4) as u64;
-            for ou in (0..ss).map(|j| offset(at, j)) {
-                for ov in (0..ss).map(|j| offset(at + 1, j)) {
-                    let a = slab
-                        .uv
-                        .point((iu as f64 + ou) / du as f64, (iv as f64 + ov) / dv as f64);
-                    for os in (0..ss).map(|j| offset(at + 2, j)) {
-                        for ot in (0..ss).map(|j| offset(at + 3, j)) {
-                            let b = slab
-                                .st
-                                .point((is as f64 + os) / ds as f64, (it as f64 + ot) / dt as f64);
-                            origins.push(a.as_vec3().to_array());
-                            dirs.push((b - a).as_vec3().to_array());
-                        }
-                    }
+            let uv = sub_positions(
+                &slab.uv,
+                [iu, iv],
+                [du, dv],
+                ss,
+                |j| offset(at, j),
+                |j| offset(at + 1, j),
+            );
+            let st = sub_positions(
+                &slab.st,
+                [is, it],
+                [ds, dt],
+                ss,
+                |j| offset(at + 2, j),
+                |j| offset(at + 3, j),
+            );
+            for a in &uv {
+                for b in &st {
+                    origins.push(a.as_vec3().to_array());
+                    dirs.push((*b - *a).as_vec3().to_array());
                 }
             }
         }
@@ -628,7 +770,9 @@ fn sample_slab(
     let offset = |at: u64, j: usize| -> f64 {
         let r = match jitter {
             Some(seed) => {
-                let h = super::epr::mix64(seed ^ super::epr::mix64(at * ss as u64 + j as u64));
+                let h = crate::discretize::epr::mix64(
+                    seed ^ crate::discretize::epr::mix64(at * ss as u64 + j as u64),
+                );
                 (h >> 11) as f64 / (1u64 << 53) as f64
             }
             None => 0.5,
@@ -766,7 +910,7 @@ mod tests {
         let [lo, hi] = scene.bounds_f64();
         let mut seed = 1u64;
         let mut rand = || {
-            seed = super::super::epr::mix64(seed);
+            seed = crate::discretize::epr::mix64(seed);
             (seed >> 11) as f64 / (1u64 << 53) as f64
         };
         for _ in 0..2000 {
