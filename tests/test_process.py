@@ -86,6 +86,9 @@ INTERRUPT = textwrap.dedent(
     import numpy as np
     import scenesample as ss
 
+    # Python's own Ctrl-C handler, whatever started the test (a shell's background job starts
+    # its children with SIGINT ignored, and Python then installs none).
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     scene = ss.scenes.icosphere(4)
     cam = ss.Camera.look_at((3, 2, 1.5), (0, 0, 0), (0, 0, 1), yfov=0.8, width=32, height=24)
     before = ss.discretize(scene, [cam]).triangle
@@ -160,6 +163,7 @@ def test_calls_from_other_threads_finish_while_the_main_thread_is_interrupted(gp
         import numpy as np
         import scenesample as ss
 
+        signal.signal(signal.SIGINT, signal.default_int_handler)  # as in INTERRUPT
         scene = ss.scenes.icosphere(4)
         rng = np.random.default_rng(1)
         o = rng.uniform(-2, 2, (3_000_000, 3)).astype(np.float32)
