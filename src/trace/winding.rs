@@ -681,16 +681,21 @@ mod tests {
             .all(|(a, b)| a.to_bits() == b.to_bits()));
     }
 
+    /// The faces of an icosphere whose centroids lie below z = 0.8: a sphere with its top cut
+    /// off (one border).
+    fn cut_sphere(v: &[[f32; 3]], f: &[[u32; 3]]) -> Vec<[u32; 3]> {
+        f.iter()
+            .copied()
+            .filter(|t| t.iter().map(|&i| v[i as usize][2]).sum::<f32>() / 3.0 < 0.8)
+            .collect()
+    }
+
     #[test]
     fn one_point_at_a_time_gives_what_the_batch_gives() {
         // The batch sorts its points and may take the ray or the sum per point; neither the
         // order nor the company of other points may change an answer (closed and open).
         let (v, f) = crate::trace::tests::icosphere(3);
-        let open: Vec<[u32; 3]> = f
-            .iter()
-            .copied()
-            .filter(|t| t.iter().map(|&i| v[i as usize][2]).sum::<f32>() / 3.0 < 0.8)
-            .collect();
+        let open = cut_sphere(&v, &f);
         for faces in [f.clone(), open] {
             let scene = Scene::from_arrays(v.clone(), faces, None, None).unwrap();
             let mut pts = probes(&scene);
@@ -720,11 +725,7 @@ mod tests {
         // A sphere with its top cut off (one border): the cap pays, and the answer is the
         // crossings through sphere and cap less the cap's sum.
         let (v, f) = crate::trace::tests::icosphere(3);
-        let keep: Vec<[u32; 3]> = f
-            .iter()
-            .copied()
-            .filter(|t| t.iter().map(|&i| v[i as usize][2]).sum::<f32>() / 3.0 < 0.8)
-            .collect();
+        let keep = cut_sphere(&v, &f);
         let scene = Scene::from_arrays(v, keep, None, None).unwrap();
         let closure = Closure::of(&scene);
         assert!(!closure.closed && cap_pays(&scene, closure.cap.as_ref().unwrap()));
