@@ -41,6 +41,21 @@ def test_bench_all_quick_writes_a_summary_and_every_methods_row(tmp_path, capsys
     check_methods_report(methods.split("`python -m scenesample.bench all`", 1)[0])
 
 
+def test_bench_scenes_quick_poses_a_tiling_and_reports_every_target(tmp_path):
+    """`bench scenes` tiles a shared scene into objects, poses it, and reports the pose against
+    a build, posed rays against flat ones and a frame against fcpw and Open3D."""
+    pytest.importorskip("fcpw")
+    pytest.importorskip("open3d")
+    from scenesample import bench
+
+    out = tmp_path / "scenes.md"
+    bench.main(["scenes", "--quick", "--rounds", "1", "--scenes", "bunny", "--out", str(out)])
+    md = out.read_text()
+    assert "| stanford_bunny |" in md
+    for target in ("a new pose <= 2% of a build", "posed rays >= 0.8x flat", "frame >= 2x fcpw"):
+        assert target in md
+
+
 def test_bench_rays_quick_measures_every_shared_scene(tmp_path, capsys):
     """`bench rays` covers each shared scene of >= 10K triangles (those over 500K skipped when
     quick) and the procedural one, with all four ray sets and build and memory columns."""

@@ -162,22 +162,24 @@ class Scene:
 
         if isinstance(obj, trimesh.Trimesh):
             meshes = [(obj, np.eye(4))]
+            names = ["mesh"]
         elif isinstance(obj, trimesh.Scene):
-            meshes = []
+            meshes, names = [], []
             for node in obj.graph.nodes_geometry:
                 transform, geometry = obj.graph[node]
                 mesh = obj.geometry[geometry]
                 if isinstance(mesh, trimesh.Trimesh):
                     meshes.append((mesh, transform))
+                    names.append(str(node))
         else:
             raise TypeError(
                 f"from_trimesh takes a trimesh.Trimesh or trimesh.Scene, got {type(obj)}"
             )
         if not meshes:
             return cls.from_arrays(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
-        verts, faces, colors = [], [], []
+        verts, faces, colors, ids = [], [], [], []
         offset = 0
-        for mesh, transform in meshes:
+        for k, (mesh, transform) in enumerate(meshes):
             v = np.asarray(mesh.vertices, dtype=np.float64)
             v = v @ np.asarray(transform)[:3, :3].T + np.asarray(transform)[:3, 3]
             f = np.asarray(mesh.faces, dtype=np.int64)
@@ -187,10 +189,141 @@ class Scene:
             verts.append(v)
             faces.append(f + offset)
             colors.append(_vertex_colors(mesh))
+            ids.append(np.full(len(f), k, dtype=np.int32))
             offset += len(v)
         return cls.from_arrays(
-            np.concatenate(verts), np.concatenate(faces), colors=np.concatenate(colors)
+            np.concatenate(verts),
+            np.concatenate(faces),
+            colors=np.concatenate(colors),
+            object_ids=np.concatenate(ids),
+            objects=names,
         )
+
+    @classmethod
+    def from_meshes(
+        cls,
+        meshes: Any,
+        transforms: Optional[Any] = None,
+        *,
+        names: Optional[list[str]] = None,
+    ) -> Scene:
+        """A scene of several meshes, one object each (the unit :meth:`posed` moves).
+
+        Parameters
+        ----------
+        meshes : sequence of (vertices, faces) pairs
+            Each ``vertices`` (N_i, 3) float and ``faces`` (M_i, 3) int indexing its own
+            vertices. The same pair may appear several times: one instance per appearance.
+        transforms : (len(meshes), 4, 4) array_like of float, optional
+            Each instance's placement in world space (identity when omitted): its vertices as
+            given are mapped by it. A mirroring transform (negative determinant) keeps
+            counter-clockwise fronts by reversing the instance's winding.
+        names : list of str, optional
+            Object names (default ``mesh0``, ``mesh1``, ...).
+
+        Faces follow mesh after mesh, so triangle ``j`` of mesh ``i`` is face
+        ``sum(M_0..M_{i-1}) + j``.
+        """
+        meshes = list(meshes)
+        if not meshes:
+            raise InputError("from_meshes needs at least one mesh")
+        if transforms is None:
+            transforms = np.broadcast_to(np.eye(4), (len(meshes), 4, 4))
+        transforms = np.asarray(transforms, dtype=np.float64)
+        if transforms.shape != (len(meshes), 4, 4):
+            raise InputError(
+                f"transforms must have shape ({len(meshes)}, 4, 4), got {transforms.shape}"
+            )
+        if names is not None and len(names) != len(meshes):
+            raise InputError(f"{len(names)} names for {len(meshes)} meshes")
+        verts, faces, ids = [], [], []
+        offset = 0
+        for k, (mesh, m) in enumerate(zip(meshes, transforms)):
+            try:
+                v, f = mesh
+            except (TypeError, ValueError):
+                raise InputError(f"meshes[{k}] must be a (vertices, faces) pair") from None
+            v = np.asarray(v, dtype=np.float64)
+            f = np.asarray(f)
+            if v.ndim != 2 or v.shape[1:] != (3,) or f.ndim != 2 or f.shape[1:] != (3,):
+                raise InputError(
+                    f"meshes[{k}]: vertices must be (N, 3) and faces (M, 3), got "
+                    f"{v.shape} and {f.shape}"
+                )
+            if not np.isfinite(m).all():
+                raise InputError(f"transforms[{k}] is not finite")
+            if np.linalg.det(m[:3, :3]) < 0:
+                f = f[:, ::-1]
+            verts.append(v @ m[:3, :3].T + m[:3, 3])
+            faces.append(f.astype(np.int64) + offset)
+            ids.append(np.full(len(f), k, dtype=np.int32))
+            offset += len(v)
+        return cls.from_arrays(
+            np.concatenate(verts),
+            np.concatenate(faces),
+            object_ids=np.concatenate(ids),
+            objects=list(names) if names is not None else [f"mesh{k}" for k in range(len(meshes))],
+        )
+
+    # -- poses ---------------------------------------------------------------------------------
+
+    def posed(self, transforms: Any) -> Scene:
+        """This scene with its objects moved, sharing the unchanged geometry.
+
+        Parameters
+        ----------
+        transforms : dict or (len(objects), 4, 4) array_like of float
+            Either a dict from an object's name or index (see :attr:`objects`) to a 4x4
+            matrix, the objects it does not name staying where they are in this scene; or
+            one matrix per object. Each matrix maps its object's vertices *as loaded* to
+            their new place in world space. It must be finite, affine (last row 0, 0, 0, 1)
+            and non-singular. Normals follow by the inverse transpose; a mirroring matrix
+            moves the vertices only, so the faces' winding (which side is the front) flips.
+
+        Returns
+        -------
+        Scene
+            A scene whose every query and method works as on any other. Triangle ids are the
+            faces' indices, the same in every pose. The first pose of a scene builds one BVH
+            per object; later poses move and refit those and rebuild only a small tree over
+            the objects. A vertex that faces of two objects share is split (one copy per
+            object, appended), so :attr:`vertices` may have more rows than this scene's.
+        """
+        objects = self.objects
+        current = self.transforms
+        if current is None:
+            current = np.broadcast_to(np.eye(4), (len(objects), 4, 4))
+        if isinstance(transforms, dict):
+            out = np.array(current, dtype=np.float64)
+            index = {name: k for k, name in reversed(list(enumerate(objects)))}
+            for key, m in transforms.items():
+                if isinstance(key, (int, np.integer)) and not isinstance(key, bool):
+                    if not 0 <= key < len(objects):
+                        raise InputError(f"no object {key}: the scene has {len(objects)} objects")
+                    k = int(key)
+                elif isinstance(key, str) and key in index:
+                    k = index[key]
+                else:
+                    raise InputError(f"no object named {key!r}; the objects are {objects[:8]}...")
+                m = np.asarray(m, dtype=np.float64)
+                if m.shape != (4, 4):
+                    raise InputError(f"the transform of {key!r} must be 4x4, got {m.shape}")
+                out[k] = m
+        else:
+            out = np.asarray(transforms, dtype=np.float64)
+            if out.shape != (len(objects), 4, 4):
+                raise InputError(
+                    f"transforms must have shape ({len(objects)}, 4, 4) (one per object), "
+                    f"got {out.shape}"
+                )
+        flat = np.ascontiguousarray(out).reshape(-1, 4)
+        return Scene(self._core.posed(flat))
+
+    @property
+    def transforms(self) -> Optional[np.ndarray]:
+        """(len(objects), 4, 4) float64: each object's transform from the scene as loaded,
+        or None for a scene that was not posed."""
+        return self._core.transforms
 
     # -- data ----------------------------------------------------------------------------------
 

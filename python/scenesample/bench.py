@@ -6,6 +6,7 @@
     python -m scenesample.bench epr           # EPR reflections vs MVR and iVIR
     python -m scenesample.bench field         # visibility-field culling vs drawing everything
     python -m scenesample.bench backends      # conventional images: GPU vs CPU vs auto
+    python -m scenesample.bench scenes        # moving scenes: a new pose vs a rebuild, fcpw, Open3D
     python -m scenesample.bench methods       # each paper's method vs its brute force, real scenes
     python -m scenesample.bench all           # every one of them, and a markdown summary table
     python -m scenesample.bench all --quick   # smaller problems, for a smoke test
@@ -30,7 +31,7 @@ import numpy as np
 
 import scenesample as ss
 
-from . import _bench_backends, _bench_methods, _bench_points, _bench_rays
+from . import _bench_backends, _bench_methods, _bench_points, _bench_rays, _bench_scenes
 
 DEPTH_TARGET = 1.5
 
@@ -451,6 +452,7 @@ def main(argv: Optional[list[str]] = None) -> None:
             "all",
             "rays",
             "points",
+            "scenes",
             "methods",
             "peers",
             "nonredundant",
@@ -474,15 +476,13 @@ def main(argv: Optional[list[str]] = None) -> None:
     p.add_argument("--json", help="also write the raw figures to this file")
     a = p.parse_args(argv)
     size = 256 if a.quick else 1024
-    if a.which == "rays":
-        # CPU only: no GPU adapter is asked for.
-        only = a.scenes.split(",") if a.scenes else None
-        r = _bench_rays.run(a.quick, a.rounds, only)
-        _emit(_bench_rays.report(r), a.out or "docs/bench/rays.md", r, a.json)
-        return
-    if a.which == "points":
-        r = _bench_points.run(a.quick, a.rounds, a.scenes.split(",") if a.scenes else None)
-        _emit(_bench_points.report(r), a.out or "docs/bench/points.md", r, a.json)
+    only = a.scenes.split(",") if a.scenes else None
+    # CPU only: no GPU adapter is asked for.
+    cpu_sets = {"rays": _bench_rays, "points": _bench_points, "scenes": _bench_scenes}
+    if a.which in cpu_sets:
+        mod = cpu_sets[a.which]
+        r = mod.run(a.quick, a.rounds, only)
+        _emit(mod.report(r), a.out or f"docs/bench/{a.which}.md", r, a.json)
         return
     if a.which == "methods":
         info = ss.device_info()

@@ -3,11 +3,12 @@
 use std::path::PathBuf;
 use std::sync::Arc;
 
+use glam::DMat4;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
 use super::camera::PyCamera;
-use super::convert::{array, faces, flat_i32, rows_array, rows_f32};
+use super::convert::{array, faces, flat_i32, rows_array, rows_f32, rows_f64};
 use super::errors::{input, IntoPy};
 use crate::scene::{Light, LightKind, Material, Scene, SceneParts};
 
@@ -85,6 +86,38 @@ impl PyScene {
         Ok(Self {
             inner: Arc::new(scene),
         })
+    }
+
+    /// This scene with its objects moved: `transforms` is (len(objects) * 4, 4) float64, the
+    /// objects' 4×4 matrices stacked (row-major), each mapping its object as loaded.
+    fn posed(&self, py: Python<'_>, transforms: &Bound<'_, PyAny>) -> PyResult<Self> {
+        let rows = rows_f64::<4>(transforms, "transforms")?;
+        if rows.len() % 4 != 0 {
+            return Err(input(py, "transforms must stack 4x4 matrices".into()));
+        }
+        let ms: Vec<DMat4> = rows
+            .chunks_exact(4)
+            .map(|r| DMat4::from_cols_array_2d(&[r[0], r[1], r[2], r[3]]).transpose())
+            .collect();
+        let scene = super::run(py, || self.inner.posed(&ms))?;
+        Ok(Self {
+            inner: Arc::new(scene),
+        })
+    }
+
+    /// Each object's transform from the scene as loaded ((len(objects), 4, 4) float64,
+    /// row-major), or None for a scene as loaded.
+    #[getter]
+    fn transforms<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyAny>>> {
+        let Some(pose) = self.inner.pose() else {
+            return Ok(None);
+        };
+        let rows: Vec<[f64; 4]> = pose
+            .transforms
+            .iter()
+            .flat_map(|m| m.transpose().to_cols_array_2d())
+            .collect();
+        Ok(Some(rows_array(py, &rows, &[rows.len() / 4, 4, 4])?))
     }
 
     #[getter]

@@ -6,6 +6,7 @@
 pub mod adjacency;
 pub mod gltf;
 pub mod obj;
+pub mod pose;
 pub mod shapes;
 
 use std::any::{Any, TypeId};
@@ -13,6 +14,7 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 
 use glam::{DVec3, Vec3};
+use rayon::prelude::*;
 
 use crate::camera::Camera;
 use crate::error::Result;
@@ -94,13 +96,28 @@ pub struct SceneParts {
 /// A validated triangle scene. Immutable: the BVH and GPU buffers are cached on first use.
 #[derive(Debug)]
 pub struct Scene {
+    /// Vertices, normals, materials, objects, lights, cameras and warnings (the faces, their
+    /// ids and the colours live in `shared`).
     parts: SceneParts,
-    colors: Vec<[f32; 3]>,
+    /// What a scene shares with the scenes posed from it ([`pose`]).
+    shared: Arc<Shared>,
     bounds: [[f32; 3]; 2],
     degenerate: Vec<bool>,
     degenerate_count: usize,
+    /// The scene this one was posed from and each object's transform ([`Scene::posed`]).
+    pose: Option<pose::Pose>,
     /// What the rooms derive from the scene (see [`Scene::derived`]).
     derived: Derived,
+}
+
+/// The faces, their material and object ids and the vertices' colours: what poses leave as
+/// they are.
+#[derive(Debug)]
+pub(crate) struct Shared {
+    faces: Vec<[u32; 3]>,
+    material_ids: Vec<i32>,
+    object_ids: Vec<i32>,
+    colors: Vec<[f32; 3]>,
 }
 
 /// One cached value per type, each built once.
@@ -134,21 +151,34 @@ impl Scene {
         let n = parts.vertices.len();
         // The one copy of the colours lives here; `parts.colors` is only the input.
         let colors = parts.colors.take().unwrap_or_else(|| vec![[1.0; 3]; n]);
-        let bounds = compute_bounds(&parts.vertices, &parts.faces);
-        let degenerate: Vec<bool> = parts
+        let shared = Arc::new(Shared {
+            faces: std::mem::take(&mut parts.faces),
+            material_ids: std::mem::take(&mut parts.material_ids),
+            object_ids: std::mem::take(&mut parts.object_ids),
+            colors,
+        });
+        Ok(Self::assemble(parts, shared, None))
+    }
+
+    /// The scene of checked `parts` (whose faces, ids and colours are `shared`'s).
+    fn assemble(parts: SceneParts, shared: Arc<Shared>, pose: Option<pose::Pose>) -> Self {
+        let bounds = compute_bounds(&parts.vertices, &shared.faces);
+        let degenerate: Vec<bool> = shared
             .faces
-            .iter()
+            .par_iter()
+            .with_min_len(4096)
             .map(|f| is_degenerate(&parts.vertices, f))
             .collect();
         let degenerate_count = degenerate.iter().filter(|d| **d).count();
-        Ok(Self {
+        Self {
             parts,
-            colors,
+            shared,
             bounds,
             degenerate,
             degenerate_count,
+            pose,
             derived: Derived::default(),
-        })
+        }
     }
 
     /// The scene's `T`, built by `make` on first use and kept for the scene's lifetime (the
@@ -184,13 +214,10 @@ impl Scene {
         }
         let pick = |v: &[i32]| order.iter().map(|&i| v[i as usize]).collect::<Vec<_>>();
         let mut parts = self.parts.clone();
-        parts.faces = order
-            .iter()
-            .map(|&i| self.parts.faces[i as usize])
-            .collect();
-        parts.material_ids = pick(&self.parts.material_ids);
-        parts.object_ids = pick(&self.parts.object_ids);
-        parts.colors = Some(self.colors.clone());
+        parts.faces = order.iter().map(|&i| self.faces()[i as usize]).collect();
+        parts.material_ids = pick(self.material_ids());
+        parts.object_ids = pick(self.object_ids());
+        parts.colors = Some(self.colors().to_vec());
         parts.warnings.clear();
         Self::new(parts)
     }
@@ -219,19 +246,19 @@ impl Scene {
         &self.parts.vertices
     }
     pub fn faces(&self) -> &[[u32; 3]] {
-        &self.parts.faces
+        &self.shared.faces
     }
     pub fn normals(&self) -> Option<&[[f32; 3]]> {
         self.parts.normals.as_deref()
     }
     pub fn colors(&self) -> &[[f32; 3]] {
-        &self.colors
+        &self.shared.colors
     }
     pub fn material_ids(&self) -> &[i32] {
-        &self.parts.material_ids
+        &self.shared.material_ids
     }
     pub fn object_ids(&self) -> &[i32] {
-        &self.parts.object_ids
+        &self.shared.object_ids
     }
     pub fn materials(&self) -> &[Material] {
         &self.parts.materials
@@ -249,7 +276,7 @@ impl Scene {
         &self.parts.warnings
     }
     pub fn triangle_count(&self) -> usize {
-        self.parts.faces.len()
+        self.shared.faces.len()
     }
     /// Axis-aligned bounds of the vertices that triangles use: `[min, max]`.
     pub fn bounds(&self) -> [[f32; 3]; 2] {
@@ -263,7 +290,7 @@ impl Scene {
     /// arrays) says nothing about its sides and counts as double-sided, the way every image of
     /// the package draws both sides unless asked to cull.
     pub fn is_double_sided(&self, i: usize) -> bool {
-        usize::try_from(self.parts.material_ids[i])
+        usize::try_from(self.shared.material_ids[i])
             .ok()
             .and_then(|m| self.parts.materials.get(m))
             .is_none_or(|m| m.double_sided)
@@ -305,7 +332,7 @@ impl Scene {
 
     /// The three world-space corners of triangle `i`, widened to f64.
     pub fn triangle(&self, i: usize) -> [DVec3; 3] {
-        let f = self.parts.faces[i];
+        let f = self.shared.faces[i];
         let v = &self.parts.vertices;
         [0, 1, 2].map(|k| Vec3::from(v[f[k] as usize]).as_dvec3())
     }
@@ -377,15 +404,18 @@ fn check_len(name: &str, got: Option<usize>, want: usize, of: &str) -> Result<()
 }
 
 fn compute_bounds(vertices: &[[f32; 3]], faces: &[[u32; 3]]) -> [[f32; 3]; 2] {
-    let mut lo = Vec3::splat(f32::INFINITY);
-    let mut hi = Vec3::splat(f32::NEG_INFINITY);
-    for f in faces {
-        for &k in f {
-            let v = Vec3::from(vertices[k as usize]);
-            lo = lo.min(v);
-            hi = hi.max(v);
-        }
-    }
+    let empty = || (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+    // Minima and maxima do not depend on the order they are taken in.
+    let (lo, hi) = faces
+        .par_iter()
+        .with_min_len(1 << 14)
+        .fold(empty, |(lo, hi), f| {
+            f.iter().fold((lo, hi), |(lo, hi), &k| {
+                let v = Vec3::from(vertices[k as usize]);
+                (lo.min(v), hi.max(v))
+            })
+        })
+        .reduce(empty, |(a, b), (c, d)| (a.min(c), b.max(d)));
     [lo.to_array(), hi.to_array()]
 }
 

@@ -65,7 +65,7 @@ impl Aabb {
     };
 
     #[inline(always)]
-    fn grow(&mut self, b: &Aabb) {
+    pub fn grow(&mut self, b: &Aabb) {
         self.lo = self.lo.min(b.lo);
         self.hi = self.hi.max(b.hi);
     }
@@ -77,7 +77,7 @@ impl Aabb {
     }
 
     #[inline(always)]
-    fn union(mut self, b: &Aabb) -> Aabb {
+    pub fn union(mut self, b: &Aabb) -> Aabb {
         self.grow(b);
         self
     }
@@ -168,11 +168,24 @@ pub fn build(tris: &[Tri], params: BuildParams) -> Bvh8 {
 /// and 2.5 block tests per ray instead of 7.3 and 2.8); the other nine scenes' medians
 /// 0.97-1.05x, single runs 0.89-1.04x (this machine's noise). Each child's order is fixed, so
 /// there is no per-ray sort, but it ignores where along the ray the boxes lie.
-fn rank_for_any_hit(nodes: &mut [Node8], blocks: &[Tri4]) {
+pub(super) fn rank_for_any_hit(nodes: &mut [Node8], blocks: &[Tri4]) -> (f64, f64) {
+    let mut subtree = vec![(0.0f64, 0.0f64); nodes.len()];
+    rank_first_nodes(nodes, blocks, nodes.len(), &mut subtree);
+    subtree[0]
+}
+
+/// [`rank_for_any_hit`] of the first `count` nodes, given in `subtree` each later node's
+/// subtree triangle area and expected cost that they have as children (and filling in
+/// theirs). Returns nothing; `subtree[0]` is the root's.
+pub(super) fn rank_first_nodes(
+    nodes: &mut [Node8],
+    blocks: &[Tri4],
+    count: usize,
+    subtree: &mut [(f64, f64)],
+) {
     // Each node's subtree: triangle area and expected cost. Children follow their parents in
     // `nodes`, so one pass from the back sees every child before its parent.
-    let mut subtree = vec![(0.0f64, 0.0f64); nodes.len()];
-    for i in (0..nodes.len()).rev() {
+    for i in (0..count).rev() {
         let n = &nodes[i];
         let surface: f64 = {
             let (lo, hi) = n.bounds();
@@ -248,15 +261,15 @@ fn bounds_of(b: &Builder, refs: &[u32]) -> (Aabb, Aabb) {
 
 /// The tree under construction: nodes, leaf blocks and their triangle ids.
 #[derive(Default)]
-struct Out {
-    nodes: Vec<Node8>,
-    blocks: Vec<Tri4>,
-    depth: u32,
+pub(super) struct Out {
+    pub nodes: Vec<Node8>,
+    pub blocks: Vec<Tri4>,
+    pub depth: u32,
 }
 
 impl Out {
     /// Append a subtree built on its own, shifting its references; returns its root's index.
-    fn append(&mut self, sub: Out) -> u32 {
+    pub fn append(&mut self, sub: Out) -> u32 {
         let (node_off, block_off) = (node_ref(self.nodes.len()), self.blocks.len() as u32);
         self.nodes.extend(sub.nodes.into_iter().map(|mut n| {
             for c in &mut n.child {

@@ -17,6 +17,7 @@ pub mod interleave;
 mod packet;
 pub mod points;
 pub mod refine;
+pub mod refit;
 pub mod token;
 pub mod watertight;
 pub mod winding;
@@ -71,6 +72,18 @@ impl Bvh {
 
     pub fn build_with(scene: &Scene, params: build::BuildParams) -> Self {
         let start = Instant::now();
+        if let Some(pose) = scene.pose() {
+            // A posed scene: its base's object trees, moved and refit.
+            let base = &pose.base;
+            let trees = base.derived(|| {
+                let objects = base.objects().len();
+                refit::ObjectTrees::of(&base.rig(), base.object_ids(), objects, params)
+            });
+            return Self {
+                tree: trees.posed(&pose.transforms),
+                build_seconds: start.elapsed().as_secs_f64(),
+            };
+        }
         let v = scene.vertices();
         let tris: Vec<Tri> = scene
             .faces()

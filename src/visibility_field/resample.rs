@@ -241,6 +241,8 @@ pub(super) struct Lines<'a> {
     range: (f64, f64),
     /// Every line of a pinhole view starts at its eye: each slab's planes crossed from there.
     froms: Vec<Option<SlabFrom>>,
+    /// Per slab, its planes' [`SlabFrom::terms`] as affine functions of the pixel.
+    terms: Vec<PixelTerms>,
     /// Where each slab's samples start among the bits of marked samples, and their count.
     pub base: Vec<usize>,
 }
@@ -265,6 +267,11 @@ impl<'a> Lines<'a> {
             .iter()
             .map(|(slab, _)| perspective.then(|| slab.from(origin)))
             .collect();
+        let terms = fields
+            .iter()
+            .zip(&froms)
+            .map(|((slab, _), from)| PixelTerms::of(&eye, slab, from, (w, h)))
+            .collect();
         let mut base = vec![0usize; fields.len() + 1];
         for (k, (_, f)) in fields.iter().enumerate() {
             base[k + 1] = base[k] + f.hits.len();
@@ -279,6 +286,7 @@ impl<'a> Lines<'a> {
             eye,
             range,
             froms,
+            terms,
             base,
         })
     }
@@ -405,12 +413,9 @@ impl<'a> Lines<'a> {
     /// denominators keep their signs over the block, so no line of the block is held when one
     /// of them is negative at all four corners (beyond a margin for rounding).
     pub fn may_hold(&self, slab: usize, [c0, c1, r0, r1]: Block) -> bool {
-        let s = &self.fields[slab].0;
         let ((x0, y0), (x1, y1)) = (self.pixel(c0, r0), self.pixel(c1, r1));
-        let corners = [(x0, y0), (x1, y0), (x0, y1), (x1, y1)].map(|(x, y)| {
-            let (o, d) = self.eye.ray_z1(DVec2::new(x as f64 + 0.5, y as f64 + 0.5));
-            self.froms[slab].unwrap_or_else(|| s.from(o)).terms(d)
-        });
+        let t = &self.terms[slab];
+        let corners = [(x0, y0), (x1, y0), (x0, y1), (x1, y1)].map(|(x, y)| t.at(x, y));
         let sign = |den: [f64; 4]| {
             let all = |f: fn(&f64) -> bool| den.iter().all(f);
             (all(|&x| x > 0.0) as i8) - (all(|&x| x < 0.0) as i8)
@@ -423,22 +428,22 @@ impl<'a> Lines<'a> {
             return true;
         }
         let (su, st) = (f64::from(su), f64::from(st));
-        // Each test as (value, size): held needs value >= 0 (> 0) everywhere it holds.
+        // Each test as (value, size): held needs value >= 0 (> 0) everywhere it holds. The
+        // sizes are the terms' scales over the image, so that the rounding of the terms (and
+        // of their affine reading) stays inside the margin.
+        let [su0, su1, su2, su3, st0, st1, st2, st3] = t.scale;
         let tests = |(u, t): ([f64; 4], [f64; 4])| {
             [
-                (su * u[1], u[1].abs()),
-                (su * (u[0] - u[1]), u[0].abs() + u[1].abs()),
-                (su * u[2], u[2].abs()),
-                (su * (u[0] - u[2]), u[0].abs() + u[2].abs()),
-                (st * t[1], t[1].abs()),
-                (st * (t[0] - t[1]), t[0].abs() + t[1].abs()),
-                (st * t[2], t[2].abs()),
-                (st * (t[0] - t[2]), t[0].abs() + t[2].abs()),
+                (su * u[1], su1),
+                (su * (u[0] - u[1]), su0 + su1),
+                (su * u[2], su2),
+                (su * (u[0] - u[2]), su0 + su2),
+                (st * t[1], st1),
+                (st * (t[0] - t[1]), st0 + st1),
+                (st * t[2], st2),
+                (st * (t[0] - t[2]), st0 + st2),
                 // The st plane after the uv plane: c_st / den_st > c_uv / den_uv.
-                (
-                    su * st * (t[3] * u[0] - u[3] * t[0]),
-                    (t[3] * u[0]).abs() + (u[3] * t[0]).abs(),
-                ),
+                (su * st * (t[3] * u[0] - u[3] * t[0]), st3 * su0 + su3 * st0),
             ]
         };
         let at = corners.map(tests);
@@ -449,6 +454,48 @@ impl<'a> Lines<'a> {
     pub fn flat(&self, c: usize, r: usize) -> usize {
         let (x, y) = self.pixel(c, r);
         y * self.size.0 + x
+    }
+}
+
+/// A slab's [`SlabFrom::terms`] at pixel centres, as the affine functions of the pixel they are
+/// ([`Lines::may_hold`]): the values at the first pixel's centre and their steps per pixel
+/// across and down, taken over the whole image so that rounding stays far below the tests'
+/// margin.
+struct PixelTerms {
+    at0: [f64; 8],
+    dx: [f64; 8],
+    dy: [f64; 8],
+    /// Each term's largest magnitude over the image.
+    scale: [f64; 8],
+}
+
+impl PixelTerms {
+    fn of(eye: &Projector, slab: &Slab, from: &Option<SlabFrom>, (w, h): (usize, usize)) -> Self {
+        let terms = |x: f64, y: f64| {
+            let (o, d) = eye.ray_z1(DVec2::new(x + 0.5, y + 0.5));
+            let (u, t) = from.unwrap_or_else(|| slab.from(o)).terms(d);
+            [u[0], u[1], u[2], u[3], t[0], t[1], t[2], t[3]]
+        };
+        let (wx, hy) = ((w.max(2) - 1) as f64, (h.max(2) - 1) as f64);
+        let (a, b, c) = (terms(0.0, 0.0), terms(wx, 0.0), terms(0.0, hy));
+        let (dx, dy): ([f64; 8], [f64; 8]) = (
+            std::array::from_fn(|k| (b[k] - a[k]) / wx),
+            std::array::from_fn(|k| (c[k] - a[k]) / hy),
+        );
+        PixelTerms {
+            at0: a,
+            dx,
+            dy,
+            scale: std::array::from_fn(|k| a[k].abs() + wx * dx[k].abs() + hy * dy[k].abs()),
+        }
+    }
+
+    /// The terms at pixel (x, y)'s centre: uv's, then st's.
+    #[inline(always)]
+    fn at(&self, x: usize, y: usize) -> ([f64; 4], [f64; 4]) {
+        let (x, y) = (x as f64, y as f64);
+        let v: [f64; 8] = std::array::from_fn(|k| self.at0[k] + x * self.dx[k] + y * self.dy[k]);
+        ([v[0], v[1], v[2], v[3]], [v[4], v[5], v[6], v[7]])
     }
 }
 

@@ -1,0 +1,261 @@
+"""``python -m scenesample.bench scenes``: moving scenes. Each shared scene of at least 5,000
+triangles is tiled (one object per tile, at least 100 tiles and 1M triangles; at least 4 tiles
+and 50K triangles with ``--quick``), and every tile is moved every frame.
+
+Per scene, medians of interleaved rounds:
+
+- a new pose (``Scene.posed`` and its BVH, after the first pose) against building the same
+  geometry from scratch (``Scene.from_arrays`` and its BVH): target <= 2%;
+- rays on the posed scene against the same geometry built flat: target >= 0.8x;
+- a frame (pose, 262,144 incoherent rays and a 512x512 conventional image on the CPU) against
+  fcpw (``update_object_vertices``, ``refit`` and the same rays plus the image's primary rays)
+  and Open3D (a new ``RaycastingScene`` and the same rays): target >= 2x both.
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+import warnings
+from typing import Any, Callable, Optional
+
+import numpy as np
+
+import scenesample as ss
+
+from ._scene import Scene
+from .scenes import shared_scene_files
+
+MIN_TRIANGLES = 5_000
+
+
+def _tiling(scene: Scene, quick: bool) -> tuple[Scene, int]:
+    n = len(scene.faces)
+    target, least = (50_000, 4) if quick else (1_000_000, 100)
+    tiles = max(least, -(-target // n))
+    side = int(np.ceil(np.sqrt(tiles)))
+    lo, hi = scene.bounds
+    step = (hi - lo) * 1.1
+    places = np.array([np.eye(4) for _ in range(tiles)])
+    for k in range(tiles):
+        places[k, 0, 3] = step[0] * (k % side)
+        places[k, 1, 3] = step[1] * (k // side)
+    mesh = (scene.vertices, scene.faces)
+    return Scene.from_meshes([mesh] * tiles, places), tiles
+
+
+def _poses(base: Scene, frame: int) -> np.ndarray:
+    """Each tile turned about its own centre and lifted a little, differently every frame."""
+    lo, hi = base.bounds
+    rng = np.random.default_rng(frame)
+    n = len(base.objects)
+    out = np.array([np.eye(4) for _ in range(n)])
+    centres = np.zeros((n, 3))
+    ids = base.object_ids
+    for k in range(n):
+        v = base.vertices[np.unique(base.faces[ids == k][:64])]
+        centres[k] = v.mean(axis=0)
+    angles = rng.uniform(-0.3, 0.3, n)
+    c, s = np.cos(angles), np.sin(angles)
+    out[:, 0, 0], out[:, 0, 1], out[:, 1, 0], out[:, 1, 1] = c, -s, s, c
+    shift = centres - np.einsum("kij,kj->ki", out[:, :3, :3], centres)
+    out[:, :3, 3] = shift + rng.uniform(0, 0.02, (n, 1)) * (hi - lo)
+    return out
+
+
+def _rays(scene: Scene, n: int) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(1)
+    lo, hi = scene.bounds
+    o = rng.uniform(lo, hi, (n, 3)).astype(np.float32)
+    d = rng.normal(size=(n, 3)).astype(np.float32)
+    return o, d
+
+
+def _median(f: Callable[[], Any], rounds: int) -> float:
+    ts = []
+    for _ in range(rounds):
+        t = time.perf_counter()
+        f()
+        ts.append(time.perf_counter() - t)
+    return statistics.median(ts)
+
+
+def _seconds(f: Callable[[Any], Any], arg: Any) -> float:
+    t = time.perf_counter()
+    f(arg)
+    return time.perf_counter() - t
+
+
+def _peers(flat: Scene, o: np.ndarray, d: np.ndarray, cam: Any) -> dict[str, Callable]:
+    """Each peer's frame on `flat`'s geometry: its update, the rays and the camera's rays."""
+    po, pd = (np.asarray(a, np.float32).reshape(-1, 3) for a in cam.pixel_rays())
+    out: dict[str, Callable] = {}
+    v = np.ascontiguousarray(flat.vertices, np.float32)
+    f = np.ascontiguousarray(flat.faces, np.int32)
+    origins, dirs = np.concatenate([o, po]), np.concatenate([d, pd])
+    try:
+        import fcpw
+
+        fs = fcpw.scene_3D()
+        fs.set_object_count(1)
+        fs.set_object_vertices(v, 0)
+        fs.set_object_triangles(f, 0)
+        fs.build(fcpw.aggregate_type.bvh_surface_area, True)
+        of, df = np.asfortranarray(origins), np.asfortranarray(dirs)
+        bounds = np.full(len(origins), np.inf, np.float32)
+
+        def fcpw_frame(vertices: np.ndarray) -> None:
+            fs.update_object_vertices(vertices, 0)
+            fs.refit()
+            fs.intersect(of, df, bounds, fcpw.interaction_3D_list())
+
+        out["fcpw"] = fcpw_frame
+    except ImportError:
+        pass
+    try:
+        import open3d as o3d
+
+        rays = o3d.core.Tensor(np.concatenate([origins, dirs], axis=1))
+
+        def open3d_frame(vertices: np.ndarray) -> None:
+            rs = o3d.t.geometry.RaycastingScene()
+            rs.add_triangles(o3d.core.Tensor(vertices), o3d.core.Tensor(f.astype(np.uint32)))
+            rs.cast_rays(rays)
+
+        out["open3d"] = open3d_frame
+    except ImportError:
+        pass
+    return out
+
+
+def _one(name: str, scene: Scene, quick: bool, rounds: int) -> dict[str, Any]:
+    base, tiles = _tiling(scene, quick)
+    n_rays = 16_384 if quick else 262_144
+    size = 128 if quick else 512
+    o, d = _rays(base, n_rays)
+    lo, hi = base.bounds
+    mid = (lo + hi) / 2
+    cam = ss.Camera.look_at(
+        mid + np.array([0.0, -1.2, 0.9]) * np.linalg.norm(hi - lo),
+        mid,
+        (0.0, 0.0, 1.0),
+        yfov=0.8,
+        width=size,
+        height=size,
+    )
+    poses = [_poses(base, k) for k in range(rounds + 1)]
+    t = time.perf_counter()
+    first = base.posed(poses[0])
+    ss.bvh_stats(first)
+    first_pose = time.perf_counter() - t
+    flat = Scene.from_arrays(
+        first.vertices, first.faces, object_ids=first.object_ids, objects=first.objects
+    )
+    frames = iter(range(1, 10**9))
+
+    def pose() -> Scene:
+        s = base.posed(poses[next(frames) % len(poses)])
+        ss.bvh_stats(s)
+        return s
+
+    def build() -> None:
+        s = Scene.from_arrays(
+            first.vertices, first.faces, object_ids=first.object_ids, objects=first.objects
+        )
+        ss.bvh_stats(s)
+
+    ss.bvh_stats(flat)
+    pose_s = _median(pose, rounds)
+    build_s = _median(build, rounds)
+    rays_posed = _median(lambda: ss.cast_rays(first, o, d), rounds)
+    rays_flat = _median(lambda: ss.cast_rays(flat, o, d), rounds)
+
+    def frame() -> None:
+        s = pose()
+        ss.cast_rays(s, o, d)
+        ss.discretize(s, cameras=[cam], backend="cpu")
+
+    frame_s = _median(frame, rounds)
+    peers = {}
+    verts = [np.ascontiguousarray(base.posed(p).vertices) for p in poses[:2]]
+    for peer, frame_of in _peers(flat, o, d, cam).items():
+        peers[peer] = statistics.median(_seconds(frame_of, verts[k % 2]) for k in range(rounds))
+    return {
+        "scene": name,
+        "triangles": len(base.faces),
+        "objects": tiles,
+        "first_pose_s": first_pose,
+        "pose_s": pose_s,
+        "build_s": build_s,
+        "rays_posed_s": rays_posed,
+        "rays_flat_s": rays_flat,
+        "frame_s": frame_s,
+        "peers_s": peers,
+        "rays": n_rays,
+        "image": size,
+    }
+
+
+def run(quick: bool, rounds: Optional[int], only: Optional[list[str]]) -> dict[str, Any]:
+    rounds = rounds or (2 if quick else 5)
+    out = []
+    for name, path in shared_scene_files().items():
+        if only and not any(s in name for s in only):
+            continue
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            scene = Scene.load(path)
+        if len(scene.faces) < MIN_TRIANGLES:
+            continue
+        out.append(_one(name, scene, quick, rounds))
+        print(f"  {name}: done", flush=True)
+    return {"scenes": out, "rounds": rounds, "quick": quick}
+
+
+def report(r: dict[str, Any]) -> str:
+    rows = r["scenes"]
+    lines = [
+        "# `python -m scenesample.bench scenes`",
+        "",
+        __doc__.split("\n\n", 1)[1].strip(),
+        "",
+        f"Medians of {r['rounds']} rounds. Shared scenes below {MIN_TRIANGLES} triangles "
+        "are not tiled.",
+        "",
+        "| scene | triangles | objects | first pose s | pose s | build s | pose / build "
+        "| posed rays / flat | frame s | frame vs fcpw | frame vs Open3D |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for s in rows:
+        p = s["peers_s"]
+        vs = {k: f"{p[k] / s['frame_s']:.2f}x" if k in p else "-" for k in ("fcpw", "open3d")}
+        lines.append(
+            f"| {s['scene']} | {s['triangles']:,} | {s['objects']} | {s['first_pose_s']:.3f} "
+            f"| {s['pose_s']:.4f} | {s['build_s']:.3f} | {s['pose_s'] / s['build_s']:.1%} "
+            f"| {s['rays_flat_s'] / s['rays_posed_s']:.2f}x | {s['frame_s']:.3f} "
+            f"| {vs['fcpw']} | {vs['open3d']} |"
+        )
+    if rows:
+        worst = lambda f: max(rows, key=f)  # noqa: E731
+        w1 = worst(lambda s: s["pose_s"] / s["build_s"])
+        w2 = worst(lambda s: s["rays_posed_s"] / s["rays_flat_s"])
+        lines += [
+            "",
+            "| target | worst | scene | verdict |",
+            "|---|---:|---|---|",
+            f"| a new pose <= 2% of a build | {w1['pose_s'] / w1['build_s']:.1%} "
+            f"| {w1['scene']} | {'met' if w1['pose_s'] <= 0.02 * w1['build_s'] else 'NOT met'} |",
+            f"| posed rays >= 0.8x flat | {w2['rays_flat_s'] / w2['rays_posed_s']:.2f}x "
+            f"| {w2['scene']} | "
+            f"{'met' if w2['rays_flat_s'] >= 0.8 * w2['rays_posed_s'] else 'NOT met'} |",
+        ]
+        for peer in ("fcpw", "open3d"):
+            have = [s for s in rows if peer in s["peers_s"]]
+            if have:
+                w = min(have, key=lambda s: s["peers_s"][peer] / s["frame_s"])
+                ratio = w["peers_s"][peer] / w["frame_s"]
+                lines.append(
+                    f"| frame >= 2x {peer} | {ratio:.2f}x | {w['scene']} "
+                    f"| {'met' if ratio >= 2 else 'NOT met'} |"
+                )
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,266 @@
+//! Poses: a scene's objects moved by one affine transform each, without rebuilding what does
+//! not change. A posed scene is an ordinary [`Scene`] (every query works on it unchanged) whose
+//! faces, ids and colours are its base scene's, shared, and which remembers its base and the
+//! transforms, so that the rooms that derive structures from a scene (the BVH) can derive
+//! them from the base's by a refit instead of a rebuild.
+//!
+//! Each transform maps the object's vertices *as loaded* to their new place; posing a posed
+//! scene poses its base again. Triangle ids stay the faces' indices.
+
+use std::sync::Arc;
+
+use glam::{DMat3, DMat4, DVec3};
+use rayon::prelude::*;
+
+use super::{Scene, SceneParts, Shared};
+use crate::error::Result;
+use crate::input_err;
+
+/// Where a posed scene comes from.
+#[derive(Debug, Clone)]
+pub struct Pose {
+    /// The scene as loaded (never itself posed).
+    pub base: Arc<Scene>,
+    /// One per object of `base`.
+    pub transforms: Arc<Vec<DMat4>>,
+}
+
+/// What posing needs from a scene as loaded, built once per scene: each vertex's object, and
+/// the vertices (with their normals and colours) and faces after every vertex that faces of
+/// two objects share is split, one copy per object (the copies are appended, so vertices
+/// that no two objects share keep their indices).
+#[derive(Debug)]
+pub struct Rig {
+    pub(crate) shared: Arc<Shared>,
+    pub vertices: Vec<[f32; 3]>,
+    pub normals: Option<Vec<[f32; 3]>>,
+    /// Per vertex its object, `u32::MAX` for a vertex no face uses.
+    pub vertex_object: Vec<u32>,
+}
+
+impl Rig {
+    fn of(scene: &Scene) -> Self {
+        let n = scene.parts.vertices.len();
+        let mut vertices = scene.parts.vertices.clone();
+        let mut normals = scene.parts.normals.clone();
+        let mut colors = scene.colors().to_vec();
+        let mut vertex_object = vec![u32::MAX; n];
+        let mut copies: std::collections::HashMap<(u32, u32), u32> = Default::default();
+        let mut faces = scene.faces().to_vec();
+        for (f, &o) in faces.iter_mut().zip(scene.object_ids()) {
+            let o = o as u32;
+            for k in f.iter_mut() {
+                let owner = &mut vertex_object[*k as usize];
+                if *owner == u32::MAX || *owner == o {
+                    *owner = o;
+                    continue;
+                }
+                let v = *k as usize;
+                *k = *copies.entry((*k, o)).or_insert_with(|| {
+                    vertices.push(vertices[v]);
+                    if let Some(nr) = normals.as_mut() {
+                        nr.push(nr[v]);
+                    }
+                    colors.push(colors[v]);
+                    vertex_object.push(o);
+                    (vertices.len() - 1) as u32
+                });
+            }
+        }
+        Rig {
+            shared: Arc::new(Shared {
+                faces,
+                material_ids: scene.material_ids().to_vec(),
+                object_ids: scene.object_ids().to_vec(),
+                colors,
+            }),
+            vertices,
+            normals,
+            vertex_object,
+        }
+    }
+
+    pub fn faces(&self) -> &[[u32; 3]] {
+        &self.shared.faces
+    }
+}
+
+/// `p` moved by `m` (affine), in f64 and rounded once to f32: the one rounding every posed
+/// copy of a vertex goes through (the scene's vertices and the BVH's triangle corners).
+#[inline(always)]
+pub fn transform_point(m: &DMat4, p: [f32; 3]) -> [f32; 3] {
+    let [x, y, z] = p.map(f64::from);
+    let c = m.to_cols_array();
+    std::array::from_fn(|a| (c[a] * x + c[4 + a] * y + c[8 + a] * z + c[12 + a]) as f32)
+}
+
+/// Check that `m` is a finite, non-singular affine transform (its last row 0, 0, 0, 1).
+pub fn check_transform(m: &DMat4, what: &str) -> Result<()> {
+    if !m.is_finite() {
+        return input_err!("the transform of {what} is not finite");
+    }
+    if m.row(3) != glam::DVec4::W {
+        return input_err!(
+            "the transform of {what} is not affine: its last row is {:?}, not [0, 0, 0, 1]",
+            m.row(3).to_array()
+        );
+    }
+    let l = DMat3::from_mat4(*m);
+    let scale = l.x_axis.length() * l.y_axis.length() * l.z_axis.length();
+    let det = l.determinant();
+    // Also refuses a NaN or infinite determinant.
+    if !matches!(
+        det.abs().partial_cmp(&(1e-12 * scale)),
+        Some(std::cmp::Ordering::Greater)
+    ) || scale == 0.0
+    {
+        return input_err!(
+            "the transform of {what} is singular (determinant {})",
+            l.determinant()
+        );
+    }
+    Ok(())
+}
+
+impl Scene {
+    /// The scene posed from, and each object's transform (`None` for a scene as loaded).
+    pub fn pose(&self) -> Option<&Pose> {
+        self.pose.as_ref()
+    }
+
+    /// What posing `self` (a scene as loaded) needs, built on first use.
+    pub fn rig(&self) -> Arc<Rig> {
+        self.derived(|| Rig::of(self))
+    }
+
+    /// This scene's objects moved: object `o`'s vertices as loaded are mapped by
+    /// `transforms[o]` (one per object, finite, affine and non-singular). Normals follow by the
+    /// inverse transpose. The faces, ids, colours, materials and lights are shared with the
+    /// scene as loaded; a vertex that faces of two objects share is split into one per object.
+    pub fn posed(self: &Arc<Self>, transforms: &[DMat4]) -> Result<Scene> {
+        let base = match &self.pose {
+            Some(p) => p.base.clone(),
+            None => self.clone(),
+        };
+        let objects = base.objects();
+        if transforms.len() != objects.len() {
+            return input_err!(
+                "{} transforms for {} objects: give one per object",
+                transforms.len(),
+                objects.len()
+            );
+        }
+        for (m, name) in transforms.iter().zip(objects) {
+            check_transform(m, &format!("object '{name}'"))?;
+        }
+        let rig = base.rig();
+        let identity = DMat4::IDENTITY;
+        let of = |o: u32| transforms.get(o as usize).unwrap_or(&identity);
+        let vertices: Vec<[f32; 3]> = rig
+            .vertices
+            .par_iter()
+            .zip(&rig.vertex_object)
+            .with_min_len(4096)
+            .map(|(&p, &o)| transform_point(of(o), p))
+            .collect();
+        if let Some(i) = vertices
+            .iter()
+            .position(|v| v.iter().any(|x| !x.is_finite()))
+        {
+            let o = rig.vertex_object[i];
+            return input_err!(
+                "the transform of object '{}' moves vertex {i} out of float32's range",
+                objects[o as usize]
+            );
+        }
+        let normal_maps: Vec<DMat3> = transforms
+            .iter()
+            .map(|m| DMat3::from_mat4(*m).inverse().transpose())
+            .collect();
+        let normals = rig.normals.as_ref().map(|ns| {
+            ns.par_iter()
+                .zip(&rig.vertex_object)
+                .with_min_len(4096)
+                .map(|(&n, &o)| match normal_maps.get(o as usize) {
+                    Some(m) => {
+                        let v = *m * DVec3::from(n.map(f64::from));
+                        let len = v.length();
+                        if len > 0.0 { v / len } else { v }.as_vec3().to_array()
+                    }
+                    None => n,
+                })
+                .collect()
+        });
+        let parts = SceneParts {
+            vertices,
+            normals,
+            materials: base.parts.materials.clone(),
+            objects: base.parts.objects.clone(),
+            lights: base.parts.lights.clone(),
+            cameras: base.parts.cameras.clone(),
+            ..Default::default()
+        };
+        let pose = Pose {
+            base: base.clone(),
+            transforms: Arc::new(transforms.to_vec()),
+        };
+        Ok(Scene::assemble(parts, rig.shared.clone(), Some(pose)))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn two_quads() -> Arc<Scene> {
+        // Two objects sharing vertices 1 and 2.
+        let v = vec![[0., 0., 0.], [1., 0., 0.], [1., 1., 0.], [2., 0., 0.]];
+        let f = vec![[0, 1, 2], [1, 3, 2]];
+        let parts = SceneParts {
+            vertices: v,
+            faces: f,
+            material_ids: vec![-1; 2],
+            object_ids: vec![0, 1],
+            objects: vec!["a".into(), "b".into()],
+            ..Default::default()
+        };
+        Arc::new(Scene::new(parts).unwrap())
+    }
+
+    #[test]
+    fn shared_vertices_are_split_and_ids_kept() {
+        let s = two_quads();
+        let up = DMat4::from_translation(DVec3::new(0.0, 0.0, 1.0));
+        let p = s.posed(&[DMat4::IDENTITY, up]).unwrap();
+        assert_eq!(p.triangle_count(), 2);
+        assert_eq!(p.vertices().len(), 6);
+        let f = p.faces()[1];
+        for k in f {
+            assert_eq!(p.vertices()[k as usize][2], 1.0);
+        }
+        for k in p.faces()[0] {
+            assert_eq!(p.vertices()[k as usize][2], 0.0);
+        }
+        // Posing a posed scene starts from the scene as loaded.
+        let q = Arc::new(p).posed(&[DMat4::IDENTITY; 2]).unwrap();
+        assert!(q.vertices().iter().all(|v| v[2] == 0.0));
+    }
+
+    #[test]
+    fn bad_transforms_are_refused() {
+        let s = two_quads();
+        let bad = [
+            DMat4::from_scale(DVec3::new(1.0, 0.0, 1.0)),
+            DMat4::from_cols_array(&[f64::NAN; 16]),
+            DMat4::from_cols_array(&[
+                1., 0., 0., 1., 0., 1., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1.,
+            ]),
+        ];
+        for m in bad {
+            assert!(s.posed(&[m, DMat4::IDENTITY]).is_err());
+        }
+        assert!(s.posed(&[DMat4::IDENTITY]).is_err());
+        let huge = DMat4::from_scale(DVec3::splat(1e300));
+        assert!(s.posed(&[huge, DMat4::IDENTITY]).is_err());
+    }
+}

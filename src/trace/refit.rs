@@ -1,0 +1,373 @@
+//! The tree of a posed scene (`scene::pose`), made without a build: each object's subtree is
+//! built once over the object as loaded ([`ObjectTrees`]); a pose moves its triangles' corners
+//! by the object's transform, refits its boxes from the leaves up, and puts a small top tree
+//! over the objects' boxes, built afresh for every pose. This is the two-level layout of
+//! Wald et al., "Ray Tracing Deformable Scenes Using Dynamic Bounding Volume Hierarchies"
+//! (ACM TOG 2007, §4: refitting) under an instance level, flattened into one `Bvh8` so that every
+//! query runs on it unchanged.
+
+use std::ops::Range;
+
+use glam::{DMat4, Vec3A};
+use rayon::prelude::*;
+
+use super::build::{self, padded_box, Aabb, BuildParams, Out};
+use super::bvh8::{leaf_blocks, node_index, node_ref, Bvh8, Node8, Tri4, EMPTY, LEAF};
+use super::watertight::Tri;
+use crate::scene::pose::{transform_point, Rig};
+
+/// The tree of a scene as loaded, laid out for posing: room for the top tree's nodes first,
+/// then each object's subtree over its triangles as loaded (its nodes and blocks contiguous,
+/// references already shifted to their place), so that a pose copies it once and refits
+/// each object's part in place.
+#[derive(Debug)]
+pub struct ObjectTrees {
+    nodes: Vec<Node8>,
+    blocks: Vec<Tri4>,
+    /// The top tree's node count (it depends only on the number of objects).
+    top_count: usize,
+    objects: Vec<Object>,
+    depth: u32,
+}
+
+/// An object's part of [`ObjectTrees`]: its index in the scene, its nodes (the root first)
+/// and blocks, and its root's triangle area and expected cost (for the any-hit order of the
+/// top tree above it).
+#[derive(Debug)]
+struct Object {
+    index: usize,
+    nodes: Range<usize>,
+    blocks: Range<usize>,
+    stats: (f64, f64),
+}
+
+impl ObjectTrees {
+    /// The subtrees of the objects of a scene as loaded (its `rig`), over `objects` objects.
+    pub fn of(rig: &Rig, object_ids: &[i32], objects: usize, params: BuildParams) -> Self {
+        let mut faces_of: Vec<Vec<u32>> = vec![Vec::new(); objects];
+        for (i, &o) in object_ids.iter().enumerate() {
+            faces_of[o as usize].push(i as u32);
+        }
+        let v = &rig.vertices;
+        let corner = |k: u32| Vec3A::from(v[k as usize]);
+        let trees: Vec<(usize, Bvh8, (f64, f64))> = faces_of
+            .into_par_iter()
+            .enumerate()
+            .filter(|(_, faces)| !faces.is_empty())
+            .map(|(index, faces)| {
+                let tris: Vec<Tri> = faces
+                    .iter()
+                    .map(|&f| Tri {
+                        v: rig.faces()[f as usize].map(corner),
+                    })
+                    .collect();
+                let mut tree = build::build(&tris, params);
+                // The builder numbers triangles by their place in `tris`: name them by face.
+                for b in &mut tree.blocks {
+                    for id in b.id.iter_mut().filter(|id| **id != u32::MAX) {
+                        *id = faces[*id as usize];
+                    }
+                }
+                let stats = build::rank_for_any_hit(&mut tree.nodes, &tree.blocks);
+                (index, tree, stats)
+            })
+            .collect();
+        let top_count = top_node_count(trees.len());
+        let mut out = Out {
+            nodes: vec![Node8::EMPTY; top_count],
+            ..Default::default()
+        };
+        let mut parts = Vec::with_capacity(trees.len());
+        for (index, tree, stats) in trees {
+            let (n0, b0) = (out.nodes.len(), out.blocks.len());
+            let sub = Out {
+                nodes: tree.nodes,
+                blocks: tree.blocks,
+                depth: tree.depth,
+            };
+            out.append(sub);
+            parts.push(Object {
+                index,
+                nodes: n0..out.nodes.len(),
+                blocks: b0..out.blocks.len(),
+                stats,
+            });
+        }
+        ObjectTrees {
+            nodes: out.nodes,
+            blocks: out.blocks,
+            top_count,
+            objects: parts,
+            depth: out.depth,
+        }
+    }
+
+    /// The tree of the scene whose object `o` is moved by `transforms[o]`.
+    pub fn posed(&self, transforms: &[DMat4]) -> Bvh8 {
+        let mut nodes = self.nodes.clone();
+        let mut blocks = self.blocks.clone();
+        // Each object's nodes and blocks, apart, in order.
+        let mut work = Vec::with_capacity(self.objects.len());
+        let (mut rest_n, mut rest_b) = (&mut nodes[self.top_count..], &mut blocks[..]);
+        for o in &self.objects {
+            let (n, tail_n) = std::mem::take(&mut rest_n).split_at_mut(o.nodes.len());
+            let (b, tail_b) = std::mem::take(&mut rest_b).split_at_mut(o.blocks.len());
+            (rest_n, rest_b) = (tail_n, tail_b);
+            work.push((o, n, b));
+        }
+        work.into_par_iter()
+            .for_each(|(o, n, b)| refit(n, b, o, &transforms[o.index]));
+        let mut items: Vec<(Aabb, usize)> = self
+            .objects
+            .iter()
+            .enumerate()
+            .map(|(k, o)| (box_of(&nodes[o.nodes.start]), k))
+            .collect();
+        let (mut top_nodes, mut patches) = (Vec::with_capacity(self.top_count), Vec::new());
+        top(&mut items, &mut top_nodes, &mut patches);
+        debug_assert_eq!(top_nodes.len(), self.top_count);
+        let top_depth = depth_of(&top_nodes, 0);
+        nodes[..self.top_count].copy_from_slice(&top_nodes);
+        for (node, slot, k) in patches {
+            nodes[node].child[slot] = node_ref(self.objects[k].nodes.start);
+        }
+        for n in &mut nodes[..self.top_count] {
+            n.set_order();
+        }
+        let mut subtree = vec![(0.0, 0.0); nodes.len()];
+        for o in &self.objects {
+            subtree[o.nodes.start] = o.stats;
+        }
+        build::rank_first_nodes(&mut nodes, &blocks, self.top_count, &mut subtree);
+        Bvh8 {
+            nodes,
+            blocks,
+            depth: top_depth + self.depth,
+        }
+    }
+}
+
+/// Nodes of the top tree over `n` objects ([`top`]'s splits depend on the count alone).
+fn top_node_count(n: usize) -> usize {
+    let mut items: Vec<(Aabb, usize)> = (0..n).map(|k| (Aabb::EMPTY, k)).collect();
+    let mut nodes = Vec::new();
+    top(&mut items, &mut nodes, &mut Vec::new());
+    nodes.len()
+}
+
+/// Object `o`'s part of a tree (`nodes` and `blocks`, whose references are the whole tree's)
+/// with its corners moved by `m` and its boxes refit from the leaves up (children follow their
+/// parents). The any-hit order is the one built for the object as loaded.
+fn refit(nodes: &mut [Node8], blocks: &mut [Tri4], o: &Object, m: &DMat4) {
+    for b in blocks.iter_mut() {
+        for lane in (0..4).filter(|&l| b.id[l] != u32::MAX) {
+            let moved = b.corners(lane).map(|c| transform_point(m, c));
+            for (c, p) in moved.iter().enumerate() {
+                for (a, &x) in p.iter().enumerate() {
+                    b.v[c][a][lane] = x;
+                }
+            }
+        }
+    }
+    for i in (0..nodes.len()).rev() {
+        for k in 0..8 {
+            let c = nodes[i].child[k];
+            if c == EMPTY {
+                continue;
+            }
+            let bx = if c & LEAF != 0 {
+                let r = leaf_blocks(c);
+                let mut bx = Aabb::EMPTY;
+                for b in &blocks[r.start - o.blocks.start..r.end - o.blocks.start] {
+                    for lane in (0..4).filter(|&l| b.id[l] != u32::MAX) {
+                        bx.grow(&padded_box(&b.tri(lane)));
+                    }
+                }
+                bx
+            } else {
+                box_of(&nodes[node_index(c) - o.nodes.start])
+            };
+            set_box(&mut nodes[i], k, &bx);
+        }
+        nodes[i].set_order();
+    }
+}
+
+fn box_of(n: &Node8) -> Aabb {
+    let (lo, hi) = n.bounds();
+    Aabb {
+        lo: Vec3A::from(lo),
+        hi: Vec3A::from(hi),
+    }
+}
+
+fn set_box(n: &mut Node8, k: usize, b: &Aabb) {
+    for a in 0..3 {
+        n.b[a][k] = b.lo[a];
+        n.b[3 + a][k] = b.hi[a];
+    }
+}
+
+/// Nodes on the longest path down from `i` through the top tree's own nodes.
+fn depth_of(nodes: &[Node8], i: usize) -> u32 {
+    let n = &nodes[i];
+    1 + n
+        .child
+        .iter()
+        .filter(|&&c| c != EMPTY && c & LEAF == 0)
+        .map(|&c| depth_of(nodes, node_index(c)))
+        .max()
+        .unwrap_or(0)
+}
+
+/// A top tree over `items` (boxes and their objects): up to eight per node, split by the median
+/// of their centres along the widest axis. Its slots that hold one object are left empty and
+/// listed in `patches` as (node, slot, object), and the nodes' orders are left to the caller,
+/// once those are filled; returns the root's index.
+fn top(
+    items: &mut [(Aabb, usize)],
+    nodes: &mut Vec<Node8>,
+    patches: &mut Vec<(usize, usize, usize)>,
+) -> usize {
+    let me = nodes.len();
+    nodes.push(Node8::EMPTY);
+    let mut groups = vec![(0, items.len())];
+    while groups.len() < 8 {
+        // The largest group (the first of equals) with more than one object.
+        let Some((g, _)) = groups
+            .iter()
+            .enumerate()
+            .filter(|(_, (a, b))| b - a > 1)
+            .max_by_key(|(i, (a, b))| (b - a, usize::MAX - i))
+        else {
+            break;
+        };
+        let (a, b) = groups[g];
+        split_at_median(&mut items[a..b]);
+        let mid = a + (b - a) / 2;
+        groups[g] = (a, mid);
+        groups.insert(g + 1, (mid, b));
+    }
+    for (slot, &(a, b)) in groups.iter().enumerate() {
+        let bx = items[a..b]
+            .iter()
+            .fold(Aabb::EMPTY, |acc, (bx, _)| acc.union(bx));
+        if b - a == 1 {
+            patches.push((me, slot, items[a].1));
+        } else {
+            let child = top(&mut items[a..b], nodes, patches);
+            nodes[me].child[slot] = node_ref(child);
+        }
+        set_box(&mut nodes[me], slot, &bx);
+    }
+    me
+}
+
+/// Order `items` by their centres along the axis where the centres spread widest (ties by
+/// object, so the tree depends only on the boxes).
+fn split_at_median(items: &mut [(Aabb, usize)]) {
+    let centre = |b: &Aabb| b.lo + b.hi;
+    let (lo, hi) = items.iter().fold(
+        (Vec3A::INFINITY, Vec3A::NEG_INFINITY),
+        |(lo, hi), (b, _)| (lo.min(centre(b)), hi.max(centre(b))),
+    );
+    let e = hi - lo;
+    let axis = if e.x >= e.y && e.x >= e.z {
+        0
+    } else if e.y >= e.z {
+        1
+    } else {
+        2
+    };
+    items.sort_by(|(a, i), (b, j)| centre(a)[axis].total_cmp(&centre(b)[axis]).then(i.cmp(j)));
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use glam::{DMat4, DQuat, DVec3};
+
+    use crate::scene::{Scene, SceneParts};
+    use crate::trace::tests::icosphere;
+    use crate::trace::{cast_rays, Bvh};
+
+    /// `n` icospheres in a row, one object each.
+    fn spheres(n: usize) -> Arc<Scene> {
+        let (v, f) = icosphere(2);
+        let mut parts = SceneParts::default();
+        for k in 0..n {
+            let off = parts.vertices.len() as u32;
+            let x = 3.0 * k as f32;
+            parts
+                .vertices
+                .extend(v.iter().map(|p| [p[0] + x, p[1], p[2]]));
+            parts.faces.extend(f.iter().map(|t| t.map(|i| i + off)));
+            parts
+                .object_ids
+                .extend(std::iter::repeat_n(k as i32, f.len()));
+            parts.objects.push(format!("s{k}"));
+        }
+        parts.material_ids = vec![-1; parts.faces.len()];
+        Arc::new(Scene::new(parts).unwrap())
+    }
+
+    /// Rays from around the scene toward its vertices, give or take.
+    fn rays(n: usize, seed: u64, at: &[[f32; 3]]) -> (Vec<[f32; 3]>, Vec<[f32; 3]>) {
+        let mut s = seed;
+        let mut r = move || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((s >> 11) as f64 / (1u64 << 53) as f64) as f32
+        };
+        let o: Vec<[f32; 3]> = (0..n)
+            .map(|_| [r() * 80.0 - 60.0, r() * 40.0 - 20.0, r() * 40.0 - 20.0])
+            .collect();
+        let d = o
+            .iter()
+            .map(|p| {
+                let v = at[(r() * at.len() as f32) as usize % at.len()];
+                std::array::from_fn(|a| v[a] - p[a] + 0.3 * (r() - 0.5))
+            })
+            .collect();
+        (o, d)
+    }
+
+    #[test]
+    fn a_posed_tree_finds_what_a_fresh_build_finds() {
+        let base = spheres(23);
+        let transforms: Vec<DMat4> = (0..23)
+            .map(|k| {
+                let t = k as f64;
+                let rot = DQuat::from_euler(glam::EulerRot::XYZ, 0.3 * t, 0.7 * t, 0.1 * t);
+                let scale = DVec3::new(1.0 + 0.1 * t, 1.0, if k % 3 == 0 { -1.0 } else { 0.5 });
+                let shift = DVec3::new(-2.0 * t, (t * 0.9).sin() * 4.0, 1e5 * f64::from(k == 5));
+                DMat4::from_scale_rotation_translation(scale, rot, shift)
+            })
+            .collect();
+        let posed = base.posed(&transforms).unwrap();
+        let flat = Scene::from_arrays(
+            posed.vertices().to_vec(),
+            posed.faces().to_vec(),
+            None,
+            None,
+        )
+        .unwrap();
+        let tree = Bvh::of(&posed);
+        assert!(tree.stats().triangles == posed.triangle_count());
+        let (o, d) = rays(20_000, 7, posed.vertices());
+        let (a, b) = (
+            cast_rays(&posed, &o, &d, 0.0, f32::INFINITY).unwrap(),
+            cast_rays(&flat, &o, &d, 0.0, f32::INFINITY).unwrap(),
+        );
+        let hits = |h: &crate::trace::RayHits| h.triangle.iter().filter(|&&t| t >= 0).count();
+        assert!(hits(&b) > 10_000, "{} {}", hits(&a), hits(&b));
+        assert_eq!(a.triangle, b.triangle);
+        assert_eq!(a.t, b.t);
+        // The same poses again: the same tree, bit for bit.
+        let again = base.posed(&transforms).unwrap();
+        let c = cast_rays(&again, &o, &d, 0.0, f32::INFINITY).unwrap();
+        assert_eq!(a.barycentric, c.barycentric);
+    }
+}

@@ -1,0 +1,244 @@
+"""Posed scenes (``Scene.posed``): a posed scene finds what the same geometry built flat finds,
+ray for ray and pixel for pixel, with non-uniform scale, mirroring and a 1e5 translation;
+every verb runs on it; the same poses give the same bits in another process; bad transforms
+fail clearly."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+import scenesample as ss
+import trimesh
+
+
+def _rotation(axis, angle):
+    m = np.eye(4)
+    m[:3, :3] = trimesh.transformations.rotation_matrix(angle, axis)[:3, :3]
+    return m
+
+
+def _meshes():
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    box = trimesh.creation.box(extents=(1.0, 0.6, 0.3))
+    floor = (
+        np.array([[-6, -6, -1.2], [6, -6, -1.2], [6, 6, -1.2], [-6, 6, -1.2]]),
+        [[0, 1, 2], [0, 2, 3]],
+    )
+    parts = [(sphere.vertices, sphere.faces), (box.vertices, box.faces)] * 3 + [floor]
+    places = [np.eye(4) for _ in parts]
+    for k in range(6):
+        places[k] = trimesh.transformations.translation_matrix(
+            [3.0 * (k % 3) - 3.0, 2.5 * (k // 3) - 1.2, 0]
+        )
+    return parts, np.array(places)
+
+
+def _poses(n):
+    """Non-uniform scale, a mirror, a rotation and a far translation among the objects."""
+    out = np.array([np.eye(4) for _ in range(n)])
+    out[0] = trimesh.transformations.translation_matrix([0.3, 0.1, 0.2]) @ np.diag(
+        [1.5, 0.7, 1.2, 1]
+    )
+    out[1] = _rotation([0, 0, 1], 0.7) @ np.diag([-1.0, 1, 1, 1])  # mirrored: det < 0
+    out[2] = _rotation([1, 1, 0], 1.1)
+    out[3] = trimesh.transformations.translation_matrix([0, 0, 0.5])
+    return out
+
+
+def _flat(posed):
+    return ss.Scene.from_arrays(
+        posed.vertices,
+        posed.faces,
+        normals=posed.normals,
+        colors=posed.colors,
+        material_ids=posed.material_ids,
+        materials=posed.materials,
+        object_ids=posed.object_ids,
+        objects=posed.objects,
+    )
+
+
+@pytest.fixture(scope="module")
+def scenes():
+    parts, places = _meshes()
+    base = ss.Scene.from_meshes(parts, places)
+    posed = base.posed(_poses(len(parts)))
+    return base, posed, _flat(posed)
+
+
+def _rays(scene, n=40_000, seed=3):
+    rng = np.random.default_rng(seed)
+    lo, hi = scene.bounds
+    o = rng.uniform(lo - 2, hi + 2, (n, 3)).astype(np.float32)
+    target = scene.vertices[rng.integers(0, len(scene.vertices), n)]
+    d = (target - o + rng.normal(0, 0.05, (n, 3))).astype(np.float32)
+    return o, d
+
+
+def test_a_posed_scene_moves_each_object_by_its_transform(scenes):
+    base, posed, _ = scenes
+    poses = _poses(len(base.objects))
+    assert posed.transforms.shape == (len(base.objects), 4, 4)
+    assert np.array_equal(posed.transforms, poses)
+    assert base.transforms is None
+    np.testing.assert_array_equal(posed.faces, base.faces)
+    for k in range(len(base.objects)):
+        idx = np.unique(base.faces[base.object_ids == k])
+        moved = base.vertices[idx].astype(np.float64) @ poses[k][:3, :3].T + poses[k][:3, 3]
+        np.testing.assert_allclose(posed.vertices[idx], moved, rtol=0, atol=1e-5)
+
+
+def test_rays_on_a_posed_scene_match_the_same_geometry_built_flat(scenes):
+    _, posed, flat = scenes
+    o, d = _rays(posed)
+    a, b = ss.cast_rays(posed, o, d), ss.cast_rays(flat, o, d)
+    assert (a.triangle >= 0).mean() > 0.5
+    np.testing.assert_array_equal(a.triangle, b.triangle)
+    np.testing.assert_array_equal(a.t, b.t)
+    np.testing.assert_array_equal(ss.occluded(posed, o, d), ss.occluded(flat, o, d))
+    np.testing.assert_array_equal(ss.count_hits(posed, o, d), ss.count_hits(flat, o, d))
+
+
+def test_a_far_translation_matches_flat(scenes):
+    base, _, _ = scenes
+    far = np.array([np.eye(4) for _ in base.objects])
+    far[:, :3, 3] = [1e5, -1e5, 1e5]
+    posed = base.posed(far)
+    flat = _flat(posed)
+    o, d = _rays(posed, 20_000, seed=5)
+    a, b = ss.cast_rays(posed, o, d), ss.cast_rays(flat, o, d)
+    assert (a.triangle >= 0).mean() > 0.3
+    np.testing.assert_array_equal(a.triangle, b.triangle)
+    np.testing.assert_array_equal(a.t, b.t)
+
+
+def test_images_and_point_queries_match_flat(scenes):
+    _, posed, flat = scenes
+    cam = ss.Camera.look_at((0, -9, 5), (0, 0, 0), (0, 0, 1), yfov=0.9, width=96, height=80)
+    for backend in ("cpu", "gpu"):
+        a = ss.discretize(posed, cameras=[cam], backend=backend)
+        b = ss.discretize(flat, cameras=[cam], backend=backend)
+        assert (a.triangle >= 0).mean() > 0.3
+        np.testing.assert_array_equal(a.triangle, b.triangle)
+        np.testing.assert_array_equal(a.depth, b.depth)
+    pts = np.random.default_rng(0).uniform(-5, 5, (3000, 3))
+    ca, cb = ss.closest_points(posed, pts), ss.closest_points(flat, pts)
+    np.testing.assert_array_equal(ca.triangle, cb.triangle)
+    np.testing.assert_array_equal(ca.distance, cb.distance)
+    np.testing.assert_array_equal(ss.winding_number(posed, pts), ss.winding_number(flat, pts))
+
+
+def test_every_verb_runs_on_a_posed_scene():
+    room = ss.scenes.reflective_room(spheres=3, seed=2, detail=2)
+    moves = {
+        f"sphere {k}": trimesh.transformations.translation_matrix([0.1 * k, 0, 0.05])
+        for k in range(3)
+    }
+    posed = room.posed(moves)
+    eye = ss.scenes.reflective_room_eye(48)
+    flat = _flat(posed)
+    for method in ("epr", "mvr"):
+        a = ss.reflections(posed, eye, method=method)
+        b = ss.reflections(flat, eye, method=method)
+        np.testing.assert_array_equal(a.image, b.image)
+    a = ss.omni_shadows(posed, eye, (0, 0, 1.8), 0.1, light_samples=4)
+    b = ss.omni_shadows(flat, eye, (0, 0, 1.8), 0.1, light_samples=4)
+    np.testing.assert_array_equal(a.visibility, b.visibility)
+    fa, fb = ss.render(posed, eye, quality="fast"), ss.render(flat, eye, quality="fast")
+    np.testing.assert_array_equal(fa.image, fb.image)
+    imgs = ss.discretize(posed, cameras=[eye], method="nonredundant")
+    assert ss.evaluate(imgs, ss.discretize(flat, cameras=[eye], method="nonredundant"))
+
+
+def test_a_dict_names_objects_and_leaves_the_others(scenes):
+    base, posed, _ = scenes
+    up = trimesh.transformations.translation_matrix([0, 0, 1])
+    by_name = posed.posed({base.objects[5]: up})
+    by_index = posed.posed({5: up})
+    np.testing.assert_array_equal(by_name.vertices, by_index.vertices)
+    expect = posed.transforms.copy()
+    expect[5] = up
+    np.testing.assert_array_equal(by_name.transforms, expect)
+    # Identity poses give the scene as loaded, bit for bit.
+    same = base.posed(np.array([np.eye(4)] * len(base.objects)))
+    np.testing.assert_array_equal(same.vertices, base.vertices)
+
+
+def test_mirroring_flips_the_winding_as_the_flat_scene_does(scenes):
+    _, posed, flat = scenes
+    mirrored = posed.object_ids == 1
+    np.testing.assert_array_equal(posed.faces[mirrored], flat.faces[mirrored])
+    # A mirrored closed box alone: its winding number is -1 inside, as built flat.
+    box = trimesh.creation.box(extents=(1.0, 0.6, 0.3))
+    alone = ss.Scene.from_meshes([(box.vertices, box.faces)]).posed(_poses(7)[1:2])
+    inside = np.array([[0.05, 0.02, 0.01]])
+    assert ss.winding_number(alone, inside) == pytest.approx([-1.0])
+    assert ss.winding_number(_flat(alone), inside) == pytest.approx([-1.0])
+
+
+@pytest.mark.parametrize(
+    "transforms, match",
+    [
+        ({"nobody": np.eye(4)}, "no object named"),
+        ({99: np.eye(4)}, "no object 99"),
+        ({0: np.full((4, 4), np.nan)}, "not finite"),
+        ({0: np.diag([1.0, 0.0, 1.0, 1.0])}, "singular"),
+        ({0: np.eye(3)}, "must be 4x4"),
+        ({0: np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0.5, 0, 0, 1.0]])}, "not affine"),
+        (
+            {
+                0: np.diag([1e38, 1e38, 1e38, 1.0])
+                @ trimesh.transformations.translation_matrix([9, 9, 9])
+            },
+            "out of float32",
+        ),
+    ],
+)
+def test_bad_transforms_are_refused(scenes, transforms, match):
+    base, _, _ = scenes
+    with pytest.raises(ss.InputError, match=match):
+        base.posed(transforms)
+
+
+def test_a_wrong_number_of_transforms_is_refused(scenes):
+    base, _, _ = scenes
+    with pytest.raises(ss.InputError, match="one per object"):
+        base.posed(np.array([np.eye(4)] * 2))
+
+
+def test_the_same_poses_give_the_same_bits_in_another_process(scenes, tmp_path):
+    code = textwrap.dedent(
+        """
+        import hashlib, sys
+        import numpy as np
+        sys.path.insert(0, sys.argv[1])
+        import scenesample as ss
+        from test_posed import _meshes, _poses, _rays
+        parts, places = _meshes()
+        posed = ss.Scene.from_meshes(parts, places).posed(_poses(len(parts)))
+        o, d = _rays(posed)
+        h = ss.cast_rays(posed, o, d)
+        blob = h.t.tobytes() + h.triangle.tobytes() + h.barycentric.tobytes()
+        print(hashlib.sha256(blob).hexdigest())
+        """
+    )
+    here = str(__import__("pathlib").Path(__file__).parent)
+    out = [
+        subprocess.run(
+            [sys.executable, "-c", code, here], capture_output=True, text=True, check=True
+        ).stdout.strip()
+        for _ in range(2)
+    ]
+    _, posed, _ = scenes
+    o, d = _rays(posed)
+    h = ss.cast_rays(posed, o, d)
+    import hashlib
+
+    mine = hashlib.sha256(
+        h.t.tobytes() + h.triangle.tobytes() + h.barycentric.tobytes()
+    ).hexdigest()
+    assert out == [mine, mine]
