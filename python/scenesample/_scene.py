@@ -320,6 +320,39 @@ class Scene:
         return Scene(self._core.posed(flat))
 
     @property
+    def animations(self) -> list[tuple[str, float]]:
+        """The glTF animation clips as ``(name, duration in seconds)``; empty without any.
+        Unnamed clips are ``animation0``, ``animation1``, ..."""
+        return self._core.animations
+
+    def at(self, t: float, animation: int | str = 0) -> Scene:
+        """The scene posed at ``t`` seconds into one animation clip (glTF node animations:
+        translation, rotation and scale, STEP, LINEAR or CUBICSPLINE).
+
+        Parameters
+        ----------
+        t : float
+            Seconds into the clip; clamped to ``[0, duration]``, as glTF's samplers hold their
+            first and last keys. Must be finite.
+        animation : int or str
+            The clip's index in :attr:`animations`, or its name.
+
+        Returns
+        -------
+        Scene
+            :meth:`posed` with each object's transform from its place as loaded to its place at
+            ``t``. Skins and morph targets stay in their rest pose (the load warned about them).
+        """
+        if isinstance(animation, bool) or not isinstance(animation, (int, np.integer, str)):
+            raise InputError(f"animation must be an index or a name, got {animation!r}")
+        if not self.animations:
+            raise InputError("the scene has no animations")
+        if not isinstance(animation, str):
+            if not 0 <= animation < len(self.animations):
+                raise InputError(f"no animation {animation}: the scene has {len(self.animations)}")
+        return Scene(self._core.at(float(t), str(animation)))
+
+    @property
     def transforms(self) -> Optional[np.ndarray]:
         """(len(objects), 4, 4) float64: each object's transform from the scene as loaded,
         or None for a scene that was not posed."""

@@ -105,6 +105,20 @@ impl PyScene {
         })
     }
 
+    /// The animation clips as (name, duration in seconds).
+    #[getter]
+    fn animations(&self) -> Vec<(String, f64)> {
+        self.inner.animations()
+    }
+
+    /// The scene posed at `t` seconds into animation `clip` (an index or a name, as text).
+    fn at(&self, py: Python<'_>, t: f64, clip: String) -> PyResult<Self> {
+        let scene = super::run(py, || self.inner.at(t, &clip))?;
+        Ok(Self {
+            inner: Arc::new(scene),
+        })
+    }
+
     /// Each object's transform from the scene as loaded ((len(objects), 4, 4) float64,
     /// row-major), or None for a scene as loaded.
     #[getter]

@@ -6,12 +6,14 @@
 
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use base64::Engine;
 use glam::{DMat4, DQuat, DVec3, DVec4};
 use gltf::accessor::{DataType, Dimensions};
 use gltf::mesh::Mode;
 
+use super::animation::{Animations, Channel, Clip, Interpolation, Node, Placed, Property};
 use super::{Light, LightKind, Material, Scene, SceneParts};
 use crate::camera::{rigid_from, Camera, Projection};
 use crate::error::{Error, Result};
@@ -108,9 +110,11 @@ fn load_parts(path: &Path) -> Result<SceneParts> {
             ..Default::default()
         },
         image_means: HashMap::new(),
+        placed: Vec::new(),
     };
     loader.materials();
     loader.nodes()?;
+    loader.animations();
     Ok(loader.parts)
 }
 
@@ -234,6 +238,8 @@ struct Loader<'a> {
     base: &'a Path,
     parts: SceneParts,
     image_means: HashMap<usize, Option<[f32; 4]>>,
+    /// Per object, where it hangs in the node hierarchy (for animations).
+    placed: Vec<Placed>,
 }
 
 impl Loader<'_> {
@@ -357,10 +363,19 @@ impl Loader<'_> {
                 .or(mesh.name())
                 .map(str::to_string)
                 .unwrap_or_else(|| format!("node{}", node.index()));
+            let place = |instance: DMat4| Placed {
+                node: node.index(),
+                instance,
+                loaded: world * instance,
+            };
             match self.instances(&node)? {
-                None => self.mesh(&mesh, world, name)?,
+                None => {
+                    self.placed.push(place(DMat4::IDENTITY));
+                    self.mesh(&mesh, world, name)?
+                }
                 Some(inst) => {
                     for (i, m) in inst.iter().enumerate() {
+                        self.placed.push(place(*m));
                         self.mesh(&mesh, world * *m, format!("{name}#{i}"))?;
                     }
                 }
@@ -377,6 +392,135 @@ impl Loader<'_> {
         }
         stack.pop();
         Ok(())
+    }
+
+    /// The node animations (`animation::Animations`), kept only when the file has some. A
+    /// channel that cannot be read is skipped with a warning; skins and morph targets are not
+    /// posed (a warning says so, once each).
+    fn animations(&mut self) {
+        let doc = self.doc;
+        if doc.skins().next().is_some() {
+            self.warn("skins are not posed: skinned meshes stay in their rest pose");
+        }
+        if doc.animations().next().is_none() {
+            return;
+        }
+        let mut parent = vec![None; doc.nodes().len()];
+        for n in doc.nodes() {
+            for c in n.children() {
+                parent[c.index()] = Some(n.index());
+            }
+        }
+        let nodes = doc
+            .nodes()
+            .map(|n| {
+                let t = n.transform();
+                let local =
+                    DMat4::from_cols_array_2d(&t.clone().matrix().map(|c| c.map(f64::from)));
+                let (tr, r, sc) = t.decomposed();
+                Node {
+                    parent: parent[n.index()],
+                    local,
+                    trs: (
+                        DVec3::from(tr.map(f64::from)),
+                        DQuat::from_array(r.map(f64::from)).normalize(),
+                        DVec3::from(sc.map(f64::from)),
+                    ),
+                }
+            })
+            .collect();
+        let mut clips = Vec::new();
+        let mut morph = false;
+        for anim in doc.animations() {
+            let mut channels = Vec::new();
+            for ch in anim.channels() {
+                match self.channel(&ch) {
+                    Ok(Some(c)) => channels.push(c),
+                    Ok(None) => morph = true,
+                    Err(m) => self.warn(format!(
+                        "animation {} channel {}: {m}; skipped",
+                        anim.index(),
+                        ch.index()
+                    )),
+                }
+            }
+            let duration = channels
+                .iter()
+                .filter_map(|c| c.times.last())
+                .fold(0.0f64, |a, &b| a.max(f64::from(b)));
+            clips.push(Clip {
+                name: anim
+                    .name()
+                    .map_or_else(|| format!("animation{}", anim.index()), str::to_string),
+                duration,
+                channels,
+            });
+        }
+        if morph {
+            self.warn("morph target weights are not animated: meshes keep their base shape");
+        }
+        self.parts.animations = Some(Arc::new(Animations {
+            nodes,
+            objects: std::mem::take(&mut self.placed),
+            clips,
+        }));
+    }
+
+    /// One channel's keys, checked (`None` for morph target weights).
+    fn channel(
+        &self,
+        ch: &gltf::animation::Channel,
+    ) -> std::result::Result<Option<Channel>, String> {
+        use gltf::animation::util::ReadOutputs;
+        let buffers = &self.buffers;
+        let reader = ch.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
+        let times: Vec<f32> = reader
+            .read_inputs()
+            .ok_or("its key times cannot be read")?
+            .collect();
+        let (property, values): (Property, Vec<[f32; 4]>) =
+            match reader.read_outputs().ok_or("its values cannot be read")? {
+                ReadOutputs::Translations(v) => (
+                    Property::Translation,
+                    v.map(|p| [p[0], p[1], p[2], 0.0]).collect(),
+                ),
+                ReadOutputs::Scales(v) => (
+                    Property::Scale,
+                    v.map(|p| [p[0], p[1], p[2], 0.0]).collect(),
+                ),
+                ReadOutputs::Rotations(v) => (Property::Rotation, v.into_f32().collect()),
+                ReadOutputs::MorphTargetWeights(_) => return Ok(None),
+            };
+        let interpolation = match ch.sampler().interpolation() {
+            gltf::animation::Interpolation::Step => Interpolation::Step,
+            gltf::animation::Interpolation::Linear => Interpolation::Linear,
+            gltf::animation::Interpolation::CubicSpline => Interpolation::CubicSpline,
+        };
+        let per_key = if interpolation == Interpolation::CubicSpline {
+            3
+        } else {
+            1
+        };
+        if times.is_empty() || values.len() != per_key * times.len() {
+            return Err(format!(
+                "{} values for {} key times ({per_key} per key expected)",
+                values.len(),
+                times.len()
+            ));
+        }
+        if times.iter().any(|t| !t.is_finite()) || times.windows(2).any(|w| w[1] < w[0]) {
+            return Err("its key times are not finite and non-decreasing".into());
+        }
+        if values.iter().flatten().any(|x| !x.is_finite()) {
+            return Err("a value is not finite".into());
+        }
+        Ok(Some(Channel {
+            node: ch.target().node().index(),
+            property,
+            interpolation,
+            times,
+            values,
+        }))
     }
 
     /// `EXT_mesh_gpu_instancing`: per-instance TRS matrices, or `None` without the extension.

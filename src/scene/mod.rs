@@ -4,6 +4,7 @@
 //! once at construction so every later stage can trust it.
 
 pub mod adjacency;
+pub mod animation;
 pub mod gltf;
 pub mod obj;
 pub mod pose;
@@ -91,6 +92,8 @@ pub struct SceneParts {
     pub lights: Vec<Light>,
     pub cameras: Vec<Camera>,
     pub warnings: Vec<String>,
+    /// glTF node animations, with where each object hangs in the node hierarchy.
+    pub animations: Option<Arc<animation::Animations>>,
 }
 
 /// A validated triangle scene. Immutable: the BVH and GPU buffers are cached on first use.

@@ -128,6 +128,26 @@ impl Scene {
         self.pose.as_ref()
     }
 
+    /// The scene's animation clips as (name, duration in seconds); empty without any.
+    pub fn animations(&self) -> Vec<(String, f64)> {
+        let clips = self.parts.animations.as_ref().map(|a| a.clips.as_slice());
+        clips
+            .unwrap_or_default()
+            .iter()
+            .map(|c| (c.name.clone(), c.duration))
+            .collect()
+    }
+
+    /// The scene posed at `t` seconds into the animation `clip` (its index or name; `t`
+    /// clamped to the clip).
+    pub fn at(self: &Arc<Self>, t: f64, clip: &str) -> Result<Scene> {
+        let Some(a) = &self.parts.animations else {
+            return input_err!("the scene has no animations");
+        };
+        let transforms = a.transforms(a.clip(clip)?, t)?;
+        self.posed(&transforms)
+    }
+
     /// What posing `self` (a scene as loaded) needs, built on first use.
     pub fn rig(&self) -> Arc<Rig> {
         self.derived(|| Rig::of(self))
@@ -198,6 +218,7 @@ impl Scene {
             objects: base.parts.objects.clone(),
             lights: base.parts.lights.clone(),
             cameras: base.parts.cameras.clone(),
+            animations: base.parts.animations.clone(),
             ..Default::default()
         };
         let pose = Pose {

@@ -1,0 +1,251 @@
+//! glTF node animations (glTF 2.0 §3.11, and Appendix C for the interpolations): per clip,
+//! channels that key a node's translation, rotation or scale, sampled STEP, LINEAR (rotations
+//! by spherical interpolation) or CUBICSPLINE (Hermite, with the keys' in- and out-tangents).
+//! A clip at a time gives each object of the scene the transform from its place as loaded to
+//! its place then, which [`Scene::posed`](super::Scene::posed) applies.
+
+use glam::{DMat4, DQuat, DVec3};
+
+use crate::error::Result;
+use crate::input_err;
+
+/// A node's place in the hierarchy and its transform as loaded.
+#[derive(Debug, Clone)]
+pub struct Node {
+    pub parent: Option<usize>,
+    /// The local transform as loaded (the node's matrix, or its TRS composed).
+    pub local: DMat4,
+    /// The local transform as translation, rotation and scale (decomposed from a matrix).
+    pub trs: (DVec3, DQuat, DVec3),
+}
+
+/// Where an object of the scene comes from: its node, the instance transform under it
+/// (`EXT_mesh_gpu_instancing`; identity otherwise), and the world transform it was loaded with.
+#[derive(Debug, Clone)]
+pub struct Placed {
+    pub node: usize,
+    pub instance: DMat4,
+    pub loaded: DMat4,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Property {
+    Translation,
+    Rotation,
+    Scale,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Interpolation {
+    Step,
+    Linear,
+    CubicSpline,
+}
+
+/// One animated property of one node: key times (seconds, non-decreasing) and values (xyz, or
+/// a quaternion's xyzw); CUBICSPLINE keys hold in-tangent, value and out-tangent, in that order.
+#[derive(Debug, Clone)]
+pub struct Channel {
+    pub node: usize,
+    pub property: Property,
+    pub interpolation: Interpolation,
+    pub times: Vec<f32>,
+    pub values: Vec<[f32; 4]>,
+}
+
+#[derive(Debug, Clone)]
+pub struct Clip {
+    pub name: String,
+    /// The last key time over its channels, in seconds.
+    pub duration: f64,
+    pub channels: Vec<Channel>,
+}
+
+/// A scene's node hierarchy, where its objects hang in it, and its clips.
+#[derive(Debug, Clone, Default)]
+pub struct Animations {
+    pub nodes: Vec<Node>,
+    pub objects: Vec<Placed>,
+    pub clips: Vec<Clip>,
+}
+
+impl Channel {
+    /// The property's value at `t` (clamped to the keys).
+    fn sample(&self, t: f64) -> [f64; 4] {
+        let times = &self.times;
+        let n = times.len();
+        let cubic = self.interpolation == Interpolation::CubicSpline;
+        let value = |k: usize| {
+            let v = self.values[if cubic { 3 * k + 1 } else { k }];
+            v.map(f64::from)
+        };
+        if n == 1 || t <= f64::from(times[0]) {
+            return value(0);
+        }
+        if t >= f64::from(times[n - 1]) {
+            return value(n - 1);
+        }
+        // The key at or before t.
+        let k = times.partition_point(|&x| f64::from(x) <= t) - 1;
+        let (t0, t1) = (f64::from(times[k]), f64::from(times[k + 1]));
+        let dt = t1 - t0;
+        let s = if dt > 0.0 { (t - t0) / dt } else { 0.0 };
+        let (a, b) = (value(k), value(k + 1));
+        match self.interpolation {
+            Interpolation::Step => a,
+            Interpolation::Linear if self.property == Property::Rotation => {
+                let q = |v: [f64; 4]| DQuat::from_xyzw(v[0], v[1], v[2], v[3]).normalize();
+                q(a).slerp(q(b), s).to_array()
+            }
+            Interpolation::Linear => std::array::from_fn(|i| a[i] + s * (b[i] - a[i])),
+            Interpolation::CubicSpline => {
+                let out_a = self.values[3 * k + 2].map(f64::from);
+                let in_b = self.values[3 * (k + 1)].map(f64::from);
+                let (s2, s3) = (s * s, s * s * s);
+                std::array::from_fn(|i| {
+                    (2.0 * s3 - 3.0 * s2 + 1.0) * a[i]
+                        + (s3 - 2.0 * s2 + s) * dt * out_a[i]
+                        + (-2.0 * s3 + 3.0 * s2) * b[i]
+                        + (s3 - s2) * dt * in_b[i]
+                })
+            }
+        }
+    }
+}
+
+impl Animations {
+    /// The clip named or numbered `clip`.
+    pub fn clip(&self, clip: &str) -> Result<usize> {
+        if let Ok(k) = clip.parse::<usize>() {
+            if k < self.clips.len() {
+                return Ok(k);
+            }
+        }
+        match self.clips.iter().position(|c| c.name == clip) {
+            Some(k) => Ok(k),
+            None => input_err!(
+                "no animation {clip:?}: the scene has {} ({:?})",
+                self.clips.len(),
+                self.clips
+                    .iter()
+                    .map(|c| c.name.as_str())
+                    .collect::<Vec<_>>()
+            ),
+        }
+    }
+
+    /// Each object's transform from its place as loaded to its place at `t` seconds into clip
+    /// `clip` (`t` clamped to the clip, as glTF's samplers hold their first and last keys).
+    /// Objects under no animated node keep the identity exactly.
+    pub fn transforms(&self, clip: usize, t: f64) -> Result<Vec<DMat4>> {
+        let Some(c) = self.clips.get(clip) else {
+            return input_err!("no animation {clip}: the scene has {}", self.clips.len());
+        };
+        if !t.is_finite() {
+            return input_err!("the time must be finite, got {t}");
+        }
+        let t = t.clamp(0.0, c.duration);
+        let mut trs: Vec<Option<(DVec3, DQuat, DVec3)>> = vec![None; self.nodes.len()];
+        for ch in &c.channels {
+            let v = ch.sample(t);
+            let (tr, rot, sc) = trs[ch.node].get_or_insert(self.nodes[ch.node].trs);
+            match ch.property {
+                Property::Translation => *tr = DVec3::new(v[0], v[1], v[2]),
+                Property::Scale => *sc = DVec3::new(v[0], v[1], v[2]),
+                Property::Rotation => *rot = DQuat::from_array(v).normalize(),
+            }
+        }
+        // World transforms at t of the nodes with an animated ancestor (or themselves).
+        let mut world: Vec<Option<Option<DMat4>>> = vec![None; self.nodes.len()];
+        let out = self
+            .objects
+            .iter()
+            .map(|p| match self.world_at(p.node, &trs, &mut world) {
+                None => DMat4::IDENTITY,
+                Some(w) => w * p.instance * p.loaded.inverse(),
+            });
+        Ok(out.collect())
+    }
+
+    /// Node `i`'s world transform at the sampled `trs`, or `None` when neither it nor an
+    /// ancestor is animated (memoised in `world`).
+    fn world_at(
+        &self,
+        i: usize,
+        trs: &[Option<(DVec3, DQuat, DVec3)>],
+        world: &mut [Option<Option<DMat4>>],
+    ) -> Option<DMat4> {
+        if let Some(w) = world[i] {
+            return w;
+        }
+        let n = &self.nodes[i];
+        let local = trs[i].map(|(t, r, s)| DMat4::from_scale_rotation_translation(s, r, t));
+        let parent = n.parent.map(|p| (p, self.world_at(p, trs, world)));
+        let w = match (parent, local) {
+            (None, None) | (Some((_, None)), None) => None,
+            (None, Some(l)) => Some(l),
+            (Some((p, pw)), l) => {
+                let pw = pw.unwrap_or_else(|| self.rest_world(p));
+                Some(pw * l.unwrap_or(n.local))
+            }
+        };
+        world[i] = Some(w);
+        w
+    }
+
+    /// Node `i`'s world transform as loaded.
+    fn rest_world(&self, i: usize) -> DMat4 {
+        let n = &self.nodes[i];
+        match n.parent {
+            None => n.local,
+            Some(p) => self.rest_world(p) * n.local,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn channel(property: Property, interpolation: Interpolation, values: Vec<[f32; 4]>) -> Channel {
+        Channel {
+            node: 0,
+            property,
+            interpolation,
+            times: vec![0.0, 1.0, 3.0],
+            values,
+        }
+    }
+
+    #[test]
+    fn each_interpolation_between_and_at_keys() {
+        let v = vec![[0., 0., 0., 0.], [2., 0., 0., 0.], [2., 4., 0., 0.]];
+        let lin = channel(Property::Translation, Interpolation::Linear, v.clone());
+        assert_eq!(lin.sample(0.5)[0], 1.0);
+        assert_eq!(lin.sample(2.0), [2.0, 2.0, 0.0, 0.0]);
+        assert_eq!(lin.sample(-1.0)[0], 0.0);
+        assert_eq!(lin.sample(9.0)[1], 4.0);
+        let step = channel(Property::Translation, Interpolation::Step, v);
+        assert_eq!(step.sample(0.99)[0], 0.0);
+        assert_eq!(step.sample(1.0)[0], 2.0);
+        // Cubic: zero tangents give smoothstep between the values.
+        let z = [0.0; 4];
+        let cubic = channel(
+            Property::Translation,
+            Interpolation::CubicSpline,
+            vec![
+                z,
+                [0., 0., 0., 0.],
+                z,
+                z,
+                [1., 0., 0., 0.],
+                z,
+                z,
+                [1., 0., 0., 0.],
+                z,
+            ],
+        );
+        assert_eq!(cubic.sample(0.5)[0], 0.5);
+        assert!((cubic.sample(0.25)[0] - (3.0 * 0.0625 - 2.0 * 0.015625)).abs() < 1e-12);
+    }
+}

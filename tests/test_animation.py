@@ -1,0 +1,145 @@
+"""glTF node animations (``Scene.animations``, ``Scene.at``): each interpolation against poses
+computed by hand at keys and between them, clamping outside a clip, a parent's animation
+carrying its child, and bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scenesample as ss
+from gltf_builder import add_accessor, document, write
+
+TRI = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], dtype=np.float32)
+ROOT = np.array([10.0, 0.0, 0.0])
+
+
+def _animated(tmp_path):
+    """The triangle on node 0, a child of node 1 (translated by ROOT), with three clips."""
+    doc = document(TRI)
+    doc["nodes"] = [{"mesh": 0, "name": "tri"}, {"children": [0], "translation": list(ROOT)}]
+    doc["scenes"] = [{"nodes": [1]}]
+
+    def sampler(times, values, kind, interpolation):
+        i = add_accessor(doc, np.asarray(times, np.float32)[:, None], "SCALAR")
+        o = add_accessor(doc, np.asarray(values, np.float32), kind)
+        return {"input": i, "output": o, "interpolation": interpolation}
+
+    z, one, three = [0, 0, 0], [1, 1, 1], [3, 3, 3]
+    quarter = [0, 0, np.sin(np.pi / 4), np.cos(np.pi / 4)]
+    clips = [
+        ("move", 0, "translation", sampler([0, 1, 2], [z, [1, 0, 0], [1, 2, 0]], "VEC3", "LINEAR")),
+        ("turn", 1, "rotation", sampler([0, 1], [[0, 0, 0, 1], quarter], "VEC4", "STEP")),
+        ("grow", 0, "scale", sampler([0, 2], [z, one, z, z, three, z], "VEC3", "CUBICSPLINE")),
+        ("spin", 1, "rotation", sampler([0, 2], [[0, 0, 0, 1], quarter], "VEC4", "LINEAR")),
+    ]
+    doc["animations"] = [
+        {
+            "name": name,
+            "samplers": [s],
+            "channels": [{"sampler": 0, "target": {"node": node, "path": path}}],
+        }
+        for name, node, path, s in clips
+    ]
+    # The accessors' buffers are data URIs of their own; byteLength must match each.
+    return ss.Scene.load(write(doc, tmp_path / "animated.gltf"))
+
+
+def _rz(angle):
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+
+@pytest.fixture
+def scene(tmp_path):
+    return _animated(tmp_path)
+
+
+def test_clips_are_listed_with_their_durations(scene):
+    assert scene.animations == [("move", 2.0), ("turn", 1.0), ("grow", 2.0), ("spin", 2.0)]
+    np.testing.assert_allclose(scene.vertices, TRI + ROOT)
+
+
+@pytest.mark.parametrize(
+    "clip, t, expect",
+    [
+        ("move", 0.0, TRI + ROOT),
+        ("move", 0.5, TRI + ROOT + [0.5, 0, 0]),
+        ("move", 1.0, TRI + ROOT + [1, 0, 0]),
+        ("move", 1.5, TRI + ROOT + [1, 1, 0]),
+        ("move", 99.0, TRI + ROOT + [1, 2, 0]),  # clamped to the last key
+        ("move", -3.0, TRI + ROOT),  # and to the first
+        ("turn", 0.99, TRI + ROOT),  # STEP holds the key before
+        ("turn", 1.0, TRI @ _rz(np.pi / 2).T + ROOT),
+        ("grow", 1.0, 2 * TRI + ROOT),  # zero tangents: smoothstep(0.5) = 0.5 of the way
+        ("grow", 0.5, (1 + 2 * (3 * 0.0625 - 2 * 0.015625)) * TRI + ROOT),
+        ("grow", 2.0, 3 * TRI + ROOT),
+        ("spin", 1.0, TRI @ _rz(np.pi / 4).T + ROOT),  # slerp halfway: an eighth turn
+    ],
+)
+def test_each_interpolation_at_keys_and_between(scene, clip, t, expect):
+    posed = scene.at(t, clip)
+    np.testing.assert_allclose(posed.vertices, expect, atol=2e-6)
+
+
+def test_a_clip_by_index_equals_it_by_name(scene):
+    np.testing.assert_array_equal(scene.at(0.7, 3).vertices, scene.at(0.7, "spin").vertices)
+    # A posed scene animates from the scene as loaded.
+    np.testing.assert_array_equal(
+        scene.at(1.0, "move").at(0.7, 3).vertices, scene.at(0.7, 3).vertices
+    )
+
+
+def test_rays_see_the_animated_triangle(scene):
+    posed = scene.at(1.5, "move")
+    hit = ss.cast_rays(posed, [[11.2, 1.2, 5]], [[0, 0, -1]])
+    assert hit.triangle[0] == 0 and hit.t[0] == pytest.approx(5.0)
+    assert ss.cast_rays(scene, [[11.2, 1.2, 5]], [[0, 0, -1]]).triangle[0] == -1
+
+
+def test_a_scene_without_animations_has_none(tmp_path):
+    plain = ss.Scene.load(write(document(TRI), tmp_path / "plain.gltf"))
+    assert plain.animations == []
+    with pytest.raises(ss.InputError, match="no animations"):
+        plain.at(0.0)
+    assert ss.Scene.from_arrays(TRI, [[0, 1, 2]]).animations == []
+
+
+@pytest.mark.parametrize(
+    "t, clip, match",
+    [
+        (float("nan"), 0, "finite"),
+        (float("inf"), 0, "finite"),
+        (0.0, 7, "no animation 7"),
+        (0.0, "dance", "no animation"),
+        (0.0, 1.5, "index or a name"),
+    ],
+)
+def test_bad_times_and_clips_are_refused(scene, t, clip, match):
+    with pytest.raises(ss.InputError, match=match):
+        scene.at(t, clip)
+
+
+def test_a_broken_channel_is_skipped_with_a_warning(tmp_path):
+    doc = document(TRI)
+    i = add_accessor(doc, np.array([[0.0], [1.0]]), "SCALAR")
+    o = add_accessor(doc, np.array([[0, 0, 0]]), "VEC3")  # one value for two keys
+    doc["animations"] = [
+        {
+            "samplers": [{"input": i, "output": o}],
+            "channels": [{"sampler": 0, "target": {"node": 0, "path": "translation"}}],
+        }
+    ]
+    with pytest.warns(ss.SceneWarning, match="skipped"):
+        s = ss.Scene.load(write(doc, tmp_path / "broken.gltf"))
+    assert s.animations == [("animation0", 0.0)]
+    np.testing.assert_array_equal(s.at(0.5).vertices, s.vertices)
+
+
+def test_skins_warn_and_stay_in_their_rest_pose(tmp_path):
+    doc = document(TRI)
+    doc["nodes"] = [{"mesh": 0, "skin": 0}, {"name": "joint"}]
+    doc["scenes"] = [{"nodes": [0, 1]}]
+    doc["skins"] = [{"joints": [1]}]
+    with pytest.warns(ss.SceneWarning, match="skins are not posed"):
+        s = ss.Scene.load(write(doc, tmp_path / "skinned.gltf"))
+    np.testing.assert_array_equal(s.vertices, TRI)
