@@ -242,3 +242,30 @@ def test_the_same_poses_give_the_same_bits_in_another_process(scenes, tmp_path):
         h.t.tobytes() + h.triangle.tobytes() + h.barycentric.tobytes()
     ).hexdigest()
     assert out == [mine, mine]
+
+
+def test_evaluate_a_sequence_reports_error_and_flicker_per_frame():
+    rng = np.random.default_rng(4)
+    ref = [rng.uniform(0, 1, (16, 16, 3)) for _ in range(4)]
+    same = ss.evaluate(ref, ref, "image")
+    assert same["overall"]["rmse"] == 0 and same["overall"]["flicker"] == 0
+    assert np.isnan(same["flicker"][0]) and len(same["per_frame"]) == 4
+    assert same["overall"]["reference_change"] > 0
+    # A steady error does not flicker; an error that jumps does.
+    steady = ss.evaluate([np.clip(r * 0.5, 0, 1) for r in ref], ref, "image")
+    noisy = ss.evaluate([rng.uniform(0, 1, (16, 16, 3)) for _ in ref], ref, "image")
+    assert steady["overall"]["rmse"] > 0
+    assert noisy["overall"]["flicker"] > 2 * steady["overall"]["flicker"]
+    with pytest.raises(ss.InputError, match="as many reference frames"):
+        ss.evaluate(ref, ref[:2], "image")
+
+
+def test_the_animation_experiment_runs_every_method_on_every_frame(tmp_path):
+    from scenesample.experiments import epr_animation
+
+    epr_animation.main(["--quick", "--out", str(tmp_path)])
+    md = (tmp_path / "epr_animation.md").read_text()
+    for m in ("EPR", "MVR", "IVIR"):
+        assert f"| {m} |" in md
+    rows = (tmp_path / "epr_animation.csv").read_text().splitlines()
+    assert len(rows) == 1 + 3 * 6

@@ -11,7 +11,7 @@ import numpy as np
 from . import _core
 from ._depth import conventional
 from ._field import FieldView, cells_metric
-from ._images import image_metrics, impostor_metrics, reflection_metrics
+from ._images import display, image_metrics, impostor_metrics, reflection_metrics
 from ._impostors import ImpostorView
 from ._omni import OmniShadowResult
 from ._reflections import ReflectionResult
@@ -100,6 +100,8 @@ def evaluate(
     ``"sampling"``, ``Mesh`` + Scene -> ``"geometry"``, ``FieldView`` + Scene -> ``"cells"``,
     two shadow results -> ``"shadow"``, two ``ImpostorView`` -> ``"impostor"``, a
     ``ReflectionResult`` against one -> ``"reflection"``, any other two images -> ``"image"``.
+    Two lists (frames of an animation and their references) give each pair's metrics and the
+    sequence's temporal flicker (see :func:`evaluate_sequence`).
 
     ``evaluate(result, reference, "image")``: any image-like result (``DepthImages`` (their
     base colour), ``ImpostorView``, ``ReflectionResult``, ``Frame``, ``ShadowResult`` and
@@ -214,6 +216,8 @@ def evaluate(
     InputError
         Unknown metric or redundancy, images without reference cameras, bad ``intermediate``.
     """
+    if isinstance(images, (list, tuple)):
+        return evaluate_sequence(images, scene, metric)
     if metric is None:
         metric = default_metric(images, scene)
     if metric not in METRICS:
@@ -346,3 +350,81 @@ def _geometry_error(
         "max_depth_error": float(err.max()) if err.size else float("nan"),
         "timings": {"total": time.perf_counter() - start},
     }
+
+
+def evaluate_sequence(
+    frames: Sequence[Any], references: Sequence[Any], metric: Optional[Metric] = None
+) -> dict[str, Any]:
+    """Accuracy and temporal stability of an animation: ``frames[k]`` against
+    ``references[k]`` (the same metric as :func:`evaluate` of one pair).
+
+    Returns ``per_frame`` (each pair's metrics), ``overall`` (each scalar metric's mean over
+    the frames), and for image-like frames the temporal figures, on the 0-255 scale of the
+    8-bit sRGB display: ``flicker`` (per frame from the second on, the mean over pixels of the
+    absolute change of the error image |frame - reference|, channels averaged, from the frame
+    before) and ``reference_change`` (the same for the reference images themselves: how much
+    the scene's motion changes the picture), with their means and ``flicker_ratio`` (mean
+    flicker over mean reference change) in ``overall``. A method as stable as its reference
+    flickers near 0; flicker comparable to the reference's change means its errors jump
+    around as much as the picture moves. When each pair's metrics carry a ``mask`` (the
+    reflection metric's mirror pixels), the same figures over the pixels masked in both frames
+    come as ``flicker_reflective`` and ``reference_change_reflective``.
+    """
+    frames, references = list(frames), list(references)
+    if not frames or not isinstance(references, list) or len(references) != len(frames):
+        raise InputError(
+            f"a sequence needs as many reference frames as frames, got {len(frames)} and "
+            f"{len(references) if isinstance(references, list) else type(references).__name__}"
+        )
+    per_frame = [evaluate(a, b, metric) for a, b in zip(frames, references)]
+    overall: dict[str, Any] = {}
+    for key, v in per_frame[0].items():
+        if isinstance(v, (int, float, np.floating, np.integer)) and not isinstance(v, bool):
+            overall[key] = float(np.mean([f[key] for f in per_frame]))
+    out: dict[str, Any] = {"per_frame": per_frame, "overall": overall}
+    try:
+        shown = [
+            (display(a)[0].astype(np.float64), display(b)[0].astype(np.float64))
+            for a, b in zip(frames, references)
+        ]
+    except InputError:
+        return out  # not images: no temporal figures
+    err = [np.abs(a - b).mean(axis=-1) for a, b in shown]
+    flicker = np.array([np.nan] + [float(np.abs(e1 - e0).mean()) for e0, e1 in zip(err, err[1:])])
+    change = np.array(
+        [np.nan] + [float(np.abs(b1 - b0).mean()) for (_, b0), (_, b1) in zip(shown, shown[1:])]
+    )
+    out["flicker"], out["reference_change"] = flicker, change
+    _temporal_means(overall, "", flicker, change)
+    masks = [f.get("mask") for f in per_frame]
+    if all(isinstance(m, np.ndarray) for m in masks):
+        # Over the pixels the metric singles out (the mirrors) in both frames.
+        both = [m0 & m1 for m0, m1 in zip(masks, masks[1:])]
+
+        def mean(x: np.ndarray, m: np.ndarray) -> float:
+            m = np.broadcast_to(m, x.shape)
+            return float(x[m].mean()) if m.any() else float("nan")
+
+        flicker_m = np.array(
+            [np.nan] + [mean(np.abs(e1 - e0), m) for e0, e1, m in zip(err, err[1:], both)]
+        )
+        change_m = np.array(
+            [np.nan]
+            + [
+                mean(np.abs(b1 - b0).mean(axis=-1), m)
+                for (_, b0), (_, b1), m in zip(shown, shown[1:], both)
+            ]
+        )
+        out["flicker_reflective"], out["reference_change_reflective"] = flicker_m, change_m
+        _temporal_means(overall, "_reflective", flicker_m, change_m)
+    return out
+
+
+def _temporal_means(
+    overall: dict[str, Any], suffix: str, flicker: np.ndarray, change: np.ndarray
+) -> None:
+    if len(flicker) < 2 or np.isnan(flicker[1:]).all():
+        return
+    f, c = float(np.nanmean(flicker)), float(np.nanmean(change))
+    overall["flicker" + suffix], overall["reference_change" + suffix] = f, c
+    overall["flicker_ratio" + suffix] = f / c if c > 0 else float("nan")

@@ -1,5 +1,5 @@
 """``python -m scenesample.experiments
-{sampling,shadows,reconstruction,epr,visibility_field,impostors} [options]``; see each
+{sampling,shadows,reconstruction,epr,epr_animation,visibility_field,impostors} [options]``; see each
 module."""
 
 from __future__ import annotations
@@ -7,13 +7,14 @@ from __future__ import annotations
 import argparse
 from typing import Optional
 
-from . import epr, impostors, reconstruction, sampling, shadows, visibility_field
+from . import epr, epr_animation, impostors, reconstruction, sampling, shadows, visibility_field
 
 EXPERIMENTS = {
     "sampling": sampling,
     "shadows": shadows,
     "reconstruction": reconstruction,
     "epr": epr,
+    "epr_animation": epr_animation,
     "visibility_field": visibility_field,
     "impostors": impostors,
 }
