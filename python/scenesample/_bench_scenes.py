@@ -74,12 +74,7 @@ def _rays(scene: Scene, n: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _median(f: Callable[[], Any], rounds: int) -> float:
-    ts = []
-    for _ in range(rounds):
-        t = time.perf_counter()
-        f()
-        ts.append(time.perf_counter() - t)
-    return statistics.median(ts)
+    return statistics.median(_seconds(lambda _: f(), None) for _ in range(rounds))
 
 
 def _seconds(f: Callable[[Any], Any], arg: Any) -> float:
