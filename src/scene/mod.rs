@@ -165,13 +165,7 @@ impl Scene {
 
     /// The scene of checked `parts` (whose faces, ids and colours are `shared`'s).
     fn assemble(parts: SceneParts, shared: Arc<Shared>, pose: Option<pose::Pose>) -> Self {
-        let bounds = compute_bounds(&parts.vertices, &shared.faces);
-        let degenerate: Vec<bool> = shared
-            .faces
-            .par_iter()
-            .with_min_len(4096)
-            .map(|f| is_degenerate(&parts.vertices, f))
-            .collect();
+        let (bounds, degenerate) = bounds_and_degenerate(&parts.vertices, &shared.faces);
         let degenerate_count = degenerate.iter().filter(|d| **d).count();
         Self {
             parts,
@@ -406,20 +400,34 @@ fn check_len(name: &str, got: Option<usize>, want: usize, of: &str) -> Result<()
     }
 }
 
-fn compute_bounds(vertices: &[[f32; 3]], faces: &[[u32; 3]]) -> [[f32; 3]; 2] {
+/// The box around the faces' corners (unreferenced vertices left out), and which faces are
+/// degenerate ([`is_degenerate`]).
+fn bounds_and_degenerate(vertices: &[[f32; 3]], faces: &[[u32; 3]]) -> ([[f32; 3]; 2], Vec<bool>) {
     let empty = || (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-    // Minima and maxima do not depend on the order they are taken in.
-    let (lo, hi) = faces
-        .par_iter()
-        .with_min_len(1 << 14)
-        .fold(empty, |(lo, hi), f| {
-            f.iter().fold((lo, hi), |(lo, hi), &k| {
-                let v = Vec3::from(vertices[k as usize]);
-                (lo.min(v), hi.max(v))
-            })
+    // One pass over the faces' corners for both (a pose pays it every frame). Minima and
+    // maxima do not depend on the order they are taken in.
+    let chunks: Vec<((Vec3, Vec3), Vec<bool>)> = faces
+        .par_chunks(1 << 14)
+        .map(|chunk| {
+            let mut bx = empty();
+            let flags = chunk
+                .iter()
+                .map(|f| {
+                    for &k in f {
+                        let v = Vec3::from(vertices[k as usize]);
+                        bx = (bx.0.min(v), bx.1.max(v));
+                    }
+                    is_degenerate(vertices, f)
+                })
+                .collect();
+            (bx, flags)
         })
-        .reduce(empty, |(a, b), (c, d)| (a.min(c), b.max(d)));
-    [lo.to_array(), hi.to_array()]
+        .collect();
+    let (lo, hi) = chunks
+        .iter()
+        .fold(empty(), |(a, b), ((c, d), _)| (a.min(*c), b.max(*d)));
+    let degenerate = chunks.into_iter().flat_map(|(_, f)| f).collect();
+    ([lo.to_array(), hi.to_array()], degenerate)
 }
 
 /// Zero area up to f64 rounding of the cross product: |e1 × e2| ≤ 1e-12·|e1|·|e2|, or a

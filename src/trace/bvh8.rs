@@ -142,23 +142,28 @@ impl Node8 {
         for o in &mut self.order {
             *o &= !((1 << ANY_SHIFT) - 1);
         }
+        // A refit calls this for every node, so it neither allocates nor branches on the
+        // keys: each slot's key (compared as `f32::total_cmp` does: its bits made a signed
+        // integer of the same order; +inf for an empty slot, which comes last) is widened
+        // with the slot below it, which makes keys unique and breaks ties by slot, and the
+        // eight are sorted by a fixed network.
+        let centre: [[f32; 8]; 3] =
+            std::array::from_fn(|a| std::array::from_fn(|k| self.b[a][k] + self.b[a + 3][k]));
         for o in 0..8u32 {
             let sign = [0, 1, 2].map(|a| if o >> a & 1 == 1 { -1.0f32 } else { 1.0 });
-            let mut slots: Vec<(f32, u32)> = (0..8)
-                .map(|k| {
-                    let key = if self.child[k] == EMPTY {
-                        f32::INFINITY
-                    } else {
-                        (0..3)
-                            .map(|a| (self.b[a][k] + self.b[a + 3][k]) * sign[a])
-                            .sum()
-                    };
-                    (key, k as u32)
-                })
-                .collect();
-            slots.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-            for (rank, &(_, k)) in slots.iter().enumerate() {
-                self.order[rank] |= k << (3 * o);
+            let mut key: [i64; 8] = std::array::from_fn(|k| {
+                let x = if self.child[k] == EMPTY {
+                    f32::INFINITY
+                } else {
+                    (0..3).map(|a| centre[a][k] * sign[a]).sum()
+                };
+                let bits = x.to_bits() as i32;
+                let ordered = bits ^ (((bits >> 31) as u32) >> 1) as i32;
+                (i64::from(ordered) << 3) | k as i64
+            });
+            sort8(&mut key);
+            for (rank, k) in key.iter().enumerate() {
+                self.order[rank] |= ((k & 7) as u32) << (3 * o);
             }
         }
     }
@@ -206,6 +211,32 @@ impl Node8 {
             std::array::from_fn(|a| (self.b[a + 3][k] - self.b[a][k]).max(0.0) as f64);
         2.0 * (e[0] * e[1] + e[1] * e[2] + e[2] * e[0])
     }
+}
+
+/// The 19 compare-exchanges that sort any eight values (Knuth, TAOCP vol. 3, §5.3.4, the
+/// optimal network for n = 8), each a branch-free min and max.
+#[rustfmt::skip]
+const SORT8: [(usize, usize); 19] = [
+    (0, 2), (1, 3), (4, 6), (5, 7),
+    (0, 4), (1, 5), (2, 6), (3, 7),
+    (0, 1), (2, 3), (4, 5), (6, 7),
+    (2, 4), (3, 5),
+    (1, 4), (3, 6),
+    (1, 2), (3, 4), (5, 6),
+];
+
+/// Sort eight keys ascending with the [`SORT8`] network, unrolled so that the keys stay in
+/// registers.
+#[inline(always)]
+fn sort8(x: &mut [i64; 8]) {
+    macro_rules! exchange {
+        ($($k:expr),*) => {$(
+            let (i, j) = SORT8[$k];
+            let (a, b) = (x[i], x[j]);
+            (x[i], x[j]) = (a.min(b), a.max(b));
+        )*};
+    }
+    exchange!(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18);
 }
 
 /// Four triangles lane by lane: `v[corner][axis][lane]`, and each lane's triangle index in the
@@ -1063,4 +1094,75 @@ pub fn sort_key(dist: f32, slot: u32) -> u32 {
 #[inline(always)]
 pub fn key_dist(key: u32) -> f32 {
     f32::from_bits(key & 0x7FFF_FFF8)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The octant orders as a stable sort of (key, slot) gives them, the definition
+    /// `Node8::set_order` must keep.
+    fn sorted_orders(n: &Node8) -> [u32; 8] {
+        let mut order = [0u32; 8];
+        for o in 0..8u32 {
+            let sign = [0, 1, 2].map(|a| if o >> a & 1 == 1 { -1.0f32 } else { 1.0 });
+            let mut slots: Vec<(f32, u32)> = (0..8)
+                .map(|k| {
+                    let key = if n.child[k] == EMPTY {
+                        f32::INFINITY
+                    } else {
+                        (0..3).map(|a| (n.b[a][k] + n.b[a + 3][k]) * sign[a]).sum()
+                    };
+                    (key, k as u32)
+                })
+                .collect();
+            slots.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            for (rank, &(_, k)) in slots.iter().enumerate() {
+                order[rank] |= k << (3 * o);
+            }
+        }
+        order
+    }
+
+    #[test]
+    fn the_network_sorts_every_input_of_zeros_and_ones() {
+        // The 0-1 principle: a network that sorts all 256 such inputs sorts every input.
+        for m in 0..256u32 {
+            let mut x: [i64; 8] = std::array::from_fn(|k| i64::from(m >> k & 1));
+            sort8(&mut x);
+            assert!(x.windows(2).all(|w| w[0] <= w[1]), "{m:08b}");
+        }
+    }
+
+    #[test]
+    fn octant_orders_rank_slots_as_a_sort_does() {
+        let mut s = 12345u64;
+        let mut r = move || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 33) as u32
+        };
+        // Ties, signed zeros and empty slots are where ranks and sorts could part.
+        let values = [0.0f32, -0.0, 1.0, -1.0, 0.5, 2.0, 1e-30, -3.25];
+        for _ in 0..5000 {
+            let mut n = Node8::EMPTY;
+            for k in 0..8 {
+                if r() % 4 != 0 {
+                    n.child[k] = k as u32;
+                    for a in 0..3 {
+                        let (lo, hi) = (values[r() as usize % 8], values[r() as usize % 8]);
+                        (n.b[a][k], n.b[a + 3][k]) = (lo.min(hi), lo.max(hi));
+                    }
+                }
+            }
+            n.order = [0xAB << ANY_SHIFT; 8];
+            let want = sorted_orders(&n);
+            n.set_order();
+            for (got, want) in n.order.iter().zip(want) {
+                assert_eq!(got & ((1 << ANY_SHIFT) - 1), want);
+                assert_eq!(got >> ANY_SHIFT, 0xAB, "the any-hit order is kept");
+            }
+        }
+    }
 }

@@ -80,7 +80,7 @@ impl Bvh {
                 refit::ObjectTrees::of(&base.rig(), base.object_ids(), objects, params)
             });
             return Self {
-                tree: trees.posed(&pose.transforms),
+                tree: trees.posed(scene.vertices(), scene.faces()),
                 build_seconds: start.elapsed().as_secs_f64(),
             };
         }

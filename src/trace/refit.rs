@@ -8,13 +8,13 @@
 
 use std::ops::Range;
 
-use glam::{DMat4, Vec3A};
+use glam::Vec3A;
 use rayon::prelude::*;
 
 use super::build::{self, padded_box, Aabb, BuildParams, Out};
 use super::bvh8::{leaf_blocks, node_index, node_ref, Bvh8, Node8, Tri4, EMPTY, LEAF};
 use super::watertight::Tri;
-use crate::scene::pose::{transform_point, Rig};
+use crate::scene::pose::Rig;
 
 /// The tree of a scene as loaded, laid out for posing: room for the top tree's nodes first,
 /// then each object's subtree over its triangles as loaded (its nodes and blocks contiguous,
@@ -30,14 +30,11 @@ pub struct ObjectTrees {
     depth: u32,
 }
 
-/// An object's part of [`ObjectTrees`]: its index in the scene, its nodes (the root first)
-/// and blocks, and its root's triangle area and expected cost (for the any-hit order of the
-/// top tree above it).
+/// An object's part of [`ObjectTrees`]: its nodes (the root first), and its root's triangle
+/// area and expected cost (for the any-hit order of the top tree above it).
 #[derive(Debug)]
 struct Object {
-    index: usize,
     nodes: Range<usize>,
-    blocks: Range<usize>,
     stats: (f64, f64),
 }
 
@@ -50,11 +47,10 @@ impl ObjectTrees {
         }
         let v = &rig.vertices;
         let corner = |k: u32| Vec3A::from(v[k as usize]);
-        let trees: Vec<(usize, Bvh8, (f64, f64))> = faces_of
+        let trees: Vec<(Bvh8, (f64, f64))> = faces_of
             .into_par_iter()
-            .enumerate()
-            .filter(|(_, faces)| !faces.is_empty())
-            .map(|(index, faces)| {
+            .filter(|faces| !faces.is_empty())
+            .map(|faces| {
                 let tris: Vec<Tri> = faces
                     .iter()
                     .map(|&f| Tri {
@@ -69,7 +65,7 @@ impl ObjectTrees {
                     }
                 }
                 let stats = build::rank_for_any_hit(&mut tree.nodes, &tree.blocks);
-                (index, tree, stats)
+                (tree, stats)
             })
             .collect();
         let top_count = top_node_count(trees.len());
@@ -78,8 +74,8 @@ impl ObjectTrees {
             ..Default::default()
         };
         let mut parts = Vec::with_capacity(trees.len());
-        for (index, tree, stats) in trees {
-            let (n0, b0) = (out.nodes.len(), out.blocks.len());
+        for (tree, stats) in trees {
+            let n0 = out.nodes.len();
             let sub = Out {
                 nodes: tree.nodes,
                 blocks: tree.blocks,
@@ -87,9 +83,7 @@ impl ObjectTrees {
             };
             out.append(sub);
             parts.push(Object {
-                index,
                 nodes: n0..out.nodes.len(),
-                blocks: b0..out.blocks.len(),
                 stats,
             });
         }
@@ -102,21 +96,40 @@ impl ObjectTrees {
         }
     }
 
-    /// The tree of the scene whose object `o` is moved by `transforms[o]`.
-    pub fn posed(&self, transforms: &[DMat4]) -> Bvh8 {
+    /// The tree of the posed scene whose `vertices` and `faces` are given (`Scene::posed`
+    /// moved this tree's scene's rig vertices by their objects' transforms, with the same f64
+    /// transform and f32 rounding the blocks' corners need, so they are gathered, not moved
+    /// again).
+    pub fn posed(&self, vertices: &[[f32; 3]], faces: &[[u32; 3]]) -> Bvh8 {
+        // Blocks are written once, from the rest tree's ids and the posed corners.
+        let blocks: Vec<Tri4> = self
+            .blocks
+            .par_iter()
+            .with_min_len(1 << 12)
+            .map(|b| {
+                let mut out = *b;
+                for lane in (0..4).filter(|&l| b.id[l] != u32::MAX) {
+                    let face = faces[b.id[lane] as usize];
+                    for (c, &k) in face.iter().enumerate() {
+                        let p = vertices[k as usize];
+                        for (a, &x) in p.iter().enumerate() {
+                            out.v[c][a][lane] = x;
+                        }
+                    }
+                }
+                out
+            })
+            .collect();
         let mut nodes = self.nodes.clone();
-        let mut blocks = self.blocks.clone();
-        // Each object's nodes and blocks, apart, in order.
+        // Each object's nodes apart, in order.
         let mut work = Vec::with_capacity(self.objects.len());
-        let (mut rest_n, mut rest_b) = (&mut nodes[self.top_count..], &mut blocks[..]);
+        let mut rest = &mut nodes[self.top_count..];
         for o in &self.objects {
-            let (n, tail_n) = std::mem::take(&mut rest_n).split_at_mut(o.nodes.len());
-            let (b, tail_b) = std::mem::take(&mut rest_b).split_at_mut(o.blocks.len());
-            (rest_n, rest_b) = (tail_n, tail_b);
-            work.push((o, n, b));
+            let (n, tail) = std::mem::take(&mut rest).split_at_mut(o.nodes.len());
+            rest = tail;
+            work.push((o, n));
         }
-        work.into_par_iter()
-            .for_each(|(o, n, b)| refit(n, b, o, &transforms[o.index]));
+        work.into_par_iter().for_each(|(o, n)| refit(n, &blocks, o));
         let mut items: Vec<(Aabb, usize)> = self
             .objects
             .iter()
@@ -155,20 +168,11 @@ fn top_node_count(n: usize) -> usize {
     nodes.len()
 }
 
-/// Object `o`'s part of a tree (`nodes` and `blocks`, whose references are the whole tree's)
-/// with its corners moved by `m` and its boxes refit from the leaves up (children follow their
-/// parents). The any-hit order is the one built for the object as loaded.
-fn refit(nodes: &mut [Node8], blocks: &mut [Tri4], o: &Object, m: &DMat4) {
-    for b in blocks.iter_mut() {
-        for lane in (0..4).filter(|&l| b.id[l] != u32::MAX) {
-            let moved = b.corners(lane).map(|c| transform_point(m, c));
-            for (c, p) in moved.iter().enumerate() {
-                for (a, &x) in p.iter().enumerate() {
-                    b.v[c][a][lane] = x;
-                }
-            }
-        }
-    }
+/// Object `o`'s nodes (`nodes`, whose references are the whole tree's, as are the indices
+/// into `blocks`, the whole tree's blocks with their corners posed) with their boxes refit from
+/// the leaves up (children follow their parents). The any-hit order is the one built for the
+/// object as loaded.
+fn refit(nodes: &mut [Node8], blocks: &[Tri4], o: &Object) {
     for i in (0..nodes.len()).rev() {
         for k in 0..8 {
             let c = nodes[i].child[k];
@@ -176,9 +180,8 @@ fn refit(nodes: &mut [Node8], blocks: &mut [Tri4], o: &Object, m: &DMat4) {
                 continue;
             }
             let bx = if c & LEAF != 0 {
-                let r = leaf_blocks(c);
                 let mut bx = Aabb::EMPTY;
-                for b in &blocks[r.start - o.blocks.start..r.end - o.blocks.start] {
+                for b in &blocks[leaf_blocks(c)] {
                     for lane in (0..4).filter(|&l| b.id[l] != u32::MAX) {
                         bx.grow(&padded_box(&b.tri(lane)));
                     }
