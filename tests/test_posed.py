@@ -244,6 +244,42 @@ def test_the_same_poses_give_the_same_bits_in_another_process(scenes, tmp_path):
     assert out == [mine, mine]
 
 
+def _posed_hits_hash(k: int) -> str:
+    """A fork pool's work: pose the module's scene (its object trees built in the parent before
+    the fork) with the poses of frame `k`, cast the rays, hash the hits."""
+    import hashlib
+
+    poses = _poses(len(_FORKED["parts"]))
+    poses[2] = _rotation([1, 1, 0], 1.1 + 0.3 * k)
+    poses[3] = trimesh.transformations.translation_matrix([0, 0.2 * k, 0.5])
+    posed = _FORKED["base"].posed(poses)
+    o, d = _rays(posed)
+    h = ss.cast_rays(posed, o, d)
+    return hashlib.sha256(
+        h.t.tobytes() + h.triangle.tobytes() + h.barycentric.tobytes()
+    ).hexdigest()
+
+
+_FORKED: dict = {}
+
+
+def test_poses_in_forked_workers_give_the_parents_bits():
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    parts, places = _meshes()
+    _FORKED.update(base=ss.Scene.from_meshes(parts, places), parts=parts)
+    mine = [_posed_hits_hash(k) for k in range(3)]  # builds and caches the object trees
+    ex = ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("fork"))
+    try:
+        theirs = list(ex.map(_posed_hits_hash, [2, 1, 0, 1]))
+    finally:
+        ex.shutdown()
+        _FORKED.clear()
+    assert theirs == [mine[2], mine[1], mine[0], mine[1]]
+    assert len(set(mine)) == 3
+
+
 def test_evaluate_a_sequence_reports_error_and_flicker_per_frame():
     rng = np.random.default_rng(4)
     ref = [rng.uniform(0, 1, (16, 16, 3)) for _ in range(4)]
