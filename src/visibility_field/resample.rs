@@ -180,7 +180,8 @@ fn most_hits(f: &Samples, axes: &Axes) -> u16 {
 
 /// What one slab says about one resampled pixel's line, compact (compared at a block's
 /// corners, cached per pixel): whether each sample read saw at most `trust` cells is worked
-/// out only for the blocks that are taken ([`Trust`]), since it follows from the samples.
+/// out only for the blocks that are taken ([`Lines::trusted`]), since it follows from the
+/// samples.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(super) enum SlabRead {
     /// The line sees nothing inside the scene's bounds: answered, with nothing to read.
@@ -524,41 +525,6 @@ fn check(fields: &[(Slab, Samples)], camera: &Camera, how: &Resampling) -> Resul
     Ok(())
 }
 
-/// Whether each sample a read takes saw at most `trust` cells, remembered for the reads met
-/// before (a direct-mapped table: the reads along a block's boundary repeat a few keys).
-struct Trust {
-    table: Vec<Option<Trusted>>,
-}
-
-/// A [`Trust`] entry: slab, the read's `first` and `two`, and whether it is trusted.
-type Trusted = (usize, [u32; 4], u8, bool);
-
-impl Trust {
-    const SIZE: usize = 4096;
-
-    fn new() -> Self {
-        Trust {
-            table: vec![None; Self::SIZE],
-        }
-    }
-
-    fn of(&mut self, slab: usize, f: &Samples, first: [u32; 4], two: u8, trust: u32) -> bool {
-        let mut h = (slab as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ u64::from(two);
-        for x in first {
-            h = (h ^ u64::from(x)).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-        }
-        let at = (h >> 52) as usize % Self::SIZE;
-        if let Some((s, fi, tw, ok)) = self.table[at] {
-            if s == slab && fi == first && tw == two {
-                return ok;
-            }
-        }
-        let ok = u32::from(most_hits(f, &SlabRead::axes(first, two))) <= trust;
-        self.table[at] = Some((slab, first, two, ok));
-        ok
-    }
-}
-
 /// The most samples per axis a block's reads may span for [`span_of`]: two overlapping
 /// interpolation pairs (wider spans took no less time on khr_cameras).
 const SPAN: u32 = 3;
@@ -682,7 +648,6 @@ struct Band {
     seen: Vec<Seen>,
     seen_stamp: Vec<u32>,
     band: u32,
-    trust: Trust,
     todo: Vec<Block>,
 }
 
@@ -698,7 +663,6 @@ impl Band {
             seen: vec![None; len],
             seen_stamp: vec![0; len],
             band: 0,
-            trust: Trust::new(),
             todo: Vec::new(),
         }
     }
@@ -937,17 +901,15 @@ fn take_span(
 /// of the block (those read nothing more; the others all read these samples).
 fn take(
     lines: &Lines,
-    b: &mut Band,
+    b: &Band,
     (slab, block): (usize, Block),
     (first, two): ([u32; 4], u8),
     bits: &mut Vec<u64>,
 ) -> u8 {
-    let conservative = lines.how.conservative.is_some();
-    let f = &lines.fields[slab].1;
-    if conservative && !b.trust.of(slab, f, first, two, lines.how.trust) {
+    if !lines.trusted(slab, first, two) {
         return HELD;
     }
-    if !conservative || !b.all(block, ANSWERED) {
+    if lines.how.conservative.is_none() || !b.all(block, ANSWERED) {
         lines.set_read(bits, slab, first, two);
     }
     HELD | ANSWERED
