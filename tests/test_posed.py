@@ -305,3 +305,41 @@ def test_the_animation_experiment_runs_every_method_on_every_frame(tmp_path):
         assert f"| {m} |" in md
     rows = (tmp_path / "epr_animation.csv").read_text().splitlines()
     assert len(rows) == 1 + 3 * 6
+
+
+def _same_arrays(a, b, what):
+    """Every array field of two results equal (timings aside); returns how many compared."""
+    fields = {k: v for k, v in vars(a).items() if not k.startswith("_") and k != "timings"}
+    n = 0
+    for k, v in fields.items():
+        if isinstance(v, np.ndarray):
+            np.testing.assert_array_equal(v, getattr(b, k), err_msg=f"{what}.{k}")
+            n += 1
+    return n
+
+
+def test_peeling_the_field_impostors_and_epr_points_match_flat(scenes):
+    """The methods the other posed tests do not compare: each on the posed scene gives what it
+    gives on the same geometry built flat, array for array."""
+    _, posed, flat = scenes
+    cam = ss.Camera.look_at((0, -9, 5), (0, 0, 0), (0, 0, 1), yfov=0.9, width=64, height=48)
+    runs = {
+        "peeling": lambda s: ss.discretize(s, [cam], method="peeling", layers=3),
+        "epr": lambda s: ss.discretize(
+            s, method="epr", eye=cam, reflectors=list(s.objects[0:4:2]), progress=False
+        ),
+        "impostors": lambda s: ss.discretize(
+            s, method="impostors", octree_depth=1, resolution=16, progress=False
+        ),
+    }
+    for name, run in runs.items():
+        assert _same_arrays(run(posed), run(flat), name) > 0, name
+    fields = [
+        ss.discretize(s, method="visibility_field", quality="fast", progress=False)
+        for s in (posed, flat)
+    ]
+    assert _same_arrays(*fields, "visibility_field") > 0
+    views = [ss.reconstruct(f, cam, backend="cpu") for f in fields]
+    np.testing.assert_array_equal(views[0].marked, views[1].marked)
+    np.testing.assert_array_equal(views[0].image.triangle, views[1].image.triangle)
+    np.testing.assert_array_equal(views[0].image.depth, views[1].image.depth)
