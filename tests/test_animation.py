@@ -13,11 +13,28 @@ TRI = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], dtype=np.float32)
 ROOT = np.array([10.0, 0.0, 0.0])
 
 
-def _animated(tmp_path):
-    """The triangle on node 0, a child of node 1 (translated by ROOT), with three clips."""
+def _animated(tmp_path, lit=False):
+    """The triangle on node 0, a child of node 1 (translated by ROOT), with three clips; `lit`:
+    a spot light and a camera on node 2, also a child of node 1, one unit along x from it and
+    turned 90 degrees about x (its -Z along +y)."""
     doc = document(TRI)
     doc["nodes"] = [{"mesh": 0, "name": "tri"}, {"children": [0], "translation": list(ROOT)}]
     doc["scenes"] = [{"nodes": [1]}]
+    if lit:
+        doc["nodes"][1]["children"].append(2)
+        doc["nodes"].append(
+            {
+                "translation": [1, 0, 0],
+                "rotation": [np.sin(np.pi / 4), 0, 0, np.cos(np.pi / 4)],
+                "camera": 0,
+                "extensions": {"KHR_lights_punctual": {"light": 0}},
+            }
+        )
+        doc["cameras"] = [{"type": "perspective", "perspective": {"yfov": 0.8, "znear": 0.1}}]
+        doc["extensionsUsed"] = ["KHR_lights_punctual"]
+        doc["extensions"] = {
+            "KHR_lights_punctual": {"lights": [{"type": "spot", "name": "s", "spot": {}}]}
+        }
 
     def sampler(times, values, kind, interpolation):
         i = add_accessor(doc, np.asarray(times, np.float32)[:, None], "SCALAR")
@@ -94,6 +111,31 @@ def test_rays_see_the_animated_triangle(scene):
     hit = ss.cast_rays(posed, [[11.2, 1.2, 5]], [[0, 0, -1]])
     assert hit.triangle[0] == 0 and hit.t[0] == pytest.approx(5.0)
     assert ss.cast_rays(scene, [[11.2, 1.2, 5]], [[0, 0, -1]]).triangle[0] == -1
+
+
+def test_lights_and_cameras_on_animated_nodes_move_with_them(tmp_path):
+    """Clip "spin" turns node 1 (the light's and camera's parent) a quarter about z over 2 s:
+    the light's position and direction and the camera's pose follow; "move" animates only the
+    triangle's node, so they stay where they were loaded."""
+    scene = _animated(tmp_path, lit=True)
+    turn = np.eye(4)
+    turn[:3, :3] = _rz(np.pi / 2)
+    local = np.eye(4)
+    local[:3, :3] = [[1, 0, 0], [0, 0, -1], [0, 1, 0]]  # 90 degrees about x
+    local[:3, 3] = [1, 0, 0]
+    for clip, t, parent in [("spin", 2.0, turn), ("spin", 0.0, np.eye(4)), ("move", 2.0, None)]:
+        at = scene.at(t, clip)
+        world = local.copy() if parent is None else parent @ local
+        world[:3, 3] += ROOT
+        light = at.lights[0]  # the file's quaternions are float32: 1e-7 off
+        np.testing.assert_allclose(light["position"], world[:3, 3], atol=1e-6)
+        np.testing.assert_allclose(light["direction"], -world[:3, 2], atol=1e-6)
+        np.testing.assert_allclose(at.cameras[0].pose, world, atol=1e-6)
+    still = scene.at(1.0, "move")
+    assert still.lights[0] == scene.lights[0]
+    np.testing.assert_array_equal(still.cameras[0].pose, scene.cameras[0].pose)
+    # A pose given by hand moves objects only.
+    assert scene.posed({0: np.eye(4)}).lights[0] == scene.lights[0]
 
 
 def test_a_scene_without_animations_has_none(tmp_path):

@@ -288,6 +288,8 @@ class Scene:
             per object; later poses move and refit those and rebuild only a small tree over
             the objects. A vertex that faces of two objects share is split (one copy per
             object, appended), so :attr:`vertices` may have more rows than this scene's.
+            Lights and cameras stay where the scene as loaded has them (:meth:`at` moves those
+            on animated nodes).
         """
         objects = self.objects
         current = self.transforms
@@ -341,7 +343,9 @@ class Scene:
         -------
         Scene
             :meth:`posed` with each object's transform from its place as loaded to its place at
-            ``t``. Skins and morph targets stay in their rest pose (the load warned about them).
+            ``t``; the :attr:`lights` and :attr:`cameras` on animated nodes move with their
+            nodes too (a camera keeps only its node's rotation and translation, as at load).
+            Skins and morph targets stay in their rest pose (the load warned about them).
         """
         if isinstance(animation, bool) or not isinstance(animation, (int, np.integer, str)):
             raise InputError(f"animation must be an index or a name, got {animation!r}")

@@ -66,7 +66,20 @@ pub struct Clip {
 pub struct Animations {
     pub nodes: Vec<Node>,
     pub objects: Vec<Placed>,
+    /// The nodes of the scene's lights and cameras, in the scene's order.
+    pub lights: Vec<Placed>,
+    pub cameras: Vec<Placed>,
     pub clips: Vec<Clip>,
+}
+
+/// A clip sampled at one time: each object's transform from its place as loaded (the identity
+/// exactly under no animated node), and the world transform of each light's and camera's node
+/// (`None` under no animated node: it stays where it was loaded).
+#[derive(Debug, Clone)]
+pub struct At {
+    pub objects: Vec<DMat4>,
+    pub lights: Vec<Option<DMat4>>,
+    pub cameras: Vec<Option<DMat4>>,
 }
 
 impl Channel {
@@ -138,6 +151,11 @@ impl Animations {
     /// `clip` (`t` clamped to the clip, as glTF's samplers hold their first and last keys).
     /// Objects under no animated node keep the identity exactly.
     pub fn transforms(&self, clip: usize, t: f64) -> Result<Vec<DMat4>> {
+        Ok(self.at(clip, t)?.objects)
+    }
+
+    /// Clip `clip` sampled at `t` seconds (clamped to the clip): objects, lights and cameras.
+    pub fn at(&self, clip: usize, t: f64) -> Result<At> {
         let Some(c) = self.clips.get(clip) else {
             return input_err!("no animation {clip}: the scene has {}", self.clips.len());
         };
@@ -157,14 +175,22 @@ impl Animations {
         }
         // World transforms at t of the nodes with an animated ancestor (or themselves).
         let mut world: Vec<Option<Option<DMat4>>> = vec![None; self.nodes.len()];
-        let out = self
-            .objects
-            .iter()
-            .map(|p| match self.world_at(p.node, &trs, &mut world) {
-                None => DMat4::IDENTITY,
-                Some(w) => w * p.instance * p.loaded.inverse(),
-            });
-        Ok(out.collect())
+        let mut worlds = |places: &[Placed]| -> Vec<Option<DMat4>> {
+            places
+                .iter()
+                .map(|p| self.world_at(p.node, &trs, &mut world))
+                .collect()
+        };
+        let objects = worlds(&self.objects)
+            .into_iter()
+            .zip(&self.objects)
+            .map(|(w, p)| w.map_or(DMat4::IDENTITY, |w| w * p.instance * p.loaded.inverse()))
+            .collect();
+        Ok(At {
+            objects,
+            lights: worlds(&self.lights),
+            cameras: worlds(&self.cameras),
+        })
     }
 
     /// Node `i`'s world transform at the sampled `trs`, or `None` when neither it nor an

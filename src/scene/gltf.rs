@@ -111,6 +111,8 @@ fn load_parts(path: &Path) -> Result<SceneParts> {
         },
         image_means: HashMap::new(),
         placed: Vec::new(),
+        placed_lights: Vec::new(),
+        placed_cameras: Vec::new(),
     };
     loader.materials();
     loader.nodes()?;
@@ -240,6 +242,9 @@ struct Loader<'a> {
     image_means: HashMap<usize, Option<[f32; 4]>>,
     /// Per object, where it hangs in the node hierarchy (for animations).
     placed: Vec<Placed>,
+    /// The nodes of `parts.lights` and `parts.cameras`, in order, for animations to move.
+    placed_lights: Vec<Placed>,
+    placed_cameras: Vec<Placed>,
 }
 
 impl Loader<'_> {
@@ -381,11 +386,18 @@ impl Loader<'_> {
                 }
             }
         }
+        let at_node = Placed {
+            node: node.index(),
+            instance: DMat4::IDENTITY,
+            loaded: world,
+        };
         if let Some(light) = node.light() {
             self.light(&light, world);
+            self.placed_lights.push(at_node.clone());
         }
         if let Some(cam) = node.camera() {
             self.camera(&cam, world, node.name())?;
+            self.placed_cameras.push(at_node);
         }
         for child in node.children() {
             self.visit(child, world, stack)?;
@@ -462,6 +474,8 @@ impl Loader<'_> {
         self.parts.animations = Some(Arc::new(Animations {
             nodes,
             objects: std::mem::take(&mut self.placed),
+            lights: std::mem::take(&mut self.placed_lights),
+            cameras: std::mem::take(&mut self.placed_cameras),
             clips,
         }));
     }
@@ -808,20 +822,19 @@ impl Loader<'_> {
                 Some(outer_cone_angle),
             ),
         };
-        let dir = (world * DVec4::new(0.0, 0.0, -1.0, 0.0))
-            .truncate()
-            .normalize_or(DVec3::NEG_Z);
-        self.parts.lights.push(Light {
+        let mut placed = Light {
             name: light.name().unwrap_or("").to_string(),
             kind,
             color: light.color(),
             intensity: light.intensity(),
             range: light.range(),
-            position: world.w_axis.truncate().to_array(),
-            direction: dir.to_array(),
+            position: [0.0; 3],
+            direction: [0.0; 3],
             inner_cone_angle: inner,
             outer_cone_angle: outer,
-        });
+        };
+        placed.place(&world);
+        self.parts.lights.push(placed);
     }
 
     /// glTF cameras carry no resolution: height `CAMERA_HEIGHT`, width from the aspect ratio

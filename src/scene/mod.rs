@@ -14,7 +14,7 @@ use std::any::{Any, TypeId};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 
-use glam::{DVec3, Vec3};
+use glam::{DMat4, DVec3, DVec4, Vec3};
 use rayon::prelude::*;
 
 use crate::camera::Camera;
@@ -73,6 +73,18 @@ pub struct Light {
     pub direction: [f64; 3],
     pub inner_cone_angle: Option<f32>,
     pub outer_cone_angle: Option<f32>,
+}
+
+impl Light {
+    /// Put the light where its node's world transform `world` puts it: at the node's origin,
+    /// pointing along its −Z.
+    pub fn place(&mut self, world: &DMat4) {
+        let dir = (*world * DVec4::new(0.0, 0.0, -1.0, 0.0))
+            .truncate()
+            .normalize_or(DVec3::NEG_Z);
+        self.position = world.w_axis.truncate().to_array();
+        self.direction = dir.to_array();
+    }
 }
 
 /// Everything that defines a scene's geometry and appearance, before validation.

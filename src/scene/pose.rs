@@ -144,8 +144,21 @@ impl Scene {
         let Some(a) = &self.parts.animations else {
             return input_err!("the scene has no animations");
         };
-        let transforms = a.transforms(a.clip(clip)?, t)?;
-        self.posed(&transforms)
+        let at = a.at(a.clip(clip)?, t)?;
+        // Lights and cameras on animated nodes go where their nodes are at `t`; a camera's
+        // pose keeps only the node's rotation and translation, as at load.
+        self.posed_with(&at.objects, |parts| {
+            for (light, w) in parts.lights.iter_mut().zip(&at.lights) {
+                if let Some(w) = w {
+                    light.place(w);
+                }
+            }
+            for (camera, w) in parts.cameras.iter_mut().zip(&at.cameras) {
+                if let Some(w) = w {
+                    camera.pose = crate::camera::rigid_from(*w);
+                }
+            }
+        })
     }
 
     /// What posing `self` (a scene as loaded) needs, built on first use.
@@ -158,6 +171,16 @@ impl Scene {
     /// inverse transpose. The faces, ids, colours, materials and lights are shared with the
     /// scene as loaded; a vertex that faces of two objects share is split into one per object.
     pub fn posed(self: &Arc<Self>, transforms: &[DMat4]) -> Result<Scene> {
+        self.posed_with(transforms, |_| {})
+    }
+
+    /// [`Scene::posed`], with `place` moving the lights and cameras (copied from the scene as
+    /// loaded) before the scene is assembled.
+    fn posed_with(
+        self: &Arc<Self>,
+        transforms: &[DMat4],
+        place: impl FnOnce(&mut SceneParts),
+    ) -> Result<Scene> {
         let base = match &self.pose {
             Some(p) => p.base.clone(),
             None => self.clone(),
@@ -211,7 +234,7 @@ impl Scene {
                 })
                 .collect()
         });
-        let parts = SceneParts {
+        let mut parts = SceneParts {
             vertices,
             normals,
             materials: base.parts.materials.clone(),
@@ -221,6 +244,7 @@ impl Scene {
             animations: base.parts.animations.clone(),
             ..Default::default()
         };
+        place(&mut parts);
         let pose = Pose {
             base: base.clone(),
             transforms: Arc::new(transforms.to_vec()),
