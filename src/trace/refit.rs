@@ -1,6 +1,6 @@
 //! The tree of a posed scene (`scene::pose`), made without a build: each object's subtree is
-//! built once over the object as loaded ([`ObjectTrees`]); a pose moves its triangles' corners
-//! by the object's transform, refits its boxes from the leaves up, and puts a small top tree
+//! built once over the object as loaded ([`ObjectTrees`]); a pose takes its triangles' corners
+//! from the posed scene's vertices, refits its boxes from the leaves up, and puts a small top tree
 //! over the objects' boxes, built afresh for every pose. This is the two-level layout of
 //! Wald et al., "Ray Tracing Deformable Scenes Using Dynamic Bounding Volume Hierarchies"
 //! (ACM TOG 2007, §4: refitting) under an instance level, flattened into one `Bvh8` so that every
