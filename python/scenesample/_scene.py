@@ -177,25 +177,14 @@ class Scene:
             )
         if not meshes:
             return cls.from_arrays(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
-        verts, faces, colors, ids = [], [], [], []
-        offset = 0
-        for k, (mesh, transform) in enumerate(meshes):
-            v = np.asarray(mesh.vertices, dtype=np.float64)
-            v = v @ np.asarray(transform)[:3, :3].T + np.asarray(transform)[:3, 3]
-            f = np.asarray(mesh.faces, dtype=np.int64)
-            # A mirroring transform reverses the winding; restore counter-clockwise fronts.
-            if np.linalg.det(np.asarray(transform)[:3, :3]) < 0:
-                f = f[:, ::-1]
-            verts.append(v)
-            faces.append(f + offset)
-            colors.append(_vertex_colors(mesh))
-            ids.append(np.full(len(f), k, dtype=np.int32))
-            offset += len(v)
+        vertices, faces, ids = _placed(
+            [(mesh.vertices, mesh.faces) for mesh, _ in meshes], [m for _, m in meshes]
+        )
         return cls.from_arrays(
-            np.concatenate(verts),
-            np.concatenate(faces),
-            colors=np.concatenate(colors),
-            object_ids=np.concatenate(ids),
+            vertices,
+            faces,
+            colors=np.concatenate([_vertex_colors(mesh) for mesh, _ in meshes]),
+            object_ids=ids,
             objects=names,
         )
 
@@ -236,15 +225,13 @@ class Scene:
             )
         if names is not None and len(names) != len(meshes):
             raise InputError(f"{len(names)} names for {len(meshes)} meshes")
-        verts, faces, ids = [], [], []
-        offset = 0
+        pairs = []
         for k, (mesh, m) in enumerate(zip(meshes, transforms)):
             try:
                 v, f = mesh
             except (TypeError, ValueError):
                 raise InputError(f"meshes[{k}] must be a (vertices, faces) pair") from None
-            v = np.asarray(v, dtype=np.float64)
-            f = np.asarray(f)
+            v, f = np.asarray(v, dtype=np.float64), np.asarray(f)
             if v.ndim != 2 or v.shape[1:] != (3,) or f.ndim != 2 or f.shape[1:] != (3,):
                 raise InputError(
                     f"meshes[{k}]: vertices must be (N, 3) and faces (M, 3), got "
@@ -252,16 +239,12 @@ class Scene:
                 )
             if not np.isfinite(m).all():
                 raise InputError(f"transforms[{k}] is not finite")
-            if np.linalg.det(m[:3, :3]) < 0:
-                f = f[:, ::-1]
-            verts.append(v @ m[:3, :3].T + m[:3, 3])
-            faces.append(f.astype(np.int64) + offset)
-            ids.append(np.full(len(f), k, dtype=np.int32))
-            offset += len(v)
+            pairs.append((v, f))
+        vertices, faces, ids = _placed(pairs, transforms)
         return cls.from_arrays(
-            np.concatenate(verts),
-            np.concatenate(faces),
-            object_ids=np.concatenate(ids),
+            vertices,
+            faces,
+            object_ids=ids,
             objects=list(names) if names is not None else [f"mesh{k}" for k in range(len(meshes))],
         )
 
@@ -471,6 +454,25 @@ class Scene:
 
 def _from_state(state: dict[str, Any]) -> Scene:
     return Scene.from_arrays(**state)
+
+
+def _placed(meshes: list, transforms: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Meshes ``(vertices, faces)`` placed by their 4x4 ``transforms`` and stacked: float64
+    vertices, int64 faces (each mesh's offset by the vertices before it; reversed under a
+    mirroring transform, which keeps counter-clockwise fronts) and each face's mesh index."""
+    verts, faces, ids = [], [], []
+    offset = 0
+    for k, ((v, f), m) in enumerate(zip(meshes, transforms)):
+        m = np.asarray(m, dtype=np.float64)
+        v = np.asarray(v, dtype=np.float64)
+        f = np.asarray(f, dtype=np.int64)
+        if np.linalg.det(m[:3, :3]) < 0:
+            f = f[:, ::-1]
+        verts.append(v @ m[:3, :3].T + m[:3, 3])
+        faces.append(f + offset)
+        ids.append(np.full(len(f), k, dtype=np.int32))
+        offset += len(v)
+    return np.concatenate(verts), np.concatenate(faces), np.concatenate(ids)
 
 
 def _vertex_colors(mesh: Any) -> np.ndarray:
