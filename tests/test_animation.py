@@ -185,3 +185,38 @@ def test_skins_warn_and_stay_in_their_rest_pose(tmp_path):
     with pytest.warns(ss.SceneWarning, match="skins are not posed"):
         s = ss.Scene.load(write(doc, tmp_path / "skinned.gltf"))
     np.testing.assert_array_equal(s.vertices, TRI)
+
+
+def test_a_clip_that_mirrors_a_node_keeps_its_fronts(tmp_path):
+    """glTF winds a node's triangles by the sign of its world determinant: a scale through -1
+    on x turns the triangle over, and its counter-clockwise side must stay the one facing +z
+    (posed() with a mirroring matrix keeps the faces, and the front flips: documented)."""
+    doc = document(TRI)
+    doc["nodes"] = [{"mesh": 0, "name": "tri"}]
+    doc["scenes"] = [{"nodes": [0]}]
+    i = add_accessor(doc, np.array([[0.0], [1.0]], np.float32), "SCALAR")
+    o = add_accessor(doc, np.array([[1, 1, 1], [-1, 1, 1]], np.float32), "VEC3")
+    doc["animations"] = [
+        {
+            "name": "mirror",
+            "samplers": [{"input": i, "output": o, "interpolation": "LINEAR"}],
+            "channels": [{"sampler": 0, "target": {"node": 0, "path": "scale"}}],
+        }
+    ]
+    scene = ss.Scene.load(write(doc, tmp_path / "mirror.gltf"))
+
+    def normal(s):
+        a, b, c = s.vertices[s.faces[0]].astype(np.float64)
+        return np.cross(b - a, c - a)
+
+    assert normal(scene)[2] > 0
+    half = scene.at(0.25, "mirror")  # scale x 0.5: not mirrored
+    np.testing.assert_array_equal(half.faces, scene.faces)
+    mirrored = scene.at(1.0, "mirror")
+    np.testing.assert_allclose(mirrored.vertices[scene.faces[0]], TRI * [-1, 1, 1])
+    np.testing.assert_array_equal(mirrored.faces, scene.faces[:, [0, 2, 1]])
+    assert normal(mirrored)[2] > 0
+    hit = ss.cast_rays(mirrored, [[-0.2, 0.2, 1]], [[0, 0, -1]])
+    assert hit.triangle[0] == 0 and hit.t[0] == pytest.approx(1.0)
+    # posed() with the same matrix moves the vertices only: the front turns to -z.
+    assert normal(scene.posed(np.array([np.diag([-1.0, 1, 1, 1])])))[2] < 0

@@ -328,7 +328,11 @@ class Scene:
             :meth:`posed` with each object's transform from its place as loaded to its place at
             ``t``; the :attr:`lights` and :attr:`cameras` on animated nodes move with their
             nodes too (a camera keeps only its node's rotation and translation, as at load).
-            Skins and morph targets stay in their rest pose (the load warned about them).
+            As glTF asks, winding follows the sign of each node's world determinant: an
+            object that the clip mirrors relative to its place as loaded has its faces wound
+            the other way, so its counter-clockwise side stays its front (``posed`` keeps the
+            faces as they are). Skins and morph targets stay in their rest pose (the load
+            warned about them).
         """
         if isinstance(animation, bool) or not isinstance(animation, (int, np.integer, str)):
             raise InputError(f"animation must be an index or a name, got {animation!r}")

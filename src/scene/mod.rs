@@ -126,8 +126,8 @@ pub struct Scene {
 }
 
 /// The faces, their material and object ids and the vertices' colours: what poses leave as
-/// they are.
-#[derive(Debug)]
+/// they are (but an animation that mirrors an object rewinds its faces, `Scene::at`).
+#[derive(Debug, Clone)]
 pub(crate) struct Shared {
     faces: Vec<[u32; 3]>,
     material_ids: Vec<i32>,

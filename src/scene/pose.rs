@@ -146,8 +146,9 @@ impl Scene {
         };
         let at = a.at(a.clip(clip)?, t)?;
         // Lights and cameras on animated nodes go where their nodes are at `t`; a camera's
-        // pose keeps only the node's rotation and translation, as at load.
-        self.posed_with(&at.objects, |parts| {
+        // pose keeps only the node's rotation and translation, as at load. Winding follows the
+        // sign of each node's world determinant (glTF 2.0 §3.7.4), as at load.
+        self.posed_with(&at.objects, true, |parts| {
             for (light, w) in parts.lights.iter_mut().zip(&at.lights) {
                 if let Some(w) = w {
                     light.place(w);
@@ -171,14 +172,17 @@ impl Scene {
     /// inverse transpose. The faces, ids, colours, materials and lights are shared with the
     /// scene as loaded; a vertex that faces of two objects share is split into one per object.
     pub fn posed(self: &Arc<Self>, transforms: &[DMat4]) -> Result<Scene> {
-        self.posed_with(transforms, |_| {})
+        self.posed_with(transforms, false, |_| {})
     }
 
     /// [`Scene::posed`], with `place` moving the lights and cameras (copied from the scene as
-    /// loaded) before the scene is assembled.
+    /// loaded) before the scene is assembled. With `rewind`, the faces of the objects whose
+    /// transform mirrors them (a negative determinant) are wound the other way, so that their
+    /// counter-clockwise sides stay their fronts (the faces are then this pose's own).
     fn posed_with(
         self: &Arc<Self>,
         transforms: &[DMat4],
+        rewind: bool,
         place: impl FnOnce(&mut SceneParts),
     ) -> Result<Scene> {
         let base = match &self.pose {
@@ -249,7 +253,19 @@ impl Scene {
             base: base.clone(),
             transforms: Arc::new(transforms.to_vec()),
         };
-        Ok(Scene::assemble(parts, rig.shared.clone(), Some(pose)))
+        let mirrored: Vec<bool> = transforms.iter().map(|m| m.determinant() < 0.0).collect();
+        let shared = if rewind && mirrored.contains(&true) {
+            let mut s = (*rig.shared).clone();
+            for (f, &o) in s.faces.iter_mut().zip(&s.object_ids) {
+                if mirrored.get(o as usize).copied().unwrap_or(false) {
+                    f.swap(1, 2);
+                }
+            }
+            Arc::new(s)
+        } else {
+            rig.shared.clone()
+        };
+        Ok(Scene::assemble(parts, shared, Some(pose)))
     }
 }
 
