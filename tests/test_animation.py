@@ -4,6 +4,8 @@ carrying its child, and bad input."""
 
 from __future__ import annotations
 
+import pickle
+
 import numpy as np
 import pytest
 import scenesample as ss
@@ -220,3 +222,18 @@ def test_a_clip_that_mirrors_a_node_keeps_its_fronts(tmp_path):
     assert hit.triangle[0] == 0 and hit.t[0] == pytest.approx(1.0)
     # posed() with the same matrix moves the vertices only: the front turns to -z.
     assert normal(scene.posed(np.array([np.diag([-1.0, 1, 1, 1])])))[2] < 0
+    # Pickled, the pose is made again the same way, winding included.
+    back = pickle.loads(pickle.dumps(mirrored))
+    np.testing.assert_array_equal(back.faces, mirrored.faces)
+    np.testing.assert_array_equal(back.transforms, mirrored.transforms)
+
+
+def test_lights_moved_by_a_clip_travel_in_a_pickle(tmp_path):
+    loaded = _animated(tmp_path, lit=True)
+    moved = loaded.at(1.0, "spin")
+    back = pickle.loads(pickle.dumps(moved))
+    (a,), (b,) = back.lights, moved.lights
+    assert a["position"] == b["position"] != loaded.lights[0]["position"]
+    # A light's direction is normalised again as it is read back (an ulp).
+    np.testing.assert_allclose(a["direction"], b["direction"], rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(back.vertices, moved.vertices)

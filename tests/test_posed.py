@@ -343,3 +343,27 @@ def test_peeling_the_field_impostors_and_epr_points_match_flat(scenes):
     np.testing.assert_array_equal(views[0].marked, views[1].marked)
     np.testing.assert_array_equal(views[0].image.triangle, views[1].image.triangle)
     np.testing.assert_array_equal(views[0].image.depth, views[1].image.depth)
+
+
+def test_a_posed_scene_pickles_as_its_base_and_transforms(scenes):
+    """A posed scene sent to another process (a sweep's workers) is posed again there: the same
+    geometry and rays, the same transforms, and a further pose maps the objects as loaded, as in
+    the parent (not the posed geometry as if it were loaded)."""
+    import pickle
+
+    base, posed, _ = scenes
+    back = pickle.loads(pickle.dumps(posed))
+    np.testing.assert_array_equal(back.transforms, posed.transforms)
+    np.testing.assert_array_equal(back.vertices, posed.vertices)
+    np.testing.assert_array_equal(back.faces, posed.faces)
+    o, d = _rays(posed, 5_000)
+    a, b = ss.cast_rays(posed, o, d), ss.cast_rays(back, o, d)
+    np.testing.assert_array_equal(a.triangle, b.triangle)
+    np.testing.assert_array_equal(a.t, b.t)
+    lift = np.eye(4)
+    lift[2, 3] = 1.0
+    again, there = posed.posed({0: lift}), back.posed({0: lift})
+    np.testing.assert_array_equal(there.vertices, again.vertices)
+    np.testing.assert_array_equal(there.transforms, again.transforms)
+    # A scene as loaded still pickles as its arrays.
+    assert pickle.loads(pickle.dumps(base)).transforms is None

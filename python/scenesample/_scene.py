@@ -441,23 +441,44 @@ class Scene:
 
     def __reduce__(self) -> tuple[Any, tuple[dict[str, Any]]]:
         """Pickling (e.g. to the workers of a sweep): geometry, normals, colours, materials,
-        objects and lights travel; glTF cameras and load warnings do not."""
+        objects and lights travel; glTF cameras, animations and load warnings do not. A posed
+        scene travels as the scene it was posed from and its transforms, and is posed again
+        where it lands: its :attr:`transforms` and the meaning of a further :meth:`posed`
+        (which maps the objects as loaded) are the same in every process."""
+        base = self._core.base
+        if base is None:
+            return (_from_state, (_state(self._core),))
         state = {
-            "vertices": self.vertices,
-            "faces": self.faces,
-            "normals": self.normals,
-            "colors": self.colors,
-            "material_ids": self.material_ids,
-            "materials": self.materials,
-            "object_ids": self.object_ids,
-            "objects": self.objects,
+            "base": _state(base),
+            "transforms": self.transforms,
+            "rewinds": self._core.rewinds,
             "lights": self.lights,
         }
-        return (_from_state, (state,))
+        return (_from_posed_state, (state,))
+
+
+def _state(core: _core.Scene) -> dict[str, Any]:
+    return {
+        "vertices": core.vertices,
+        "faces": core.faces,
+        "normals": core.normals,
+        "colors": core.colors,
+        "material_ids": core.material_ids,
+        "materials": core.materials,
+        "object_ids": core.object_ids,
+        "objects": core.objects,
+        "lights": core.lights,
+    }
 
 
 def _from_state(state: dict[str, Any]) -> Scene:
     return Scene.from_arrays(**state)
+
+
+def _from_posed_state(state: dict[str, Any]) -> Scene:
+    base = Scene.from_arrays(**state["base"])
+    rows = np.ascontiguousarray(state["transforms"], dtype=np.float64).reshape(-1, 4)
+    return Scene(base._core.posed(rows, state["rewinds"], state["lights"]))
 
 
 def _placed(meshes: list, transforms: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

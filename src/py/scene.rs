@@ -89,8 +89,17 @@ impl PyScene {
     }
 
     /// This scene with its objects moved: `transforms` is (len(objects) * 4, 4) float64, the
-    /// objects' 4×4 matrices stacked (row-major), each mapping its object as loaded.
-    fn posed(&self, py: Python<'_>, transforms: &Bound<'_, PyAny>) -> PyResult<Self> {
+    /// objects' 4×4 matrices stacked (row-major), each mapping its object as loaded. `rewinds`
+    /// and `lights` remake a pose as it was (unpickling): mirrored objects wound the other way,
+    /// as `at` does, and the lights as they were placed.
+    #[pyo3(signature = (transforms, rewinds=false, lights=None))]
+    fn posed(
+        &self,
+        py: Python<'_>,
+        transforms: &Bound<'_, PyAny>,
+        rewinds: bool,
+        lights: Option<Vec<Bound<'_, PyDict>>>,
+    ) -> PyResult<Self> {
         let rows = rows_f64::<4>(transforms, "transforms")?;
         if rows.len() % 4 != 0 {
             return Err(input(py, "transforms must stack 4x4 matrices".into()));
@@ -99,10 +108,32 @@ impl PyScene {
             .chunks_exact(4)
             .map(|r| DMat4::from_cols_array_2d(&[r[0], r[1], r[2], r[3]]).transpose())
             .collect();
-        let scene = super::run(py, || self.inner.posed(&ms))?;
+        let lights = match lights {
+            Some(ls) => Some(
+                ls.iter()
+                    .map(|d| light(py, d))
+                    .collect::<PyResult<Vec<_>>>()?,
+            ),
+            None => None,
+        };
+        let scene = super::run(py, || self.inner.posed_again(&ms, rewinds, lights.clone()))?;
         Ok(Self {
             inner: Arc::new(scene),
         })
+    }
+
+    /// The scene this one was posed from (as loaded), or None for a scene as loaded.
+    #[getter]
+    fn base(&self) -> Option<Self> {
+        self.inner.pose().map(|p| Self {
+            inner: p.base.clone(),
+        })
+    }
+
+    /// Whether this pose winds mirrored objects' faces the other way (a pose made by `at`).
+    #[getter]
+    fn rewinds(&self) -> bool {
+        self.inner.pose().is_some_and(|p| p.rewinds)
     }
 
     /// The animation clips as (name, duration in seconds).

@@ -23,6 +23,8 @@ pub struct Pose {
     pub base: Arc<Scene>,
     /// One per object of `base`.
     pub transforms: Arc<Vec<DMat4>>,
+    /// Whether the faces of mirrored objects were wound the other way (`Scene::at`).
+    pub rewinds: bool,
 }
 
 /// What posing needs from a scene as loaded, built once per scene: each vertex's object, and
@@ -175,6 +177,23 @@ impl Scene {
         self.posed_with(transforms, false, |_| {})
     }
 
+    /// A pose made again from what it is made of: [`Scene::posed`] (or, with `rewinds`, as
+    /// [`Scene::at`] winds mirrored objects), with `lights` in place of the scene as loaded's
+    /// when given. Unpickling a posed scene takes this way, so that the scene it poses from
+    /// travels with it.
+    pub fn posed_again(
+        self: &Arc<Self>,
+        transforms: &[DMat4],
+        rewinds: bool,
+        lights: Option<Vec<crate::scene::Light>>,
+    ) -> Result<Scene> {
+        self.posed_with(transforms, rewinds, |parts| {
+            if let Some(lights) = lights {
+                parts.lights = lights;
+            }
+        })
+    }
+
     /// [`Scene::posed`], with `place` moving the lights and cameras (copied from the scene as
     /// loaded) before the scene is assembled. With `rewind`, the faces of the objects whose
     /// transform mirrors them (a negative determinant) are wound the other way, so that their
@@ -252,6 +271,7 @@ impl Scene {
         let pose = Pose {
             base: base.clone(),
             transforms: Arc::new(transforms.to_vec()),
+            rewinds: rewind,
         };
         let mirrored: Vec<bool> = transforms.iter().map(|m| m.determinant() < 0.0).collect();
         let shared = if rewind && mirrored.contains(&true) {
