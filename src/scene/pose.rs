@@ -273,8 +273,13 @@ impl Scene {
             transforms: Arc::new(transforms.to_vec()),
             rewinds: rewind,
         };
-        let mirrored: Vec<bool> = transforms.iter().map(|m| m.determinant() < 0.0).collect();
-        let shared = if rewind && mirrored.contains(&true) {
+        // Determinants only where they decide something (a plain pose keeps the faces).
+        let mirrored: Vec<bool> = if rewind {
+            transforms.iter().map(|m| m.determinant() < 0.0).collect()
+        } else {
+            Vec::new()
+        };
+        let shared = if mirrored.contains(&true) {
             let mut s = (*rig.shared).clone();
             for (f, &o) in s.faces.iter_mut().zip(&s.object_ids) {
                 if mirrored.get(o as usize).copied().unwrap_or(false) {
