@@ -142,7 +142,8 @@ fn near_edges(tri: [DVec3; 3], camera: &Projector, x: DVec2) -> u8 {
 /// wins the pixel only where its plane is not behind `t`'s there. On khr_simple_instancing and
 /// the Cornell box such pixels were the only ones of 1-7 visible cells in a view; without this
 /// look, 54 visible cells instead of 15 went missing over the bench's views of every shared
-/// scene (a tolerance of 1e-6 of the depth for the fold changed none of them, so it went). All near edges' neighbours when `t` does not project (a vertex behind).
+/// scene (a tolerance of 1e-6 of the depth for the fold changed none of them, so it went).
+/// All near edges' neighbours when `t` does not project (a vertex behind).
 fn across_near(
     sorted: &Scene,
     adjacent: &EdgeNeighbours,
