@@ -9,6 +9,7 @@ Python of our machines.
 
     python3 scripts/pins.py check PYTHON   # PYTHON's environment holds exactly the pinned versions
     python3 scripts/pins.py update         # resolve the newest versions again, rewrite pins.txt
+    python3 scripts/pins.py requirements [EXTRA ...]   # numpy and those extras, a line each
 
 `check` fails when a package installed in PYTHON's environment is missing from the pins or has
 another version, when a build tool is missing, or when the pinned maturin is outside the range
@@ -168,7 +169,19 @@ def update() -> int:
     return 0
 
 
+def requirements(extras: list[str]) -> list[str]:
+    """The package's own dependencies and those of the named extras, each once, in order."""
+    meta = pyproject()["project"]
+    reqs = list(meta["dependencies"])
+    for extra in extras:
+        reqs += meta["optional-dependencies"][extra]
+    return list(dict.fromkeys(reqs))
+
+
 def main(argv: list[str]) -> int:
+    if argv and argv[0] == "requirements":
+        print("\n".join(requirements(argv[1:])))
+        return 0
     if len(argv) >= 2 and argv[0] == "check":
         return check(argv[1], build_tools="--no-build-tools" not in argv)
     if argv == ["update"]:

@@ -35,5 +35,10 @@ PIPI=("$PY" -m pip install --quiet --disable-pip-version-check -c scripts/pins.t
 PATH="$("$PY" -c 'import sysconfig; print(sysconfig.get_path("scripts"))'):$PATH"
 export PATH
 "${PIPI[@]}" maturin
+# numpy and the extras first, each built in its own isolated environment: some have no wheel
+# (pyrender's PyOpenGL 3.1.0 is an sdist whose setup.py needs `wheel`, which a fresh Python
+# lacks), and pip's cache of wheels it once built hides that on a machine that ran this before.
+mapfile -t DEPS < <("$PY" scripts/pins.py requirements test demo)
+"${PIPI[@]}" "${DEPS[@]}"
 # Editable install: maturin builds the extension in release mode into python/scenesample/.
-"${PIPI[@]}" --no-build-isolation -e ".[test,demo]"
+"${PIPI[@]}" --no-build-isolation --no-deps -e .
