@@ -11,12 +11,11 @@ use std::arch::x86_64::*;
 
 use std::ops::{Add, Div, Mul, Sub};
 
-use super::bvh8::{
-    portable, Bvh8, Kernel, Lanes, Node8, PacketStack, Ray, Stack, Tri4, Tri4Hit, ANY_SHIFT, STACK,
-    WIDTH,
-};
+use super::node::{Bvh8, Node8, Tri4, ANY_SHIFT, STACK};
+use super::portable;
 use super::refine::{self, moller_trumbore, Lane, Pending};
 pub use super::token::Avx2;
+use super::traverse::{Kernel, Lanes, PacketStack, Ray, Stack, Tri4Hit, WIDTH};
 
 impl Kernel for Avx2 {
     const PACKETS: bool = true;
@@ -366,7 +365,7 @@ unsafe fn packed_lanes(m: u32) -> __m256i {
     ))
 }
 
-/// Keep only a distance's magnitude bits above the slot bits (see `bvh8::sort_key`).
+/// Keep only a distance's magnitude bits above the slot bits (see `traverse::sort_key`).
 const KEY_BITS: i32 = 0x7FFF_FFF8;
 
 #[cfg(test)]

@@ -11,7 +11,7 @@
 use glam::Vec3A;
 use rayon::prelude::*;
 
-use super::bvh8::{
+use super::node::{
     leaf_blocks, leaf_ref, node_index, node_ref, Bvh8, Node8, Tri4, EMPTY, LEAF, MAX_BLOCKS,
     MAX_DEPTH, MAX_LEAF_BLOCKS, NODE_UNITS,
 };
@@ -706,8 +706,8 @@ fn partition(refs: &mut [u32], left: impl Fn(&u32) -> bool) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::trace::bvh8::{leaf_blocks, node_at, NODE_UNITS};
-    use crate::trace::tests::{icosphere, Rng};
+    use crate::trace::node::{leaf_blocks, node_at, NODE_UNITS};
+    use crate::trace::testdata::{icosphere, Rng};
 
     fn tris(v: &[[f32; 3]], f: &[[u32; 3]]) -> Vec<Tri> {
         f.iter()

@@ -17,8 +17,13 @@
 
 use glam::{DVec3, Vec3A};
 
-use super::bvh8::{Bvh8, Kernel, Sink, Tri4Hit};
-use super::{dispatch, on_threads, prepare, run, Job, Query, Rays, Scratch, Threads};
+use super::dispatch::{dispatch, Job};
+use super::driver::drive;
+use super::node::Bvh8;
+use super::query::{Query, Threads};
+use super::rays::{Rays, Scratch};
+use super::schedule::run;
+use super::traverse::{Kernel, Sink, Tri4Hit};
 use crate::error::Result;
 use crate::scene::Scene;
 
@@ -44,18 +49,18 @@ pub fn crossings(
         threads,
         report: true,
     };
-    on_threads(threads, || {
-        let (bvh, _) = prepare(scene, origins, directions, &q)?;
+    let (count, _) = drive(scene, origins, directions, &q, |bvh| {
         let mut count = vec![0i32; origins.len()];
         let behind = Query { t_min: -back, ..q };
-        let rays = Rays::new(&bvh.tree, origins, directions, &behind);
+        let rays = Rays::new(bvh, origins, directions, &behind);
         let job = CrossJob {
             rays: &rays,
             near: f64::from(near),
         };
         run(&q, &mut count[..], 1, |base, out| dispatch(&job, base, out))?;
         Ok(count)
-    })?
+    })?;
+    Ok(count)
 }
 
 struct CrossJob<'a> {

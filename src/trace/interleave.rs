@@ -10,13 +10,14 @@
 //! were asked for when the ray entered it (`descend` prefetches every child a closest-hit ray
 //! enters), so by the time the turn comes back, they have arrived. Only sinks that visit
 //! children nearest first ([`Sink::ORDERED`]: closest hits, which have no hint block to try
-//! first) are traced in turns; any-hit rays lost there (see `bvh8::Any`).
+//! first) are traced in turns; any-hit rays lost there (see `sinks::Any`).
 //!
 //! Each ray visits exactly the nodes and blocks, in exactly the order, that
-//! [`bvh8::traverse`](super::bvh8::traverse) would: only the interleaving differs, so every
+//! [`traverse::traverse`](super::traverse::traverse) would: only the interleaving differs, so every
 //! query reports the same hits.
 
-use super::bvh8::{visit, Bvh8, Kernel, Ray, Sink, Stack};
+use super::node::Bvh8;
+use super::traverse::{visit, Kernel, Ray, Sink, Stack};
 
 /// Rays in flight at once.
 pub const FLIGHTS: usize = 8;
@@ -130,12 +131,12 @@ fn launch<K: Kernel, S: Sink>(
     let j = *next;
     *next += 1;
     let (ray, sink) = start(j);
-    // `bvh8::traverse` would try a hint block first; sinks traced in turns have none.
+    // `traverse::traverse` would try a hint block first; sinks traced in turns have none.
     debug_assert!(sink.hint().is_none());
     Some((ray, k.prepare(&ray), sink, j))
 }
 
-/// Visit `f`'s current node or leaf and pick its next node (`bvh8::visit`; the next node's lines
+/// Visit `f`'s current node or leaf and pick its next node (`traverse::visit`; the next node's lines
 /// were asked for when the ray entered it, in `descend`, and asking again as it is popped cost
 /// more than it found); true when the ray's traversal has ended.
 #[inline(always)]

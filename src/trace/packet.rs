@@ -10,10 +10,9 @@
 
 use std::arch::x86_64::*;
 
-use super::bvh8::{
-    leaf_blocks, node_at, Bvh8, Kernel, Lanes, PacketStack, Ray, EMPTY, LEAF, STACK, WIDTH,
-};
+use super::node::{leaf_blocks, node_at, Bvh8, EMPTY, LEAF, STACK};
 use super::token::Avx2;
+use super::traverse::{Kernel, Lanes, PacketStack, Ray, WIDTH};
 
 /// Traverse `bvh` with the eight `rays` (lanes not in `active` hold copies and are ignored),
 /// giving each lane's leaf hits to `sinks`.

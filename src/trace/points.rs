@@ -14,8 +14,9 @@ use std::time::Instant;
 use glam::DVec3;
 use rayon::prelude::*;
 
-use super::bvh8::{leaf_blocks, node_at, node_ref, Bvh8, EMPTY, LEAF, STACK};
-use super::{on_threads, Threads};
+use super::node::{leaf_blocks, node_at, node_ref, Bvh8, EMPTY, LEAF, STACK};
+use super::query::Threads;
+use super::schedule::on_threads;
 use crate::error::Result;
 use crate::input_err;
 use crate::scene::Scene;
@@ -50,7 +51,7 @@ pub fn closest_points(
     }
     check_points(points)?;
     on_threads(threads, || {
-        let (bvh, built) = super::bvh_for(scene, threads)?;
+        let (bvh, built) = super::bvh::bvh_for(scene, threads)?;
         let start = Instant::now();
         let limit = max_distance as f64;
         // Each answer packed as it is found (28 bytes, not the 72 of an `Option<Near>`).
@@ -482,7 +483,7 @@ mod tests {
 
     #[test]
     fn closest_points_match_a_brute_force_in_f64() {
-        let (v, f) = crate::trace::tests::icosphere(3);
+        let (v, f) = crate::trace::testdata::icosphere(3);
         let scene = Scene::from_arrays(v, f, None, None).unwrap();
         let mut rng = 12345u64;
         let mut next = || {
@@ -517,7 +518,7 @@ mod tests {
 
     #[test]
     fn the_order_and_the_seed_change_no_answer() {
-        let (v, f) = crate::trace::tests::icosphere(3);
+        let (v, f) = crate::trace::testdata::icosphere(3);
         let scene = Scene::from_arrays(v, f, None, None).unwrap();
         // Points on a spiral through the sphere's surface, inside and out, plus exact repeats
         // (ties with their neighbours' seeds).

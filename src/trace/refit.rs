@@ -12,7 +12,7 @@ use glam::Vec3A;
 use rayon::prelude::*;
 
 use super::build::{self, padded_box, Aabb, BuildParams, Out};
-use super::bvh8::{leaf_blocks, node_index, node_ref, Bvh8, Node8, Tri4, EMPTY, LEAF};
+use super::node::{leaf_blocks, node_index, node_ref, Bvh8, Node8, Tri4, EMPTY, LEAF};
 use super::watertight::Tri;
 use crate::scene::pose::Rig;
 
@@ -292,7 +292,7 @@ mod tests {
     use glam::{DMat4, DQuat, DVec3};
 
     use crate::scene::{Scene, SceneParts};
-    use crate::trace::tests::icosphere;
+    use crate::trace::testdata::icosphere;
     use crate::trace::{cast_rays, Bvh};
 
     /// `n` icospheres in a row, one object each.

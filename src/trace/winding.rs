@@ -17,10 +17,11 @@ use std::f64::consts::PI;
 use glam::DVec3;
 use rayon::prelude::*;
 
-use super::bvh8::{leaf_blocks, node_at, node_index, node_ref, Bvh8, EMPTY, LEAF, STACK};
 use super::crossings::AMBIGUOUS;
+use super::node::{leaf_blocks, node_at, node_index, node_ref, Bvh8, EMPTY, LEAF, STACK};
 use super::points::{check_points, chunked, spread_bits, Scratch};
-use super::{on_threads, Threads};
+use super::query::Threads;
+use super::schedule::on_threads;
 use crate::error::Result;
 use crate::scene::adjacency::Closure;
 use crate::scene::Scene;
@@ -47,7 +48,7 @@ pub const REFINE: f64 = 0.1;
 pub fn winding_numbers(scene: &Scene, points: &[[f32; 3]], threads: Threads) -> Result<Vec<f64>> {
     check_points(points)?;
     on_threads(threads, || {
-        let (bvh, _) = super::bvh_for(scene, threads)?;
+        let (bvh, _) = super::bvh::bvh_for(scene, threads)?;
         let closure = Closure::of(scene);
         // (Point indices are u32 there.)
         if points.len() < u32::MAX as usize {
@@ -250,7 +251,7 @@ fn crossing_winding(
     }
     let mut w: Vec<f64> = crossed.iter().map(|&c| f64::from(c)).collect();
     if let Some(cap) = cap {
-        let cap_bvh = super::Bvh::of_with(cap, threads);
+        let cap_bvh = super::bvh::Bvh::of_with(cap, threads);
         let sum = summed(cap, &cap_bvh.tree, points, threads, BETA)?;
         w.iter_mut().zip(&sum).for_each(|(w, s)| *w -= s);
         let crossed = &crossed;
@@ -654,7 +655,7 @@ mod tests {
 
     #[test]
     fn closed_surfaces_take_one_ray_per_point_and_agree_with_the_sum() {
-        let (v, f) = crate::trace::tests::icosphere(3);
+        let (v, f) = crate::trace::testdata::icosphere(3);
         let scene = Scene::from_arrays(v.clone(), f.clone(), None, None).unwrap();
         let pts = probes(&scene);
         let by_ray = check_closed_against_summed(&scene, &pts);
@@ -694,7 +695,7 @@ mod tests {
     fn one_point_at_a_time_gives_what_the_batch_gives() {
         // The batch sorts its points and may take the ray or the sum per point; neither the
         // order nor the company of other points may change an answer (closed and open).
-        let (v, f) = crate::trace::tests::icosphere(3);
+        let (v, f) = crate::trace::testdata::icosphere(3);
         let open = cut_sphere(&v, &f);
         for faces in [f.clone(), open] {
             let scene = Scene::from_arrays(v.clone(), faces, None, None).unwrap();
@@ -724,7 +725,7 @@ mod tests {
     fn an_open_surface_is_closed_by_its_cap_and_only_the_cap_is_summed() {
         // A sphere with its top cut off (one border): the cap pays, and the answer is the
         // crossings through sphere and cap less the cap's sum.
-        let (v, f) = crate::trace::tests::icosphere(3);
+        let (v, f) = crate::trace::testdata::icosphere(3);
         let keep = cut_sphere(&v, &f);
         let scene = Scene::from_arrays(v, keep, None, None).unwrap();
         let closure = Closure::of(&scene);
@@ -753,7 +754,7 @@ mod tests {
     fn angles_sum_like_arctangents_through_every_turn() {
         // Triangles of a sphere seen from inside (4 pi in all, two turns of the product), from
         // outside (0), and random triangles around the origin, in f64.
-        let (v, f) = crate::trace::tests::icosphere(2);
+        let (v, f) = crate::trace::testdata::icosphere(2);
         let mut rng = 99u64;
         let mut next = || {
             rng ^= rng << 13;
@@ -804,7 +805,7 @@ mod tests {
 
     #[test]
     fn winding_numbers_are_one_inside_zero_outside_and_near_the_exact_sum() {
-        let (v, f) = crate::trace::tests::icosphere(4);
+        let (v, f) = crate::trace::testdata::icosphere(4);
         let scene = Scene::from_arrays(v, f, None, None).unwrap();
         let pts: Vec<[f32; 3]> = (0..400)
             .map(|i| {

@@ -1,0 +1,277 @@
+//! The ray queries: closest hit (`cast_rays`), the k nearest hits (`nearest_hits`), closest
+//! hits among kept triangles (`cast_rays_kept`), any hit (`occluded`), every hit (`all_hits`)
+//! and how many (`count_hits`). Each goes through the one driver (`driver::drive`) with its
+//! job (`jobs`).
+
+use super::dispatch::dispatch;
+use super::driver::{drive, Seconds};
+use super::jobs::{AllJob, AnyJob, ClosestJob, CountJob, NearestJob};
+use super::query::Query;
+use super::rays::{Hit, Rays};
+use super::schedule::{collect, run, HitSlices, CHUNK};
+use super::sinks::{Closest, ClosestKept};
+use crate::error::Result;
+use crate::input_err;
+use crate::scene::Scene;
+
+/// Results of `cast_rays` and `nearest_hits`: `k` entries per ray, nearest first.
+#[derive(Debug, Default)]
+pub struct RayHits {
+    pub k: usize,
+    /// Distance in units of the direction's length; +inf where there is no (further) hit.
+    pub t: Vec<f32>,
+    /// Triangle index (the scene's face index); −1 where there is no hit.
+    pub triangle: Vec<i32>,
+    /// Barycentric (u, v) of the hit: point = (1−u−v)·v0 + u·v1 + v·v2; (0, 0) without a hit.
+    pub barycentric: Vec<[f32; 2]>,
+    pub bvh_build_seconds: f64,
+    pub trace_seconds: f64,
+}
+
+impl RayHits {
+    /// `n` rays of `k` entries without a hit.
+    fn empty(n: usize, k: usize) -> Self {
+        Self {
+            k,
+            t: vec![f32::INFINITY; n * k],
+            triangle: vec![-1; n * k],
+            barycentric: vec![[0.0; 2]; n * k],
+            ..Self::default()
+        }
+    }
+
+    fn slices(&mut self) -> HitSlices<'_> {
+        (&mut self.t, &mut self.triangle, &mut self.barycentric)
+    }
+
+    fn timed(mut self, s: Seconds) -> Self {
+        (self.bvh_build_seconds, self.trace_seconds) = (s.build, s.trace);
+        self
+    }
+}
+
+/// Results of `occluded`.
+#[derive(Debug, Default)]
+pub struct Occlusion {
+    pub hit: Vec<bool>,
+    pub bvh_build_seconds: f64,
+    pub trace_seconds: f64,
+}
+
+/// Closest hit of each ray in `[t_min, t_max)` (units of each direction's length), on every
+/// core. Directions need not be unit length but must be finite and non-zero.
+pub fn cast_rays(
+    scene: &Scene,
+    origins: &[[f32; 3]],
+    directions: &[[f32; 3]],
+    t_min: f32,
+    t_max: f32,
+) -> Result<RayHits> {
+    cast_rays_with(scene, origins, directions, &Query::new(t_min, t_max))
+}
+
+/// [`cast_rays`] with a chosen range and threads.
+pub fn cast_rays_with(
+    scene: &Scene,
+    origins: &[[f32; 3]],
+    directions: &[[f32; 3]],
+    q: &Query,
+) -> Result<RayHits> {
+    nearest_hits(scene, origins, directions, 1, q)
+}
+
+/// The first `k` hits along each ray, nearest first, in `[t_min, t_max)`. Hits whose `t` agree
+/// within [`SAME_HIT`](crate::types::SAME_HIT) (relative) are one surface met twice (coincident
+/// or duplicated triangles) and count once, as the triangle with the smaller `t` (then the
+/// smaller index).
+pub fn nearest_hits(
+    scene: &Scene,
+    origins: &[[f32; 3]],
+    directions: &[[f32; 3]],
+    k: usize,
+    q: &Query,
+) -> Result<RayHits> {
+    nearest_hits_facing(scene, origins, directions, k, q, false)
+}
+
+/// [`nearest_hits`], optionally counting only the triangles whose counter-clockwise front
+/// faces the ray (`front_only`: a back face is passed through, as a culling rasterizer skips
+/// it; a back face coincident with a front one then cannot take its place as the surface).
+pub fn nearest_hits_facing(
+    scene: &Scene,
+    origins: &[[f32; 3]],
+    directions: &[[f32; 3]],
+    k: usize,
+    q: &Query,
+    front_only: bool,
+) -> Result<RayHits> {
+    if k == 0 {
+        return input_err!("max_hits must be at least 1, got 0");
+    }
+    let n = origins.len();
+    // t, triangle and barycentric per hit.
+    crate::limits::check(
+        || format!("{n} rays x max_hits={k}"),
+        crate::limits::product(&[n as u64, k as u64]),
+        16,
+    )?;
+    let (hits, s) = drive(scene, origins, directions, q, |bvh| {
+        let mut hits = RayHits::empty(n, k);
+        let rays = Rays::new(bvh, origins, directions, q);
+        if k == 1 && !front_only {
+            let job = ClosestJob::new(&rays);
+            run(q, hits.slices(), 1, |base, out| dispatch(&job, base, out))?;
+        } else {
+            let job = NearestJob(&rays, k, front_only);
+            run(q, hits.slices(), k, |base, out| dispatch(&job, base, out))?;
+        }
+        Ok(hits)
+    })?;
+    Ok(hits.timed(s))
+}
+
+/// [`cast_rays_with`] meeting only the triangles kept: triangle `i` counts when bit `i % 64`
+/// of `keep[i / 64]` is set, and a ray passes through the others (the visibility field's
+/// CPU view traces only its marked cells, as its GPU view draws only them).
+pub fn cast_rays_kept(
+    scene: &Scene,
+    origins: &[[f32; 3]],
+    directions: &[[f32; 3]],
+    q: &Query,
+    keep: &[u64],
+) -> Result<RayHits> {
+    let need = scene.triangle_count().div_ceil(64);
+    if keep.len() < need {
+        return input_err!(
+            "{} words of triangle bits for {} triangles, need {need}",
+            keep.len(),
+            scene.triangle_count()
+        );
+    }
+    let n = origins.len();
+    crate::limits::check(|| format!("{n} rays"), n as u128, 16)?;
+    let (hits, s) = drive(scene, origins, directions, q, |bvh| {
+        let mut hits = RayHits::empty(n, 1);
+        let rays = Rays::new(bvh, origins, directions, q);
+        let sink = ClosestKept {
+            closest: Closest::new(rays.range.1),
+            keep,
+        };
+        let job = ClosestJob(&rays, sink);
+        run(q, hits.slices(), 1, |base, out| dispatch(&job, base, out))?;
+        Ok(hits)
+    })?;
+    Ok(hits.timed(s))
+}
+
+/// Whether anything lies along each ray within `[t_min, t_max)`: the traversal stops at the
+/// first hit it finds, in whatever order.
+pub fn occluded(
+    scene: &Scene,
+    origins: &[[f32; 3]],
+    directions: &[[f32; 3]],
+    q: &Query,
+) -> Result<Occlusion> {
+    let (hit, s) = drive(scene, origins, directions, q, |bvh| {
+        let mut hit = vec![false; origins.len()];
+        let rays = Rays::new(bvh, origins, directions, q);
+        let job = AnyJob(&rays);
+        run(q, &mut hit[..], 1, |base, out| dispatch(&job, base, out))?;
+        Ok(hit)
+    })?;
+    Ok(Occlusion {
+        hit,
+        bvh_build_seconds: s.build,
+        trace_seconds: s.trace,
+    })
+}
+
+/// Results of [`count_hits`].
+#[derive(Debug, Default)]
+pub struct HitCounts {
+    pub count: Vec<u32>,
+    pub bvh_build_seconds: f64,
+    pub trace_seconds: f64,
+}
+
+/// How many distinct hits each ray has in `[t_min, t_max)`: the length of its [`all_hits`]
+/// (coincident hits counting once), found the same way but with no memory for the hits.
+pub fn count_hits(
+    scene: &Scene,
+    origins: &[[f32; 3]],
+    directions: &[[f32; 3]],
+    q: &Query,
+) -> Result<HitCounts> {
+    let (count, s) = drive(scene, origins, directions, q, |bvh| {
+        let mut count = vec![0u32; origins.len()];
+        let rays = Rays::new(bvh, origins, directions, q);
+        let job = CountJob(&rays);
+        run(q, &mut count[..], 1, |base, out| dispatch(&job, base, out))?;
+        Ok(count)
+    })?;
+    Ok(HitCounts {
+        count,
+        bvh_build_seconds: s.build,
+        trace_seconds: s.trace,
+    })
+}
+
+/// Every hit of every ray, ragged: ray i's hits are `splits[i]..splits[i + 1]`.
+#[derive(Debug, Default)]
+pub struct AllHits {
+    /// Offsets of each ray's hits (one more than there are rays).
+    pub splits: Vec<u64>,
+    pub t: Vec<f32>,
+    pub triangle: Vec<i32>,
+    pub barycentric: Vec<[f32; 2]>,
+    pub bvh_build_seconds: f64,
+    pub trace_seconds: f64,
+}
+
+/// Every hit along each ray in `[t_min, t_max)`, nearest first, with memory for the hits found
+/// only. Hits within [`SAME_HIT`](crate::types::SAME_HIT) of each other count once, as in
+/// [`nearest_hits`].
+pub fn all_hits(
+    scene: &Scene,
+    origins: &[[f32; 3]],
+    directions: &[[f32; 3]],
+    q: &Query,
+) -> Result<AllHits> {
+    let n = origins.len();
+    let (mut all, s) = drive(scene, origins, directions, q, |bvh| {
+        let rays = Rays::new(bvh, origins, directions, q);
+        let parts = collect(q, n, |c, len| {
+            let (mut counts, mut hits) = (Vec::with_capacity(len), Vec::new());
+            dispatch(&AllJob(&rays, len), c * CHUNK, (&mut counts, &mut hits));
+            Ok((counts, hits))
+        })?;
+        Ok(ragged(n, parts))
+    })?;
+    (all.bvh_build_seconds, all.trace_seconds) = (s.build, s.trace);
+    Ok(all)
+}
+
+/// Each chunk's hit counts and hits, in chunk order, as one ragged [`AllHits`].
+fn ragged(n: usize, parts: Vec<(Vec<u32>, Vec<Hit>)>) -> AllHits {
+    let total: usize = parts.iter().map(|p| p.1.len()).sum();
+    let mut out = AllHits {
+        splits: Vec::with_capacity(n + 1),
+        t: Vec::with_capacity(total),
+        triangle: Vec::with_capacity(total),
+        barycentric: Vec::with_capacity(total),
+        ..AllHits::default()
+    };
+    out.splits.push(0);
+    for (counts, hits) in parts {
+        for c in counts {
+            let last = *out.splits.last().expect("starts at 0");
+            out.splits.push(last + c as u64);
+        }
+        for h in hits {
+            out.t.push(h.t);
+            out.triangle.push(h.triangle as i32);
+            out.barycentric.push(h.bary);
+        }
+    }
+    out
+}

@@ -1,0 +1,125 @@
+//! A scene's BVH: built once on first use (every core, or the calling thread), cached with the
+//! scene, and for a posed scene refit from its base's object trees (`refit`).
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use glam::{Vec3, Vec3A};
+
+use super::node::{self, Bvh8};
+use super::query::Threads;
+use super::watertight::Tri;
+use super::{build, refit};
+use crate::error::Result;
+use crate::input_err;
+use crate::scene::Scene;
+
+pub const MAX_TRIANGLES: u32 = node::MAX_BLOCKS;
+
+/// A scene's BVH.
+#[derive(Debug)]
+pub struct Bvh {
+    pub(crate) tree: Bvh8,
+    pub build_seconds: f64,
+}
+
+/// What a BVH holds and what it cost.
+#[derive(Clone, Copy, Debug)]
+pub struct BvhStats {
+    pub triangles: usize,
+    pub nodes: usize,
+    pub blocks: usize,
+    /// Bytes of nodes and triangle blocks: everything the queries read besides the rays.
+    pub bytes: usize,
+    pub depth: u32,
+    pub build_seconds: f64,
+    /// Surface area heuristic cost, Embree's measure: inner nodes' areas plus leaves' areas
+    /// times their blocks, relative to the root's area.
+    pub sah: f64,
+}
+
+impl Bvh {
+    pub fn build(scene: &Scene) -> Self {
+        Self::build_with(scene, build::BuildParams::standard())
+    }
+
+    pub fn build_with(scene: &Scene, params: build::BuildParams) -> Self {
+        let start = Instant::now();
+        if let Some(pose) = scene.pose() {
+            // A posed scene: its base's object trees, moved and refit.
+            let base = &pose.base;
+            let trees = base.derived(|| {
+                let objects = base.objects().len();
+                refit::ObjectTrees::of(&base.rig(), base.object_ids(), objects, params)
+            });
+            return Self {
+                tree: trees.posed(scene.vertices(), scene.faces()),
+                build_seconds: start.elapsed().as_secs_f64(),
+            };
+        }
+        let v = scene.vertices();
+        let tris: Vec<Tri> = scene
+            .faces()
+            .iter()
+            .map(|f| Tri {
+                v: f.map(|k| Vec3A::from(Vec3::from(v[k as usize]))),
+            })
+            .collect();
+        let tree = build::build(&tris, params);
+        Self {
+            tree,
+            build_seconds: start.elapsed().as_secs_f64(),
+        }
+    }
+
+    /// The scene's BVH, built on first use (by every core) and cached for the scene's lifetime.
+    pub fn of(scene: &Scene) -> Arc<Bvh> {
+        Self::of_with(scene, Threads::All)
+    }
+
+    /// [`Bvh::of`], building on `threads` when the BVH is not cached yet.
+    pub fn of_with(scene: &Scene, threads: Threads) -> Arc<Bvh> {
+        let params = build::BuildParams::standard();
+        scene.derived(|| {
+            // `Count` threads: the caller runs this inside that pool already.
+            match threads {
+                Threads::One => Bvh::build_with(scene, params.sequential()),
+                _ => Bvh::build_with(scene, params),
+            }
+        })
+    }
+
+    pub fn stats(&self) -> BvhStats {
+        let t = &self.tree;
+        BvhStats {
+            triangles: t
+                .blocks
+                .iter()
+                .flat_map(|b| b.id)
+                .filter(|&i| i != u32::MAX)
+                .count(),
+            nodes: t.nodes.len(),
+            blocks: t.blocks.len(),
+            bytes: t.bytes(),
+            depth: t.depth,
+            build_seconds: self.build_seconds,
+            sah: t.sah(),
+        }
+    }
+}
+
+/// The scene's BVH (built on `threads` if not cached yet) and the seconds spent building it now
+/// (0 when it was cached).
+pub(crate) fn bvh_for(scene: &Scene, threads: Threads) -> Result<(Arc<Bvh>, f64)> {
+    if scene.triangle_count() >= MAX_TRIANGLES as usize {
+        return input_err!(
+            "the ray and point queries handle scenes of fewer than {MAX_TRIANGLES} triangles; \
+             this one has {}",
+            scene.triangle_count()
+        );
+    }
+    let had = scene.derived_if_built::<Bvh>().is_some();
+    let bvh = Bvh::of_with(scene, threads);
+    let built = if had { 0.0 } else { bvh.build_seconds };
+    Ok((bvh, built))
+}

@@ -1,0 +1,275 @@
+//! The query jobs: what each kind of query does with a chunk of rays (`dispatch::Job`), over
+//! the shared ray loop of `rays`. Closest hits (all triangles, or those kept), any hit, the k
+//! nearest hits, every hit, and how many hits.
+
+use glam::Vec3;
+
+use super::dispatch::Job;
+use super::node::Bvh8;
+use super::rays::{Hit, Rays, Scratch, Traced};
+use super::refine::Pending;
+use super::schedule::HitSlices;
+use super::sinks::{Any, BlockHit, Closest, ClosestKept};
+use super::traverse::{traverse, Kernel, Sink, Stack, Tri4Hit, WIDEN};
+use crate::types::SAME_HIT;
+
+/// A closest-hit sink: what it kept.
+pub(crate) trait Best: Sink + Copy + Sync {
+    fn best(&self) -> Option<BlockHit>;
+}
+
+impl Best for Closest {
+    #[inline(always)]
+    fn best(&self) -> Option<BlockHit> {
+        self.best
+    }
+}
+
+impl Best for ClosestKept<'_> {
+    #[inline(always)]
+    fn best(&self) -> Option<BlockHit> {
+        self.closest.best
+    }
+}
+
+/// Closest hits, each ray's sink a copy of the prototype `.1`.
+pub(crate) struct ClosestJob<'a, S>(pub &'a Rays<'a>, pub S);
+
+impl<'a> ClosestJob<'a, Closest> {
+    pub fn new(rays: &'a Rays<'a>) -> Self {
+        ClosestJob(rays, Closest::new(rays.range.1))
+    }
+}
+
+impl<S: Best> Job for ClosestJob<'_, S> {
+    type Out<'o> = HitSlices<'o>;
+
+    #[inline(always)]
+    fn chunk<K: Kernel>(&self, k: K, base: usize, (t, tri, bary): HitSlices<'_>) {
+        // Two passes per batch: traversal records each closest hit in f32; the f64 refinement
+        // then runs over the batch's hits, free of the traversal's long dependency chains (the
+        // processor overlaps one hit's refinement with the next's; inline it took as long as
+        // the traversal of a primary ray).
+        const BATCH: usize = 256;
+        let mut scratch = Scratch::new();
+        let mut found = [0u32; BATCH];
+        let mut pending = [Pending::default(); BATCH];
+        for start in (0..t.len()).step_by(BATCH) {
+            let end = (start + BATCH).min(t.len());
+            let mut hits = 0;
+            let rays = self.0;
+            rays.trace(
+                k,
+                base,
+                start..end,
+                &mut scratch,
+                #[inline(always)]
+                |_| self.1,
+                // Inlined, so compiled with the kernel's instructions: a closure does not
+                // inherit its caller's target features, and a call from AVX2 code into this
+                // one, for every ray, spilled the traversal's registers around it.
+                #[inline(always)]
+                |j, sink| {
+                    if let Some(h) = sink.best() {
+                        tri[j] = h.triangle as i32;
+                        found[hits] = j as u32;
+                        pending[hits] = Pending {
+                            v: rays.bvh.blocks[h.block as usize].corners(h.lane as usize),
+                            o: rays.origins[base + j],
+                            d: rays.directions[base + j],
+                            t: h.t,
+                            bary: h.bary(),
+                        };
+                        hits += 1;
+                    }
+                },
+            );
+            k.refine(&mut pending[..hits], self.0.range);
+            for (&j, p) in found[..hits].iter().zip(&pending[..hits]) {
+                t[j as usize] = p.t;
+                bary[j as usize] = p.bary;
+            }
+        }
+    }
+}
+
+pub(crate) struct AnyJob<'a>(pub &'a Rays<'a>);
+
+impl Job for AnyJob<'_> {
+    type Out<'o> = &'o mut [bool];
+
+    #[inline(always)]
+    fn chunk<K: Kernel>(&self, k: K, base: usize, out: &mut [bool]) {
+        let mut scratch = Scratch::new();
+        // The block that stopped the last ray, tried first on the next; none after a ray that
+        // nothing stopped (`Any::hint`).
+        let last = std::cell::Cell::new(None);
+        let any = |_| Any {
+            t_far: self.0.range.1,
+            hit: None,
+            hint: last.get(),
+        };
+        self.0.trace(
+            k,
+            base,
+            0..out.len(),
+            &mut scratch,
+            any,
+            #[inline(always)]
+            |j, sink| {
+                out[j] = sink.hit.is_some();
+                last.set(sink.hit);
+            },
+        );
+    }
+}
+
+/// The rays, the hits wanted per ray, and whether back faces are skipped.
+pub(crate) struct NearestJob<'a>(pub &'a Rays<'a>, pub usize, pub bool);
+
+impl Job for NearestJob<'_> {
+    type Out<'o> = HitSlices<'o>;
+
+    #[inline(always)]
+    fn chunk<K: Kernel>(&self, k: K, base: usize, (t, tri, bary): HitSlices<'_>) {
+        let want = self.1;
+        // Memory for the hits found, not for `want` (which may be far larger).
+        let mut found = Vec::with_capacity(want.min(64) + 1);
+        let mut stack = Stack::new();
+        for j in 0..t.len() / want {
+            let r = self.0.ray(base + j);
+            found.clear();
+            let mut sink = Nearest {
+                rays: self.0,
+                r: &r,
+                want,
+                found: &mut found,
+                t_far: r.t_far,
+                front_only: self.2,
+            };
+            traverse(k, self.0.bvh, &r.ray, &mut sink, &mut stack);
+            for (m, h) in found.iter().enumerate() {
+                t[j * want + m] = h.t;
+                tri[j * want + m] = h.triangle as i32;
+                bary[j * want + m] = h.bary;
+            }
+        }
+    }
+}
+
+/// Every distinct hit of each ray of a chunk (the k-nearest sink without a k): how many per
+/// ray, appended to the first vector, and the hits, nearest first, to the second.
+pub(crate) struct AllJob<'a>(pub &'a Rays<'a>, pub usize);
+
+impl Job for AllJob<'_> {
+    type Out<'o> = (&'o mut Vec<u32>, &'o mut Vec<Hit>);
+
+    #[inline(always)]
+    fn chunk<K: Kernel>(&self, k: K, base: usize, (counts, hits): Self::Out<'_>) {
+        let mut found = Vec::new();
+        let mut stack = Stack::new();
+        for j in 0..self.1 {
+            let r = self.0.ray(base + j);
+            found.clear();
+            let mut sink = Nearest {
+                rays: self.0,
+                r: &r,
+                want: usize::MAX,
+                found: &mut found,
+                t_far: r.t_far,
+                front_only: false,
+            };
+            traverse(k, self.0.bvh, &r.ray, &mut sink, &mut stack);
+            counts.push(found.len() as u32);
+            hits.extend_from_slice(&found);
+        }
+    }
+}
+
+/// How many hits [`all_hits`] would give each ray, without keeping them.
+pub(crate) struct CountJob<'a>(pub &'a Rays<'a>);
+
+impl Job for CountJob<'_> {
+    type Out<'o> = &'o mut [u32];
+
+    #[inline(always)]
+    fn chunk<K: Kernel>(&self, k: K, base: usize, out: &mut [u32]) {
+        let mut found = Vec::new();
+        let mut stack = Stack::new();
+        for (j, n) in out.iter_mut().enumerate() {
+            let r = self.0.ray(base + j);
+            found.clear();
+            let mut sink = Nearest {
+                rays: self.0,
+                r: &r,
+                want: usize::MAX,
+                found: &mut found,
+                t_far: r.t_far,
+                front_only: false,
+            };
+            traverse(k, self.0.bvh, &r.ray, &mut sink, &mut stack);
+            *n = found.len() as u32;
+        }
+    }
+}
+
+/// The k-nearest-hits sink: up to `want` distinct hits, refined as they are found, nearest
+/// first.
+struct Nearest<'a> {
+    rays: &'a Rays<'a>,
+    r: &'a Traced,
+    want: usize,
+    found: &'a mut Vec<Hit>,
+    /// Traversal bound: `t_max` until `want` hits are in hand, then the last one's `t` widened
+    /// by the same-hit tolerance.
+    t_far: f32,
+    /// Skip triangles whose front (counter-clockwise) faces away from the ray.
+    front_only: bool,
+}
+
+impl Nearest<'_> {
+    fn add(&mut self, h: Hit) {
+        let same = |a: f32, b: f32| (a - b).abs() <= SAME_HIT * a.max(b);
+        if let Some(e) = self.found.iter_mut().find(|e| same(e.t, h.t)) {
+            if (h.t, h.triangle) < (e.t, e.triangle) {
+                *e = h;
+                self.found.sort_by(|a, b| a.t.total_cmp(&b.t));
+            }
+            return;
+        }
+        let at = self.found.partition_point(|e| e.t <= h.t);
+        self.found.insert(at, h);
+        self.found.truncate(self.want);
+        if self.found.len() == self.want {
+            let last = self.found[self.want - 1].t as f64;
+            let bound = last * (1.0 + 2.0 * SAME_HIT as f64);
+            self.t_far = self.t_far.min(bound as f32 * WIDEN);
+        }
+    }
+}
+
+impl Sink for Nearest<'_> {
+    #[inline(always)]
+    fn t_far(&self) -> f32 {
+        self.t_far
+    }
+
+    fn take(&mut self, _: &Bvh8, block: usize, h: &Tri4Hit) -> bool {
+        let mut m = h.mask;
+        while m != 0 {
+            let lane = m.trailing_zeros() as usize;
+            m &= m - 1;
+            if self.front_only {
+                let [a, b, c] = self.rays.bvh.blocks[block].corners(lane).map(Vec3::from);
+                if (b - a).cross(c - a).dot(Vec3::from(self.r.d)) >= 0.0 {
+                    continue;
+                }
+            }
+            let hit = self
+                .rays
+                .report(self.r, &BlockHit::of(self.rays.bvh, block, lane, h));
+            self.add(hit);
+        }
+        false
+    }
+}

@@ -1,0 +1,462 @@
+//! Traversal of the 8-wide BVH (`node`): the ray's constants, the kernels' interface, the
+//! stack, and the loop every query runs.
+//!
+//! Traversal is depth first with a short stack. A node whose ray hits several children pushes
+//! them sorted by entry distance (an 8-lane sorting network on AVX2) and descends into the
+//! nearest; entries popped beyond the closest hit so far are skipped. The same loop serves every
+//! query through a [`Sink`] (`sinks`): closest hit, any hit, the k nearest hits, crossings.
+//! Any-hit rays may instead visit children in an order the builder fixed, the likeliest to stop
+//! a ray for its cost first and the boxes around the ray's start last (`Kernel::push_any`).
+
+use std::mem::MaybeUninit;
+
+use glam::Vec3A;
+
+use super::node::{
+    leaf_blocks, leaf_first, node_at, node_offset, Bvh8, Node8, Tri4, LEAF, ROW_BYTES, STACK,
+};
+use super::watertight::RayShear;
+
+/// A ray's constants for traversal (its direction as given, not normalised).
+#[derive(Clone, Copy, Debug)]
+pub struct Ray {
+    pub o: Vec3A,
+    pub inv: Vec3A,
+    /// `inv` widened by [`WIDEN`]: exit distances computed with it come out a few ulps long.
+    pub inv_far: Vec3A,
+    /// Per axis, the byte offset in a `Node8` of the row of `b` holding each box's near plane,
+    /// and of its far plane (see [`Node8::row`]).
+    pub(crate) near: [usize; 3],
+    pub(crate) far: [usize; 3],
+    pub shear: RayShear,
+    /// The origin in the shear's axis order (kx, ky, kz).
+    pub o_k: [f32; 3],
+    pub t_min: f32,
+    /// 3 × the direction's octant (bit a set when component a is negative): where this ray's
+    /// order lies in `Node8::order`.
+    pub octant_shift: u32,
+}
+
+impl Ray {
+    /// The ray from `o` along `d`, traced in units of `d`'s length (no normalisation: every
+    /// test is invariant to the direction's scale, and the square root and divisions it would
+    /// take sit at the head of every ray's dependency chain).
+    #[inline(always)]
+    pub fn new(o: Vec3A, d: Vec3A, t_min: f32) -> Self {
+        // Components this small (relative to the largest) get a huge but finite inverse of the
+        // same sign, so the slab products never meet 0 · inf.
+        let tiny = Vec3A::splat(1e-20 * d.abs().max_element());
+        let inv = Vec3A::ONE / Vec3A::select(d.abs().cmplt(tiny), tiny.copysign(d), d);
+        let row = |a: usize| a + 3 * usize::from(inv[a] < 0.0);
+        let near = std::array::from_fn(|a| ROW_BYTES * row(a));
+        let shear = RayShear::with_inverse(d, inv);
+        Self {
+            o,
+            inv,
+            inv_far: inv * WIDEN,
+            near,
+            far: std::array::from_fn(|a| ROW_BYTES * ((row(a) + 3) % 6)),
+            shear,
+            o_k: shear.permute(o),
+            t_min,
+            octant_shift: 3 * (0..3).map(|a| u32::from(inv[a] < 0.0) << a).sum::<u32>(),
+        }
+    }
+}
+
+/// Boxes whose exit distance rounds to just below the entry distance are still entered: exits
+/// are computed with the inverse direction widened by a few ulps (PBRT's 1 + 2γ₃; Embree's
+/// robust mode does the same), so the f32 slab test never rejects a box the ray grazes, and
+/// the watertight triangle test decides alone.
+pub const WIDEN: f32 = 1.0 + 4.0 * f32::EPSILON;
+
+/// Four triangles' test results: lanes hit within `[t_min, t_far)`, their `t` (+inf in the
+/// other lanes), and for each lane the barycentric numerators and their common denominator
+/// (barycentric (u, v) = (`bu / det`, `bv / det`)).
+#[derive(Clone, Copy, Debug)]
+pub struct Tri4Hit {
+    pub mask: u32,
+    pub t: [f32; 4],
+    pub bu: [f32; 4],
+    pub bv: [f32; 4],
+    pub det: [f32; 4],
+}
+
+impl Tri4Hit {
+    /// No lane hit.
+    pub const NONE: Tri4Hit = Tri4Hit {
+        mask: 0,
+        t: [f32::INFINITY; 4],
+        bu: [0.0; 4],
+        bv: [0.0; 4],
+        det: [1.0; 4],
+    };
+}
+
+/// The arithmetic of traversal, one implementation per instruction set. Every implementation
+/// gives bit-identical results (the portable one is the reference in the tests).
+pub trait Kernel: Copy {
+    /// Whether [`Kernel::packet`] traces packets.
+    const PACKETS: bool = false;
+    /// A ray's constants in this kernel's registers.
+    type R: Copy;
+    /// What a node test leaves for ordering the children it hit.
+    type D: Copy;
+    fn prepare(self, r: &Ray) -> Self::R;
+    /// The entry distance of child `lane` left by `node`.
+    fn dist(self, d: &Self::D, lane: u32) -> f32;
+    /// The children of `n` whose boxes the ray enters before `t_far`, as a bit mask.
+    fn node(self, n: &Node8, r: &Self::R, t_far: f32) -> (u32, Self::D);
+    /// Push the children in `mask` (three or more) onto `s` above `sp`, farthest first (by
+    /// entry distance); return the nearest, unpushed.
+    fn push_sorted(self, n: &Node8, mask: u32, d: Self::D, s: &mut Stack, sp: &mut usize) -> u32;
+    /// Push the children in `mask` (three or more; `descend` orders two by a compare, the same
+    /// way, and the kernels take any two or more) for an any-hit query and return the first to
+    /// visit, unpushed: the node's any-hit order ([`Node8::any_slot`]), with the boxes that hold
+    /// the ray's start (entry distance `t_min`) below the rest. A shadow ray leaves a surface,
+    /// which those boxes hold and which rarely blocks it. The entries' distances are 0: an any-hit
+    /// query never shortens its range, so nothing on its stack is culled.
+    fn push_any(
+        self,
+        n: &Node8,
+        mask: u32,
+        d: Self::D,
+        t_min: f32,
+        s: &mut Stack,
+        sp: &mut usize,
+    ) -> u32;
+    /// The watertight test of a block's four triangles.
+    fn tri4(self, b: &Tri4, r: &Self::R, ray: &Ray, t_far: f32) -> Tri4Hit;
+    /// Refine hits in f64 (`refine`), as `refine::refine_one` does one by one.
+    fn refine(self, p: &mut [super::refine::Pending], range: (f32, f32));
+    /// Trace eight coherent rays as one packet (lanes not in `active` are ignored), if this
+    /// kernel can; false leaves them to be traced one by one.
+    #[inline(always)]
+    fn packet<L: Lanes>(
+        self,
+        _bvh: &Bvh8,
+        _rays: &[Ray; WIDTH],
+        _active: u32,
+        _sinks: &mut L,
+        _stack: &mut PacketStack,
+    ) -> bool {
+        false
+    }
+}
+
+/// The traversal stack: node references with their entry distances (rounded down). Its height
+/// lives in the traversal loop, in a register.
+pub struct Stack {
+    pub node: [MaybeUninit<u32>; STACK],
+    pub dist: [MaybeUninit<f32>; STACK],
+}
+
+impl Default for Stack {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Stack {
+    #[inline(always)]
+    pub fn new() -> Self {
+        Self {
+            node: [MaybeUninit::uninit(); STACK],
+            dist: [MaybeUninit::uninit(); STACK],
+        }
+    }
+
+    #[inline(always)]
+    pub fn push(&mut self, sp: &mut usize, node: u32, dist: f32) {
+        debug_assert!(*sp < STACK);
+        // SAFETY: the builder bounds the tree's depth so the stack never exceeds STACK.
+        unsafe {
+            self.node.get_unchecked_mut(*sp).write(node);
+            self.dist.get_unchecked_mut(*sp).write(dist);
+        }
+        *sp += 1;
+    }
+
+    /// The next entry whose box starts no farther than `t_far`, if any.
+    #[inline(always)]
+    pub(crate) fn pop(&self, sp: &mut usize, t_far: f32) -> Option<u32> {
+        while *sp > 0 {
+            *sp -= 1;
+            // SAFETY: entries below `sp` were written by `push` or a kernel's `push_sorted` or
+            // `push_any`.
+            let (node, dist) = unsafe {
+                (
+                    self.node.get_unchecked(*sp).assume_init(),
+                    self.dist.get_unchecked(*sp).assume_init(),
+                )
+            };
+            if dist <= t_far {
+                return Some(node);
+            }
+        }
+        None
+    }
+}
+
+/// Rays in a packet (`packet`).
+pub const WIDTH: usize = 8;
+
+/// What each ray of a packet collects: one [`Sink`] per lane.
+pub trait Lanes {
+    /// Lane `lane`'s current bound: hits at or beyond it are not wanted.
+    fn t_far(&self, lane: usize) -> f32;
+    /// Lane `lane`'s hits in a block; true when the lane needs no more (an any-hit query).
+    fn take(&mut self, bvh: &Bvh8, lane: usize, block: usize, h: &Tri4Hit) -> bool;
+}
+
+impl<S: Sink> Lanes for [S; WIDTH] {
+    #[inline(always)]
+    fn t_far(&self, lane: usize) -> f32 {
+        self[lane].t_far()
+    }
+
+    #[inline(always)]
+    fn take(&mut self, bvh: &Bvh8, lane: usize, block: usize, h: &Tri4Hit) -> bool {
+        self[lane].take(bvh, block, h)
+    }
+}
+
+/// Whether `rays` (with directions `d`) can travel as one packet: their directions share an
+/// octant (so they share each box's near and far planes), their origins lie within
+/// `origin_extent` of each other on every axis, and their directions within about 14 degrees
+/// (camera rays of neighbouring pixels do; shuffled or random rays do not, and go one by one).
+#[inline(always)]
+pub fn coherent(rays: &[Ray; WIDTH], d: &[Vec3A; WIDTH], origin_extent: f32) -> bool {
+    // Octants first: rays in random order almost never share one, and then nothing else is
+    // computed.
+    let octant = rays[0].octant_shift;
+    if rays.iter().any(|r| r.octant_shift != octant) {
+        return false;
+    }
+    let (mut lo, mut hi) = (rays[0].o, rays[0].o);
+    // Directions scaled to a largest component of 1: the spread of each component then
+    // measures the angle between them, with no square root.
+    let unit = |d: Vec3A| d / d.abs().max_element();
+    let (mut dlo, mut dhi) = (unit(d[0]), unit(d[0]));
+    for i in 1..WIDTH {
+        (lo, hi) = (lo.min(rays[i].o), hi.max(rays[i].o));
+        let u = unit(d[i]);
+        (dlo, dhi) = (dlo.min(u), dhi.max(u));
+    }
+    (hi - lo).max_element() <= origin_extent && (dhi - dlo).max_element() <= 0.25
+}
+
+/// A packet's stack: node references with the lanes that entered them.
+pub struct PacketStack {
+    pub node: [MaybeUninit<u32>; STACK],
+    pub lanes: [MaybeUninit<u32>; STACK],
+}
+
+impl Default for PacketStack {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl PacketStack {
+    #[inline(always)]
+    pub fn new() -> Self {
+        Self {
+            node: [MaybeUninit::uninit(); STACK],
+            lanes: [MaybeUninit::uninit(); STACK],
+        }
+    }
+}
+
+/// Where hits go. `t_far` bounds the search (hits at or beyond it are not reported).
+pub trait Sink {
+    /// Whether children are visited strictly nearest first (closest hits), or in the builder's
+    /// any-hit order (any hit, see [`Kernel::push_any`]).
+    const ORDERED: bool = true;
+    /// Whether runs of coherent rays may travel as packets (`Kernel::packet`).
+    const PACKETS: bool = true;
+    /// Whether rays may be traced in turns where the tree is large (`interleave`; only for
+    /// `ORDERED` sinks, whose descent prefetches the children it enters).
+    const INTERLEAVE: bool = false;
+    fn t_far(&self) -> f32;
+    /// Take block `block`'s hits; return true to stop the traversal.
+    fn take(&mut self, bvh: &Bvh8, block: usize, h: &Tri4Hit) -> bool;
+    /// A block worth testing before the traversal starts (see [`Any::hint`]).
+    #[inline(always)]
+    fn hint(&self) -> Option<usize> {
+        None
+    }
+}
+
+/// Visit the tree along `ray`, giving every leaf block's hits to `sink`. `stack` is scratch
+/// space, reused from ray to ray.
+#[inline(always)]
+pub fn traverse<K: Kernel, S: Sink>(k: K, bvh: &Bvh8, ray: &Ray, sink: &mut S, stack: &mut Stack) {
+    let r = k.prepare(ray);
+    if sink
+        .hint()
+        .is_some_and(|b| block_stops(k, bvh, b, &r, ray, sink))
+    {
+        return;
+    }
+    let (mut cur, mut sp) = (0u32, 0usize);
+    while let Some(next) = visit(k, bvh, cur, &r, ray, sink, stack, &mut sp) {
+        cur = next;
+    }
+}
+
+/// One step of a traversal: visit node or leaf `cur` and return the next to visit (a child
+/// entered, or the stack's top), or `None` when the traversal has ended (the sink wants no
+/// more, or the stack is spent). `traverse` loops over it; `interleave` takes one step per turn.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub(crate) fn visit<K: Kernel, S: Sink>(
+    k: K,
+    bvh: &Bvh8,
+    cur: u32,
+    r: &K::R,
+    ray: &Ray,
+    sink: &mut S,
+    stack: &mut Stack,
+    sp: &mut usize,
+) -> Option<u32> {
+    if cur & LEAF == 0 {
+        let n = node_at(&bvh.nodes, cur);
+        let (mask, d) = k.node(n, r, sink.t_far());
+        if mask != 0 {
+            return Some(descend::<K, S>(k, bvh, n, mask, d, ray, stack, sp));
+        }
+    } else {
+        for b in leaf_blocks(cur) {
+            if block_stops(k, bvh, b, r, ray, sink) {
+                return None;
+            }
+        }
+    }
+    stack.pop(sp, sink.t_far())
+}
+
+/// The child of `n` to visit next, of those in `mask` (not empty) that the ray enters, by the
+/// order `S` asks for: the nearest, or the first in the any-hit order. The others are pushed
+/// onto `stack` above `sp`, the last to visit first. Closest-hit rays also ask the cache for
+/// every child entered (`prefetch_children`).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub(crate) fn descend<K: Kernel, S: Sink>(
+    k: K,
+    bvh: &Bvh8,
+    n: &Node8,
+    mask: u32,
+    d: K::D,
+    ray: &Ray,
+    stack: &mut Stack,
+    sp: &mut usize,
+) -> u32 {
+    if S::ORDERED {
+        prefetch_children(bvh, n, mask);
+    }
+    let first = mask.trailing_zeros();
+    let rest = mask & (mask - 1);
+    if rest == 0 {
+        return n.child[first as usize];
+    }
+    if !S::ORDERED {
+        if rest & (rest - 1) == 0 {
+            // Two children: by a compare, as for closest hits (the vector push cost 3-9% more
+            // on the occlusion rays of `bench rays`). A box around the start goes after one
+            // that is not; otherwise the lower rank goes first.
+            let second = rest.trailing_zeros();
+            let (ca, cb) = (n.child[first as usize], n.child[second as usize]);
+            let key = |lane: u32| {
+                u32::from(k.dist(&d, lane) <= ray.t_min) << 3 | n.any_rank(lane as usize)
+            };
+            let (next, later) = if key(first) < key(second) {
+                (ca, cb)
+            } else {
+                (cb, ca)
+            };
+            stack.push(sp, later, 0.0);
+            return next;
+        }
+        return k.push_any(n, mask, d, ray.t_min, stack, sp);
+    }
+    if rest & (rest - 1) == 0 {
+        // Two children: the nearer next, the other pushed. Both references are loaded before
+        // the comparison, which then only selects.
+        let second = rest.trailing_zeros();
+        let (ca, cb) = (n.child[first as usize], n.child[second as usize]);
+        let a = sort_key(k.dist(&d, first), first);
+        let b = sort_key(k.dist(&d, second), second);
+        let (near, far, far_key) = if a < b { (ca, cb, b) } else { (cb, ca, a) };
+        stack.push(sp, far, key_dist(far_key));
+        near
+    } else {
+        k.push_sorted(n, mask, d, stack, sp)
+    }
+}
+
+/// Test block `b` and give its hits to `sink`; true when the sink wants no more.
+#[inline(always)]
+pub(crate) fn block_stops<K: Kernel, S: Sink>(
+    k: K,
+    bvh: &Bvh8,
+    b: usize,
+    r: &K::R,
+    ray: &Ray,
+    sink: &mut S,
+) -> bool {
+    debug_assert!(b < bvh.blocks.len());
+    // SAFETY: leaf references index `blocks` (checked by the builder's tests), and hints are
+    // blocks an earlier ray hit in this tree.
+    let block = unsafe { bvh.blocks.get_unchecked(b) };
+    let h = k.tri4(block, r, ray, sink.t_far());
+    h.mask != 0 && sink.take(bvh, b, &h)
+}
+
+/// Ask the cache for what the children in `mask` will read: an inner child's four lines (boxes
+/// and references), a leaf's first block. Embree's traversal prefetches its children the same
+/// way. It pays where the tree outgrows the core's cache: a closest-hit ray pops most children
+/// it pushes, and by then their lines are in (on the 1M-triangle spheres scene, shuffled and
+/// incoherent rays ran 1.25–1.3× faster). Any-hit queries stop early and leave most pushed
+/// children unread, so they do not prefetch.
+#[inline(always)]
+fn prefetch_children(bvh: &Bvh8, n: &Node8, mask: u32) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        let nodes = bvh.nodes.as_ptr() as usize;
+        let blocks = bvh.blocks.as_ptr() as usize;
+        let mut m = mask;
+        while m != 0 {
+            let c = n.child[m.trailing_zeros() as usize];
+            m &= m - 1;
+            // Both addresses, then a select by mask arithmetic: a branch on inner or leaf
+            // would be a coin toss for the predictor at every child.
+            let inner = nodes.wrapping_add(node_offset(c));
+            let leaf = blocks.wrapping_add(leaf_first(c) * size_of::<Tri4>());
+            let is_leaf = ((c >> 31) as usize).wrapping_neg();
+            let p = (inner ^ ((inner ^ leaf) & is_leaf)) as *const i8;
+            for l in 0..4 {
+                // SAFETY: a prefetch is only a hint: it never faults, whatever the address.
+                unsafe { _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(64 * l)) };
+            }
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (bvh, n, mask);
+}
+
+/// A child's sort key: its entry distance's bits with the sign cleared (distances are never
+/// negative, but may be −0) and the low three bits replaced by its slot. Keys order like the
+/// distances, up to those three bits.
+#[inline(always)]
+pub fn sort_key(dist: f32, slot: u32) -> u32 {
+    (dist.to_bits() & 0x7FFF_FFF8) | slot
+}
+
+/// The distance kept on the stack for a key: rounded down, so it never culls a box it should
+/// enter.
+#[inline(always)]
+pub fn key_dist(key: u32) -> f32 {
+    f32::from_bits(key & 0x7FFF_FFF8)
+}
