@@ -5,7 +5,7 @@
 
 use super::dispatch::dispatch;
 use super::driver::{drive, Seconds};
-use super::jobs::{AllJob, AnyJob, ClosestJob, CountJob, NearestJob};
+use super::jobs::{any_plan, AllJob, AnyJob, AnyPlan, ClosestJob, CountJob, NearestJob};
 use super::query::Query;
 use super::rays::{Hit, Rays};
 use super::schedule::{collect, run, HitSlices, CHUNK};
@@ -166,6 +166,17 @@ pub fn cast_rays_kept(
 
 /// Whether anything lies along each ray within `[t_min, t_max)`: the traversal stops at the
 /// first hit it finds, in whatever order.
+///
+/// How is decided once per call by a probe of 256 of the rays (`jobs::any_plan`; the answer
+/// does not depend on it): nearest first or in the builder's any-hit order, whichever visits
+/// fewer nodes and blocks, and whether each ray first tries the block that stopped its
+/// neighbour. Neither order wins everywhere (one thread, AMD EPYC, nearest first against the
+/// any-hit order): shadow segments from surface points towards a small light 0.60-0.77x on
+/// `khr_toy_car`, `balloon` and `stanford_bunny` (toy car: 15.7 visits a ray against 9.7);
+/// short segments in random directions from the same points 1.0-1.16x; segments between random
+/// points 1.0-1.23x. Hints: 1.10-1.18x on the shadow rays of `khr_glass_vase_flowers` and
+/// `intel_sponza_curtains` (a neighbour's block stops 19-38% of them), 0.93-1.0x where it stops
+/// under 15%.
 pub fn occluded(
     scene: &Scene,
     origins: &[[f32; 3]],
@@ -175,8 +186,8 @@ pub fn occluded(
     let (hit, s) = drive(scene, origins, directions, q, |bvh| {
         let mut hit = vec![false; origins.len()];
         let rays = Rays::new(bvh, origins, directions, q);
-        let job = AnyJob(&rays);
-        run(q, &mut hit[..], 1, |base, out| dispatch(&job, base, out))?;
+        let plan = any_plan(&rays, origins.len());
+        occluded_as(q, &rays, plan, &mut hit)?;
         Ok(hit)
     })?;
     Ok(Occlusion {
@@ -184,6 +195,24 @@ pub fn occluded(
         bvh_build_seconds: s.build,
         trace_seconds: s.trace,
     })
+}
+
+/// Trace `rays` for [`occluded`] as `plan` says, into `hit`.
+pub(crate) fn occluded_as(q: &Query, rays: &Rays, plan: AnyPlan, hit: &mut [bool]) -> Result<()> {
+    match (plan.nearest, plan.hint) {
+        (true, true) => run(q, hit, 1, |b, o| {
+            dispatch(&AnyJob::<true, true>(rays), b, o)
+        }),
+        (true, false) => run(q, hit, 1, |b, o| {
+            dispatch(&AnyJob::<true, false>(rays), b, o)
+        }),
+        (false, true) => run(q, hit, 1, |b, o| {
+            dispatch(&AnyJob::<false, true>(rays), b, o)
+        }),
+        (false, false) => run(q, hit, 1, |b, o| {
+            dispatch(&AnyJob::<false, false>(rays), b, o)
+        }),
+    }
 }
 
 /// Results of [`count_hits`].

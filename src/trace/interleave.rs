@@ -7,17 +7,16 @@
 //! and the processor cannot run ahead into the next ray, because every node ends in branches it
 //! mispredicts. Here up to [`FLIGHTS`] rays are in flight. Each turn visits one node (or one
 //! leaf) of one ray, picks that ray's next node and moves on to the next ray. The node's lines
-//! were asked for when the ray entered it (`descend` prefetches every child a closest-hit ray
-//! enters), so by the time the turn comes back, they have arrived. Only sinks that visit
-//! children nearest first ([`Sink::ORDERED`]: closest hits, which have no hint block to try
-//! first) are traced in turns; any-hit rays lost there (see `sinks::Any`).
+//! were asked for when the ray entered it (`descend` prefetches every child the ray enters),
+//! so by the time the turn comes back, they have arrived. Only sinks that ask for every child
+//! they enter ([`Sink::PREFETCH`]: closest and any hits) are traced in turns.
 //!
 //! Each ray visits exactly the nodes and blocks, in exactly the order, that
 //! [`traverse::traverse`](super::traverse::traverse) would: only the interleaving differs, so every
 //! query reports the same hits.
 
 use super::node::Bvh8;
-use super::traverse::{visit, Kernel, Ray, Sink, Stack};
+use super::traverse::{block_stops, visit, Kernel, Ray, Sink, Stack};
 
 /// Rays in flight at once.
 pub const FLIGHTS: usize = 8;
@@ -65,8 +64,8 @@ pub fn traverse<K: Kernel, S: Sink + Copy>(
     mut done: impl FnMut(usize, S),
 ) {
     debug_assert!(
-        S::ORDERED,
-        "only closest-hit sinks prefetch the children they enter"
+        S::PREFETCH,
+        "only sinks that prefetch the children they enter go in turns"
     );
     let Flights { flights, stacks } = scratch;
     flights.clear();
@@ -75,7 +74,7 @@ pub fn traverse<K: Kernel, S: Sink + Copy>(
         stacks.resize_with(FLIGHTS, Stack::new);
     }
     while flights.len() < FLIGHTS {
-        match launch(k, &mut next, range.end, &mut start) {
+        match launch(k, bvh, &mut next, range.end, &mut start, &mut done) {
             Some((ray, r, sink, j)) => flights.push(Flight {
                 ray,
                 r,
@@ -102,7 +101,7 @@ pub fn traverse<K: Kernel, S: Sink + Copy>(
             // stack. The flight is rewritten where it lies: moving it (some 400 bytes) cost a
             // call to memcpy per ray.
             done(f.j, f.sink);
-            match launch(k, &mut next, range.end, &mut start) {
+            match launch(k, bvh, &mut next, range.end, &mut start, &mut done) {
                 Some((ray, r, sink, j)) => {
                     (f.ray, f.r, f.sink, f.cur, f.sp, f.j) = (ray, r, sink, 0, 0, j);
                 }
@@ -116,24 +115,33 @@ pub fn traverse<K: Kernel, S: Sink + Copy>(
     }
 }
 
-/// Ray `*next`, set up for traversal: its constants, the kernel's, its sink and its index.
-/// `None` when the rays up to `end` are spent.
+/// The next ray that needs a traversal, set up for it: its constants, the kernel's, its sink
+/// and its index. A ray whose sink's hint block stops it (`Sink::hint`) is done here, as
+/// `traverse::traverse` would be. `None` when the rays up to `end` are spent.
 #[inline(always)]
 fn launch<K: Kernel, S: Sink>(
     k: K,
+    bvh: &Bvh8,
     next: &mut usize,
     end: usize,
     start: &mut impl FnMut(usize) -> (Ray, S),
+    done: &mut impl FnMut(usize, S),
 ) -> Option<(Ray, K::R, S, usize)> {
-    if *next >= end {
-        return None;
+    while *next < end {
+        let j = *next;
+        *next += 1;
+        let (ray, mut sink) = start(j);
+        let r = k.prepare(&ray);
+        // No closure around the block test (see `traverse::traverse`).
+        if let Some(b) = sink.hint() {
+            if block_stops(k, bvh, b, &r, &ray, &mut sink) {
+                done(j, sink);
+                continue;
+            }
+        }
+        return Some((ray, r, sink, j));
     }
-    let j = *next;
-    *next += 1;
-    let (ray, sink) = start(j);
-    // `traverse::traverse` would try a hint block first; sinks traced in turns have none.
-    debug_assert!(sink.hint().is_none());
-    Some((ray, k.prepare(&ray), sink, j))
+    None
 }
 
 /// Visit `f`'s current node or leaf and pick its next node (`traverse::visit`; the next node's lines

@@ -126,32 +126,42 @@ impl Sink for ClosestKept<'_> {
     }
 }
 
-/// Any-hit sink: stops at the first hit.
+/// Any-hit sink: stops at the first hit, visiting children nearest first (`NEAREST`, as closest
+/// hits do) or in the builder's any-hit order (`Kernel::push_any`: the children likeliest to
+/// stop a ray for their cost first, the boxes around the ray's start last). Neither order wins
+/// everywhere (`api::occluded` has the figures and picks one per call, `jobs::nearest_first`).
+///
+/// One ray at a time, never as packets, but in turns where the tree is large (`interleave`):
+/// one thread, 400K occlusion segments between random points of 2M-triangle tilings of
+/// `stanford_bunny` and `intel_sponza_ivy`, 2.0-2.2x.
 #[derive(Clone, Copy)]
-pub struct Any {
+pub struct AnyHit<const NEAREST: bool> {
     pub t_far: f32,
     /// The block that stopped the traversal, if any.
     pub hit: Option<u32>,
-    /// A block to test first: the one that stopped the previous ray (none when nothing did).
-    /// Shadow rays from neighbouring points (in image order) are mostly blocked by the same
-    /// occluder, and one block test then replaces a traversal (Haines and Greenberg's shadow
-    /// cache, "The Light Buffer", 1986). Whatever it finds is a hit in range, so the answer does
-    /// not change. After a ray that nothing blocked, the next is likely unblocked too, and the
-    /// test is skipped (the cache is emptied): with one thread on the occlusion rays of
-    /// `bench rays`, 1.06x on the procedural shapes, whose tests mostly missed; 0.97-1.02x on
-    /// the real scenes.
+    /// A block to test first: the one that stopped the previous ray (Haines and Greenberg's
+    /// shadow cache, "The Light Buffer", 1986). Shadow rays from neighbouring points (in image
+    /// order) are mostly blocked by the same occluder, and one block test then replaces a
+    /// traversal. Whatever it finds is a hit in range, so the answer does not change.
     pub hint: Option<u32>,
 }
 
-impl Sink for Any {
-    const ORDERED: bool = false;
-    /// One by one, so that each ray tries its hint first: on shadow rays in image order that
-    /// beat packets on the four scenes measured (e.g. 0.83× → 0.89× Embree's speed on
-    /// `khr_toy_car`, 0.94× → 1.05× on the procedural shapes). Not in turns either
-    /// (`interleave`): shadow rays in image order find their nodes in the cache, and the turns
-    /// only cost (one thread, 786K occlusion rays: 0.77x on `khr_metal_rough_spheres_notex`,
-    /// whose tree is 60 MB; 0.78x on `khr_toy_car`).
+impl<const NEAREST: bool> AnyHit<NEAREST> {
+    #[inline(always)]
+    pub fn new(t_far: f32, hint: Option<u32>) -> Self {
+        Self {
+            t_far,
+            hit: None,
+            hint,
+        }
+    }
+}
+
+impl<const NEAREST: bool> Sink for AnyHit<NEAREST> {
+    const ORDERED: bool = NEAREST;
+    const PREFETCH: bool = true;
     const PACKETS: bool = false;
+    const INTERLEAVE: bool = true;
 
     #[inline(always)]
     fn t_far(&self) -> f32 {
@@ -167,5 +177,52 @@ impl Sink for Any {
     #[inline(always)]
     fn hint(&self) -> Option<usize> {
         self.hint.map(|b| b as usize)
+    }
+}
+
+/// A sink that counts the nodes and blocks its traversal visits, for a probe that compares
+/// traversal orders by the work they cost (the same work on every kernel and thread count).
+#[derive(Clone, Copy)]
+pub struct Counted<S> {
+    pub sink: S,
+    pub nodes: u32,
+    pub blocks: u32,
+}
+
+impl<S> Counted<S> {
+    pub fn new(sink: S) -> Self {
+        Self {
+            sink,
+            nodes: 0,
+            blocks: 0,
+        }
+    }
+}
+
+impl<S: Sink> Sink for Counted<S> {
+    const ORDERED: bool = S::ORDERED;
+    const PREFETCH: bool = S::PREFETCH;
+    const PACKETS: bool = false;
+    const INTERLEAVE: bool = false;
+
+    #[inline(always)]
+    fn t_far(&self) -> f32 {
+        self.sink.t_far()
+    }
+
+    #[inline(always)]
+    fn take(&mut self, bvh: &Bvh8, block: usize, h: &Tri4Hit) -> bool {
+        self.sink.take(bvh, block, h)
+    }
+
+    #[inline(always)]
+    fn hint(&self) -> Option<usize> {
+        self.sink.hint()
+    }
+
+    #[inline(always)]
+    fn count(&mut self, nodes: u32, blocks: u32) {
+        self.nodes += nodes;
+        self.blocks += blocks;
     }
 }

@@ -9,7 +9,7 @@ use super::api::{
 };
 use super::bvh::Bvh;
 use super::dispatch::{dispatch, Job};
-use super::jobs::{AnyJob, ClosestJob};
+use super::jobs::{any_plan, plan_of, AnyJob, AnyPlan, ClosestJob, Probe, ProbeJob};
 use super::portable::Portable;
 use super::query::{Query, Threads};
 use super::rays::Rays;
@@ -261,9 +261,39 @@ fn kernels_packets_orders_and_threads_agree() {
         };
         assert_eq!(bits(&h), bits(&reference)[..m], "{name}, in turns");
     }
-    let mut any = vec![false; n];
-    AnyJob(&rays).chunk(Portable, 0, &mut any);
-    assert_eq!(any, occluded(&s, &o, &d, &q).unwrap().hit);
+    let hit = occluded(&s, &o, &d, &q).unwrap().hit;
+    assert_eq!(hit, hit_by_closest(&s, &o, &d, &q));
+    // Every any-hit plan, both kernels, one by one and in turns.
+    for turns in [false, true] {
+        let mut rays = Rays::new(&bvh.tree, &o, &d, &q);
+        rays.interleave = turns;
+        for (name, any) in any_plans(&rays) {
+            assert_eq!(any, hit, "{name}, in turns: {turns}");
+        }
+    }
+}
+
+/// `occluded` of every ray of `rays` by each any-hit plan (nearest first or not, hints or
+/// not) on each kernel, named.
+fn any_plans(rays: &Rays) -> Vec<(String, Vec<bool>)> {
+    let n = rays.origins.len();
+    let mut out = Vec::new();
+    macro_rules! plan {
+        ($nearest:expr, $hint:expr) => {{
+            let job = AnyJob::<$nearest, $hint>(rays);
+            let (mut portable, mut best) = (vec![false; n], vec![false; n]);
+            job.chunk(Portable, 0, &mut portable);
+            dispatch(&job, 0, &mut best);
+            let name = format!("nearest {}, hints {}", $nearest, $hint);
+            out.push((format!("{name}, portable"), portable));
+            out.push((format!("{name}, dispatched"), best));
+        }};
+    }
+    plan!(true, true);
+    plan!(true, false);
+    plan!(false, true);
+    plan!(false, false);
+    out
 }
 
 /// Whether `cast_rays` finds a hit in the range, per ray.
@@ -280,15 +310,20 @@ fn occluded_agrees_with_closest_hits() {
     for t_max in [0.3, 1.0, f32::INFINITY] {
         let q = Query::new(0.05, t_max);
         let a = occluded(&s, &o, &d, &q).unwrap();
-        assert_eq!(a.hit, hit_by_closest(&s, &o, &d, &q), "t_max {t_max}");
+        let want = hit_by_closest(&s, &o, &d, &q);
+        assert_eq!(a.hit, want, "t_max {t_max}");
+        let bvh = Bvh::of(&s);
+        for (name, any) in any_plans(&Rays::new(&bvh.tree, &o, &d, &q)) {
+            assert_eq!(any, want, "t_max {t_max}, {name}");
+        }
     }
 }
 
-/// Shadow rays in image order, where each ray's predecessor was stopped by a block (the
-/// hint it tries first): every other segment ends short of that occluder, and some rays pass
-/// beside it. The hint must never turn them into hits.
+/// Shadow rays in image order where every other segment ends short of the occluder its
+/// neighbour meets (the hint each tries first), and some rays pass beside it: never a hit
+/// beyond a segment's end, whatever the any-hit plan.
 #[test]
-fn occluded_hints_never_add_hits() {
+fn occluded_segments_end_where_they_end() {
     // A quad at z = 1 over [0, 1]²; shadow rays rise from a grid over [-0.5, 1.5]².
     let v = [
         [0.0, 0.0, 1.0],
@@ -312,6 +347,11 @@ fn occluded_hints_never_add_hits() {
     let a = occluded(&s, &o, &d, &q).unwrap();
     let want = hit_by_closest(&s, &o, &d, &q);
     assert_eq!(a.hit, want);
+    let bvh = Bvh::of(&s);
+    let rays = Rays::new(&bvh.tree, &o, &d, &q);
+    for (name, any) in any_plans(&rays) {
+        assert_eq!(any, want, "{name}");
+    }
     let blocked = want.iter().filter(|&&h| h).count();
     assert!(
         blocked > 500 && blocked < 4096 / 2,
@@ -434,4 +474,30 @@ fn bad_rays_are_rejected() {
     assert!(k0.unwrap_err().to_string().contains("max_hits"));
     assert!(Threads::from_count(Some(0)).is_err());
     assert!(cast_rays(&s, &[[0.0; 3]], &[[1.0, 0.0, 0.0]], 2.0, 1.0).is_err());
+}
+
+/// The any-hit probe counts visits, which every kernel makes alike: the same plan on both
+/// kernels, and the plans a shadow batch and a random batch should get.
+#[test]
+fn the_any_hit_probe_is_a_count() {
+    let s = soup(3000, 41);
+    let bvh = Bvh::of(&s);
+    let q = Query::new(0.0, 1.0);
+    let (o, d) = random_rays(4096, 42);
+    let rays = Rays::new(&bvh.tree, &o, &d, &q);
+    let plan = any_plan(&rays, o.len());
+    let mut portable = Probe::default();
+    ProbeJob(&rays, o.len()).chunk(Portable, 0, &mut portable);
+    assert_eq!(plan, plan_of(&portable));
+    // Random rays in random order: a neighbour's block never stops the next.
+    assert!(!plan.hint, "{plan:?}");
+    // A small batch is not probed.
+    let few = Rays::new(&bvh.tree, &o[..100], &d[..100], &q);
+    assert_eq!(
+        any_plan(&few, 100),
+        AnyPlan {
+            nearest: false,
+            hint: true
+        }
+    );
 }
