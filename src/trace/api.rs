@@ -29,12 +29,13 @@ pub struct RayHits {
 }
 
 impl RayHits {
-    /// `n` rays of `k` entries without a hit.
-    fn empty(n: usize, k: usize) -> Self {
+    /// `n` rays of `k` entries, zeroed (allocated lazily by the system): every job marks its
+    /// chunk's entries "no hit" before it writes the hits (`jobs::no_hits`), on its own thread.
+    fn zeroed(n: usize, k: usize) -> Self {
         Self {
             k,
-            t: vec![f32::INFINITY; n * k],
-            triangle: vec![-1; n * k],
+            t: vec![0.0; n * k],
+            triangle: vec![0; n * k],
             barycentric: vec![[0.0; 2]; n * k],
             ..Self::default()
         }
@@ -116,7 +117,7 @@ pub fn nearest_hits_facing(
         16,
     )?;
     let (hits, s) = drive(scene, origins, directions, q, |bvh| {
-        let mut hits = RayHits::empty(n, k);
+        let mut hits = RayHits::zeroed(n, k);
         let rays = Rays::new(bvh, origins, directions, q);
         if k == 1 && !front_only {
             let job = ClosestJob::new(&rays);
@@ -151,7 +152,7 @@ pub fn cast_rays_kept(
     let n = origins.len();
     crate::limits::check(|| format!("{n} rays"), n as u128, 16)?;
     let (hits, s) = drive(scene, origins, directions, q, |bvh| {
-        let mut hits = RayHits::empty(n, 1);
+        let mut hits = RayHits::zeroed(n, 1);
         let rays = Rays::new(bvh, origins, directions, q);
         let sink = ClosestKept {
             closest: Closest::new(rays.range.1),

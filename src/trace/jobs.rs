@@ -13,6 +13,18 @@ use super::sinks::{AnyHit, BlockHit, Closest, ClosestKept, Counted};
 use super::traverse::{block_stops, traverse, Kernel, Sink, Stack, Tri4Hit, WIDEN};
 use crate::types::SAME_HIT;
 
+/// Mark every entry of a chunk "no hit" (`t` +inf, triangle −1, barycentrics 0), before the
+/// hits are written. The result arrays are allocated zeroed (`api::RayHits::empty`), which the
+/// system does lazily, and each chunk's thread fills its own part here: filled up front, by the
+/// calling thread, 786K rays' 12.6 MB took 4-5 ms of page faults and stores that no other core
+/// could share (on `intel_sponza_ivy`'s primary rays, 15% of the trace on two cores).
+#[inline(always)]
+fn no_hits((t, tri, bary): HitSlices<'_>) {
+    t.fill(f32::INFINITY);
+    tri.fill(-1);
+    bary.fill([0.0; 2]);
+}
+
 /// A closest-hit sink: what it kept.
 pub(crate) trait Best: Sink + Copy + Sync {
     fn best(&self) -> Option<BlockHit>;
@@ -51,6 +63,7 @@ impl<S: Best> Job for ClosestJob<'_, S> {
         // processor overlaps one hit's refinement with the next's; inline it took as long as
         // the traversal of a primary ray).
         const BATCH: usize = 256;
+        no_hits((t, tri, bary));
         let mut scratch = Scratch::new();
         let mut found = [0u32; BATCH];
         let mut pending = [Pending::default(); BATCH];
@@ -212,6 +225,7 @@ impl Job for NearestJob<'_> {
     #[inline(always)]
     fn chunk<K: Kernel>(&self, k: K, base: usize, (t, tri, bary): HitSlices<'_>) {
         let want = self.1;
+        no_hits((t, tri, bary));
         // Memory for the hits found, not for `want` (which may be far larger).
         let mut found = Vec::with_capacity(want.min(64) + 1);
         let mut stack = Stack::new();
