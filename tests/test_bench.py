@@ -19,8 +19,8 @@ def test_bench_all_quick_writes_a_summary_and_every_methods_row(tmp_path, capsys
     bench.main(["all", "--quick", "--repeats", "1", "--out", str(out)])
     md = out.read_text()
     for row in (
-        "rays, primary: 1 thread vs embreex",
-        "rays, occlusion: all cores vs Open3D",
+        "rays, primary, closest hit: one core vs Open3D",
+        "rays, shadow, occluded: every core vs Open3D",
         "rays, BVH memory / Embree's",
         "depth images vs pyrender",
         "non-redundant / conventional time",
@@ -56,27 +56,30 @@ def test_bench_scenes_quick_poses_a_tiling_and_reports_every_target(tmp_path):
         assert target in md
 
 
-def test_bench_rays_quick_measures_every_shared_scene(tmp_path, capsys):
-    """`bench rays` covers each shared scene of >= 10K triangles (those over 500K skipped when
-    quick) and the procedural one, with all four ray sets and build and memory columns."""
+def test_bench_rays_quick_measures_scenes_and_tilings_on_one_core_and_every_core(tmp_path):
+    """`bench rays` measures a shared scene and its tiling, each ray set on one core (a child
+    process pinned to one) and on every core, against Open3D and embreex, with a verdict for
+    every target, the build and the memory."""
     pytest.importorskip("embreex")
     pytest.importorskip("open3d")
-    import scenesample as ss
     from scenesample import _bench_rays, bench
 
     out = tmp_path / "rays.md"
-    bench.main(["rays", "--quick", "--scenes", "bunny,shapes", "--out", str(out)])
+    bench.main(["rays", "--quick", "--scenes", "bunny", "--out", str(out)])
     md = out.read_text()
-    for section in ("## primary", "## shuffled", "## incoherent", "## occlusion", "## BVH build"):
+    for section in ("## primary", "## incoherent", "## shadow", "## segments", "## BVH build"):
         assert section in md
-    names = [n for n in ss.scenes.shared_scene_files() if "bunny" in n] + ["procedural"]
-    for name in names:
-        assert md.count(name) >= 5, name  # one row per table
-    rows = _bench_rays.summary_rows(_bench_rays.run(True, 1, ["shapes"]))
-    # Two per ray set, occluded against the closest hit, count and list of hits, build, memory.
-    assert len(rows) == 13 and all(r[2] > 0 for r in rows)
-    assert "| 1 thread to all cores: ours | Open3D |" in md
-    assert "count_hits vs Open3D's count_intersections" in md
+    for name in ("| stanford_bunny |", "| stanford_bunny x2 (tiled) |"):
+        rows = [line for line in md.splitlines() if line.startswith(name)]
+        assert len(rows) == 5, name  # one row per table
+    rows = _bench_rays.summary_rows(_bench_rays.run(True, 1, ["cornell"]))
+    # Two per ray set against Open3D, occluded against the closest hit on two sets on one and
+    # every core, scaling and agreement per set, count (two) and list of hits, build, memory.
+    assert len(rows) == 8 + 4 + 4 + 3 + 4 + 2 and all(r[2] > 0 for r in rows)
+    # The cornell box (3,968 triangles) is only measured tiled.
+    assert {r[3] for r in rows} == {"cornell_box x26 (tiled)"}
+    assert "count_hits vs Open3D's count_intersections (one core)" in md
+    assert "pinned with `os.sched_setaffinity`" in md
 
 
 def test_bench_backends_quick_compares_gpu_cpu_and_auto(tmp_path, gpu):

@@ -1,6 +1,6 @@
 """Side-by-side benchmarks against the tools users trust, measured in one run on one machine.
 
-    python -m scenesample.bench rays          # ray queries vs Embree and Open3D, real scenes
+    python -m scenesample.bench rays          # ray queries vs Embree 4 (Open3D: one core, all)
     python -m scenesample.bench peers         # depth images vs pyrender
     python -m scenesample.bench nonredundant  # non-redundant rendering and peeling vs conventional
     python -m scenesample.bench epr           # EPR reflections vs MVR and iVIR

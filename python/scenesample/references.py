@@ -215,6 +215,19 @@ class EmbreeReference:
         far = np.full(len(o), t_max, dtype=np.float32)
         return np.asarray(self._scene.run(o, d, dists=far, query="OCCLUDED")) == 0
 
+    def raw(self, origins: np.ndarray, directions: np.ndarray, t_max: float) -> dict[str, Any]:
+        """embreex's own calls on float32 C-contiguous copies of the rays made once, here:
+        ``cast`` and ``occluded`` (no arguments; each returns what embreex returns), so that a
+        benchmark times Embree's queries alone, not the conversions around them."""
+        o = np.ascontiguousarray(origins, dtype=np.float32)
+        d = np.ascontiguousarray(directions, dtype=np.float32)
+        far = np.full(len(o), t_max, dtype=np.float32)
+        s = self._scene
+        return {
+            "cast": lambda: s.run(o, d, output=1),
+            "occluded": lambda: s.run(o, d, dists=far, query="OCCLUDED"),
+        }
+
     def commit(self) -> None:
         """Build the BVH now (embreex builds it on the first query)."""
         self.cast(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32))
@@ -236,6 +249,19 @@ class Open3DReference:
     def _rays(self, origins: np.ndarray, directions: np.ndarray) -> Any:
         rays = np.concatenate([origins, directions], axis=1).astype(np.float32)
         return self._o3d.core.Tensor(rays)
+
+    def raw(self, origins: np.ndarray, directions: np.ndarray, t_max: float) -> dict[str, Any]:
+        """Open3D's own calls on rays made into its tensor once, here: ``cast``, ``occluded``,
+        ``count`` and ``list`` (no arguments; each returns what Open3D returns, unconverted), so
+        that a benchmark times Open3D's query alone, not the conversions around it."""
+        rays = self._rays(origins, directions)
+        s = self._scene
+        return {
+            "cast": lambda: s.cast_rays(rays),
+            "occluded": lambda: s.test_occlusions(rays, tfar=t_max),
+            "count": lambda: s.count_intersections(rays),
+            "list": lambda: s.list_intersections(rays),
+        }
 
     def cast(
         self, origins: np.ndarray, directions: np.ndarray, threads: int = 0
