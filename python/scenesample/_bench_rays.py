@@ -500,7 +500,41 @@ def report(r: dict[str, Any]) -> str:
             f"{m['ours']:.1f} | {m['embree']:.1f} | {m['ours'] / m['embree']:.2f}x | "
             f"{a['sah']:.1f} |"
         )
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines + NOTES) + "\n"
+
+
+#: What the report says besides its figures: how the work is spread, and what that implies
+#: beyond the two cores measured here.
+NOTES = [
+    "",
+    "## Two cores, and what the design implies for 16 or 64",
+    "",
+    "- **How the work is split.** A call's rays are cut into chunks of 1,024 (`trace::schedule`) "
+    "that rayon's pool steals, each with its own stacks; the tree is read-only and shared. A "
+    "786K-ray call has 768 chunks: 48 for each of 16 threads, 12 for each of 64, enough to "
+    "even out; a call of under 64K rays has fewer chunks than a 64-core pool has threads, and "
+    "leaves cores idle.",
+    "- **Writes to shared result arrays.** Each chunk writes only its own slices; neighbouring "
+    "chunks share at most a cache line at their border. The arrays are allocated zeroed (lazily, "
+    "by the system) and each chunk marks its own entries \"no hit\" on its thread: filled up "
+    "front by the calling thread, 786K rays' 12.6 MB took 4-5 ms of page faults on one core, "
+    "15% of `intel_sponza_ivy`'s primary rays on two; on 64 cores it would have been most of "
+    "the call.",
+    "- **The float64 refinement** of each hit runs in the chunk that found it, in batches of 256 "
+    "hits after their traversal; it adds no serial step.",
+    "- **What stays serial per call:** the check of the rays (itself parallel, a pass over the "
+    "inputs), the lookup of the cached tree, the any-hit probe (256 rays traced both ways, "
+    "about 0.1-0.2 ms), and the Python wrapper (no copies: numpy takes the result vectors). "
+    "These are fixed costs, so small calls scale worst: `shadow` on `intel_sponza_ivy` (34K "
+    "rays) is the weakest case here.",
+    "- **Measured on two cores:** the chunks' busy time summed over threads is the same on one "
+    "thread and on two (46 ms for `intel_sponza_ivy`'s primary rays); the rest of the gap to 2x "
+    "is the serial part above and this shared machine's run-to-run spread (the same one-thread "
+    "call took 35-47 ms in consecutive rounds). On many cores the trees of large scenes, read by "
+    "every core, compete for the shared last-level cache as they do here.",
+    "- **The first call builds the tree**, in parallel above 8,192 triangles a range; its top "
+    "levels split one range at a time, so the build scales less than the trace.",
+]
 
 
 def _main(argv: list[str]) -> None:

@@ -14,7 +14,7 @@ use super::traverse::{block_stops, traverse, Kernel, Sink, Stack, Tri4Hit, WIDEN
 use crate::types::SAME_HIT;
 
 /// Mark every entry of a chunk "no hit" (`t` +inf, triangle −1, barycentrics 0), before the
-/// hits are written. The result arrays are allocated zeroed (`api::RayHits::empty`), which the
+/// hits are written. The result arrays are allocated zeroed (`api::RayHits::zeroed`), which the
 /// system does lazily, and each chunk's thread fills its own part here: filled up front, by the
 /// calling thread, 786K rays' 12.6 MB took 4-5 ms of page faults and stores that no other core
 /// could share (on `intel_sponza_ivy`'s primary rays, 15% of the trace on two cores).
