@@ -516,7 +516,7 @@ NOTES = [
     "leaves cores idle.",
     "- **Writes to shared result arrays.** Each chunk writes only its own slices; neighbouring "
     "chunks share at most a cache line at their border. The arrays are allocated zeroed (lazily, "
-    "by the system) and each chunk marks its own entries \"no hit\" on its thread: filled up "
+    'by the system) and each chunk marks its own entries "no hit" on its thread: filled up '
     "front by the calling thread, 786K rays' 12.6 MB took 4-5 ms of page faults on one core, "
     "15% of `intel_sponza_ivy`'s primary rays on two; on 64 cores it would have been most of "
     "the call.",
