@@ -527,11 +527,14 @@ NOTES = [
     "about 0.1-0.2 ms), and the Python wrapper (no copies: numpy takes the result vectors). "
     "These are fixed costs, so small calls scale worst: `shadow` on `intel_sponza_ivy` (34K "
     "rays) is the weakest case here.",
-    "- **Measured on two cores:** the chunks' busy time summed over threads is the same on one "
-    "thread and on two (46 ms for `intel_sponza_ivy`'s primary rays); the rest of the gap to 2x "
-    "is the serial part above and this shared machine's run-to-run spread (the same one-thread "
-    "call took 35-47 ms in consecutive rounds). On many cores the trees of large scenes, read by "
-    "every core, compete for the shared last-level cache as they do here.",
+    "- **Measured on two cores:** where the gap to 2x is, the chunks' busy time summed over "
+    "threads tells. On `intel_sponza_ivy`'s primary rays it is the same on one thread and on two "
+    "(46 ms). On `balloon`'s it rose from 43-45 ms on one thread to 54-59 ms on two in five "
+    "rounds of six (43 ms in the sixth, which then took 24 ms): each chunk ran 25-30% slower "
+    "while the other core worked, with no shared write between them, so the two cores of this "
+    "virtual machine contend for something below the code (one core's two hyperthreads, or "
+    "memory). On many cores the trees of large scenes, read by every core, compete for the "
+    "shared last-level cache as they do here.",
     "- **The first call builds the tree**, in parallel above 8,192 triangles a range; its top "
     "levels split one range at a time, so the build scales less than the trace.",
 ]
