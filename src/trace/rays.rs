@@ -19,7 +19,7 @@ pub(crate) struct Rays<'a> {
     pub origins: &'a [[f32; 3]],
     pub directions: &'a [[f32; 3]],
     pub range: (f32, f32),
-    /// How far apart the origins of a packet's rays may lie (`bvh8::coherent`).
+    /// How far apart the origins of a packet's rays may lie (`traverse::coherent`).
     pub origin_extent: f32,
     /// Whether closest-hit rays that do not travel as packets are traced in turns
     /// (`interleave`): where the tree is larger than [`INTERLEAVE_BYTES`].
