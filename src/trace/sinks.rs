@@ -129,7 +129,7 @@ impl Sink for ClosestKept<'_> {
 /// Any-hit sink: stops at the first hit, visiting children nearest first (`NEAREST`, as closest
 /// hits do) or in the builder's any-hit order (`Kernel::push_any`: the children likeliest to
 /// stop a ray for their cost first, the boxes around the ray's start last). Neither order wins
-/// everywhere (`api::occluded` has the figures and picks one per call, `jobs::nearest_first`).
+/// everywhere (`api::occluded` has the figures; `jobs::any_plan` picks one per call).
 ///
 /// One ray at a time, never as packets, but in turns where the tree is large (`interleave`):
 /// one thread, 400K occlusion segments between random points of 2M-triangle tilings of
