@@ -230,17 +230,7 @@ impl Job for NearestJob<'_> {
         let mut found = Vec::with_capacity(want.min(64) + 1);
         let mut stack = Stack::new();
         for j in 0..t.len() / want {
-            let r = self.0.ray(base + j);
-            found.clear();
-            let mut sink = Nearest {
-                rays: self.0,
-                r: &r,
-                want,
-                found: &mut found,
-                t_far: r.t_far,
-                front_only: self.2,
-            };
-            traverse(k, self.0.bvh, &r.ray, &mut sink, &mut stack);
+            nearest(k, self.0, base + j, want, self.2, &mut found, &mut stack);
             for (m, h) in found.iter().enumerate() {
                 t[j * want + m] = h.t;
                 tri[j * want + m] = h.triangle as i32;
@@ -262,17 +252,15 @@ impl Job for AllJob<'_> {
         let mut found = Vec::new();
         let mut stack = Stack::new();
         for j in 0..self.1 {
-            let r = self.0.ray(base + j);
-            found.clear();
-            let mut sink = Nearest {
-                rays: self.0,
-                r: &r,
-                want: usize::MAX,
-                found: &mut found,
-                t_far: r.t_far,
-                front_only: false,
-            };
-            traverse(k, self.0.bvh, &r.ray, &mut sink, &mut stack);
+            nearest(
+                k,
+                self.0,
+                base + j,
+                usize::MAX,
+                false,
+                &mut found,
+                &mut stack,
+            );
             counts.push(found.len() as u32);
             hits.extend_from_slice(&found);
         }
@@ -290,20 +278,43 @@ impl Job for CountJob<'_> {
         let mut found = Vec::new();
         let mut stack = Stack::new();
         for (j, n) in out.iter_mut().enumerate() {
-            let r = self.0.ray(base + j);
-            found.clear();
-            let mut sink = Nearest {
-                rays: self.0,
-                r: &r,
-                want: usize::MAX,
-                found: &mut found,
-                t_far: r.t_far,
-                front_only: false,
-            };
-            traverse(k, self.0.bvh, &r.ray, &mut sink, &mut stack);
+            nearest(
+                k,
+                self.0,
+                base + j,
+                usize::MAX,
+                false,
+                &mut found,
+                &mut stack,
+            );
             *n = found.len() as u32;
         }
     }
+}
+
+/// Ray `i`'s first `want` distinct hits (every hit for `usize::MAX`), nearest first, into
+/// `found` (emptied first): the one traversal of the k-nearest, all-hits and count jobs.
+#[inline(always)]
+fn nearest<K: Kernel>(
+    k: K,
+    rays: &Rays,
+    i: usize,
+    want: usize,
+    front_only: bool,
+    found: &mut Vec<Hit>,
+    stack: &mut Stack,
+) {
+    let r = rays.ray(i);
+    found.clear();
+    let mut sink = Nearest {
+        rays,
+        r: &r,
+        want,
+        found,
+        t_far: r.t_far,
+        front_only,
+    };
+    traverse(k, rays.bvh, &r.ray, &mut sink, stack);
 }
 
 /// The k-nearest-hits sink: up to `want` distinct hits, refined as they are found, nearest
