@@ -199,7 +199,7 @@ pub fn occluded(
 }
 
 /// Trace `rays` for [`occluded`] as `plan` says, into `hit`.
-pub(crate) fn occluded_as(q: &Query, rays: &Rays, plan: AnyPlan, hit: &mut [bool]) -> Result<()> {
+fn occluded_as(q: &Query, rays: &Rays, plan: AnyPlan, hit: &mut [bool]) -> Result<()> {
     match (plan.nearest, plan.hint) {
         (true, true) => run(q, hit, 1, |b, o| {
             dispatch(&AnyJob::<true, true>(rays), b, o)
