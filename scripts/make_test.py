@@ -38,12 +38,6 @@ VENV_ENV = {"PATH": f"{VENV / 'bin'}{os.pathsep}{os.environ.get('PATH', '')}"}
 VENV_ENV["VIRTUAL_ENV"] = str(VENV)
 
 
-def test_extras() -> list[str]:
-    """numpy and the `test` extra of pyproject.toml (the tools the tests compare against)."""
-    meta = pins.pyproject()["project"]
-    return [*meta["dependencies"], *meta["optional-dependencies"]["test"]]
-
-
 STAGES = [
     Stage(
         "system",
@@ -70,7 +64,8 @@ STAGES = [
     ),
     Stage(
         "deps",
-        f"nice -n 10 {PIP} {sh(*test_extras())}",
+        # numpy and the `test` extra of pyproject.toml (the tools the tests compare against).
+        f"nice -n 10 {PIP} {sh(*pins.requirements(['test']))}",
         after=("venv",),
         what="numpy and the test extras into target/test-venv",
     ),
