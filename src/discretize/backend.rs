@@ -12,8 +12,8 @@
 //! ~130K triangles, rendered and traced at 256² and 512², the best of two warm runs each): per
 //! scene, the line through its two sizes gives the cost per pixel and per call; the two scenes
 //! give how those grow with the triangles. The probes run once per machine: their result is
-//! kept in a small calibration file ([`cache`]), keyed by the package version, the CPU, the
-//! worker threads and the adapter, and every process reads it (a millisecond) instead.
+//! kept in a small calibration file ([`cache`]), keyed by the package version and build, the
+//! CPU, the worker threads and the adapter, and every process reads it (a millisecond) instead.
 //!
 //! Same call, same result: the two backends' images differ at a few edge pixels, so the choice
 //! must not depend on anything but the call and the machine. `auto` therefore decides from the
@@ -615,7 +615,8 @@ pub mod cache {
         r.map(Ok)
     }
 
-    /// What the coefficients depend on: the package, the CPU model, the worker threads, and
+    /// What the coefficients depend on: the package and the hash of the sources it was built
+    /// from (`build.rs`: a rebuilt engine may be faster), the CPU model, the worker threads, and
     /// the adapter (its name and driver; "none" without one).
     pub fn machine(adapter: Option<&wgpu::AdapterInfo>) -> String {
         let cpu = std::fs::read_to_string("/proc/cpuinfo")
@@ -632,8 +633,9 @@ pub mod cache {
             |a| format!("{} ({} {})", a.name, a.driver, a.driver_info),
         );
         format!(
-            "scenesample {} format {FORMAT}; cpu {cpu}; {} threads; gpu {gpu}",
+            "scenesample {} ({}) format {FORMAT}; cpu {cpu}; {} threads; gpu {gpu}",
             env!("CARGO_PKG_VERSION"),
+            env!("SCENESAMPLE_SOURCE_HASH"),
             rayon::current_num_threads()
         )
     }
