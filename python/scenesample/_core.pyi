@@ -661,6 +661,7 @@ def choose_backend(
     images: int = 1,
     bvh_built: bool = True,
     uploaded: bool = True,
+    box_fraction: float = 0.75,
 ) -> _BackendChoiceDict: ...
 def write_exr(
     path: _Path,

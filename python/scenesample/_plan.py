@@ -279,8 +279,11 @@ def rates(triangles: int) -> dict[str, float]:
         c = _core.choose_backend(max(int(triangles), 2), 512 * 512)["coefficients"]
     except GpuError:  # the probes failed: the defaults stand
         c = {}
-    per_ray = c.get("cpu_per_ray", 0.0) + c.get("cpu_per_ray_log2", 0.0) * np.log2(
-        max(int(triangles), 2)
+    # A pixel's ray that meets the scene's box (the model holds log2 t at its small probe's).
+    per_ray = (
+        c.get("cpu_per_pixel", 0.0)
+        + c.get("cpu_per_box_ray", 0.0)
+        + c.get("cpu_per_box_ray_log2", 0.0) * np.log2(max(int(triangles), 4608))
     )
     for key, seconds in (
         ("raster_triangles", c.get("gpu_per_triangle", 0.0)),

@@ -3,17 +3,28 @@
 //! pays per triangle per image, the ray caster per pixel and a logarithm of the triangles, plus
 //! a one-time BVH build. `"auto"` predicts both from a cost model measured on this machine.
 //!
-//! The model (seconds, for `n` images of `p` pixels of a scene of `t` triangles):
+//! The model (seconds, for `n` images of `p` pixels of a scene of `t` triangles, of which a
+//! fraction `b` see the scene's bounding box):
 //!
 //! - GPU: `g0 + n·(gt·t + gp·p)`, plus `gu·t` when the scene is not on the device yet;
-//! - CPU: `c0 + ct·t + n·p·(ca + cb·log2 t)`, plus `cu·t` when the scene has no BVH yet.
+//! - CPU: `c0 + n·(ct·t + p·ca + b·p·(cb + cl·log2 t))`, plus `cu·t` when the scene has no BVH
+//!   yet. `ct·t` is each image's pass over the scene's vertices (which settles the pixels on an
+//!   edge); `ca` what every pixel costs (its ray, its share of the resolve); a ray that meets
+//!   the box pays for its traversal. `b` comes from a grid of at most 64×64 rays per image
+//!   ([`box_fraction`]), so views where the scene is small ("sparse" views) are not priced as
+//!   full ones. Below the small probe's triangles `log2 t` is held at the probe's: the line is
+//!   not extrapolated.
 //!
-//! Its coefficients come from probes (about a second: two procedural height fields of ~5K and
-//! ~130K triangles, rendered and traced at 256² and 512², the best of two warm runs each): per
-//! scene, the line through its two sizes gives the cost per pixel and per call; the two scenes
-//! give how those grow with the triangles. The probes run once per machine: their result is
-//! kept in a small calibration file ([`cache`]), keyed by the package version and build, the
-//! CPU, the worker threads and the adapter, and every process reads it (a millisecond) instead.
+//! The shape of each model (the ratios between its coefficients) was fitted to `bench
+//! backends`' real scenes on a 2-core AMD EPYC with lavapipe ([`CPU_SHAPE`],
+//! [`LAVAPIPE_SHAPE`]). Probes (one to two seconds: two procedural tori of ~5K and ~130K
+//! triangles, closed and bumpy like a scanned or modelled object, seen from near at 384² and
+//! 768² and from far at 768², the best of three warm runs each) measure how fast this machine
+//! is: one factor per backend, the probes' time over the time the shape predicts for them
+//! ([`calibrate`]; a hardware GPU gets lines through its probe times instead). The probes run
+//! once per machine: their result is kept in a small calibration file ([`cache`]), keyed by the
+//! package version and build, the CPU, the worker threads and the adapter, and every process
+//! reads it (a millisecond) instead.
 //!
 //! Same call, same result: the two backends' images differ at a few edge pixels, so the choice
 //! must not depend on anything but the call and the machine. `auto` therefore decides from the
@@ -93,6 +104,8 @@ pub struct Workload {
     pub uploaded: bool,
     /// Whether the images fit in the GPU's textures (true where that is not known).
     pub fits_gpu: bool,
+    /// Of all pixels, the fraction whose ray meets the scene's bounding box ([`box_fraction`]).
+    pub box_fraction: f64,
 }
 
 impl Workload {
@@ -103,6 +116,9 @@ impl Workload {
             (Ok(ctx), Some(c)) => gpu::raster::check_image_size(&ctx, c.width, c.height).is_ok(),
             _ => true,
         };
+        let bounds = scene.bounds_f64();
+        let box_fraction = cameras.iter().map(|c| box_fraction(c, bounds)).sum::<f64>()
+            / cameras.len().max(1) as f64;
         Self {
             triangles: scene.triangle_count() as u64,
             pixels: cameras
@@ -112,8 +128,33 @@ impl Workload {
             bvh_built: true,
             uploaded: true,
             fits_gpu,
+            box_fraction,
         }
     }
+}
+
+/// Of `cam`'s pixels, the fraction whose centre ray meets the box `bounds` ahead of the camera,
+/// from an evenly spread grid of at most 64×64 of them (at most a few hundred microseconds of
+/// slab tests, and a function of the camera and the box alone).
+pub fn box_fraction(cam: &Camera, [lo, hi]: [DVec3; 2]) -> f64 {
+    let rays = super::pixels::PixelRays::new(cam);
+    let (w, h) = (cam.width as usize, cam.height as usize);
+    let (nx, ny) = (w.clamp(1, 64), h.clamp(1, 64));
+    let mut hit = 0usize;
+    for j in 0..ny {
+        for i in 0..nx {
+            let x = (i as f64 + 0.5) * w as f64 / nx as f64;
+            let y = (j as f64 + 0.5) * h as f64 / ny as f64;
+            let (o, d) = rays.ray_at(x, y);
+            let inv = d.recip();
+            let (a, b) = ((lo - o) * inv, (hi - o) * inv);
+            // NaN (0 · ∞ on a face's plane) is dropped by min/max: the slab is not narrowed.
+            let near = a.min(b).max_element().max(0.0);
+            let far = a.max(b).min_element();
+            hit += usize::from(near <= far);
+        }
+    }
+    hit as f64 / (nx * ny) as f64
 }
 
 /// The fitted coefficients (see the module's formulas).
@@ -122,17 +163,79 @@ pub struct GpuCosts {
     pub per_call: f64,
     pub per_triangle: f64,
     pub per_pixel: f64,
+    /// What a pixel that sees the scene's box adds (a software rasterizer's fragments).
+    pub per_box_pixel: f64,
     pub upload_per_triangle: f64,
+}
+
+impl GpuCosts {
+    /// Every cost of a call `k` times this one's (the upload's too).
+    fn scaled(self, k: f64) -> Self {
+        Self {
+            per_call: self.per_call * k,
+            per_triangle: self.per_triangle * k,
+            per_pixel: self.per_pixel * k,
+            per_box_pixel: self.per_box_pixel * k,
+            upload_per_triangle: self.upload_per_triangle * k,
+        }
+    }
 }
 
 #[derive(Debug, Clone, Copy, Default)]
 pub struct CpuCosts {
     pub per_call: f64,
-    pub per_call_triangle: f64,
-    pub per_ray: f64,
-    pub per_ray_log2: f64,
+    pub per_image_triangle: f64,
+    pub per_pixel: f64,
+    pub per_box_ray: f64,
+    pub per_box_ray_log2: f64,
     pub build_per_triangle: f64,
 }
+
+impl CpuCosts {
+    /// Every cost of a call `k` times this one's (the BVH build's too).
+    fn scaled(self, k: f64) -> Self {
+        Self {
+            per_call: self.per_call * k,
+            per_image_triangle: self.per_image_triangle * k,
+            per_pixel: self.per_pixel * k,
+            per_box_ray: self.per_box_ray * k,
+            per_box_ray_log2: self.per_box_ray_log2 * k,
+            build_per_triangle: self.build_per_triangle * k,
+        }
+    }
+}
+
+/// What the probes' time over the shape's prediction came to on the machine the shapes were
+/// fitted on (the ray caster's, lavapipe's; the mean of four calibrations): the tori are not
+/// the shared scenes, so a factor is divided by these to be 1 there.
+const PROBE_FACTOR_ON_SHAPE_MACHINE: (f64, f64) = (1.12, 1.21);
+
+/// The probe tori: `2·k²` triangles each.
+const PROBE_K: [u32; 2] = [48, 256];
+
+/// The shape of the ray caster's costs: the coefficients that fit `bench backends`' rows (every
+/// shared scene, 640x480 and 1024², orbit and sparse views; non-negative least squares of the
+/// relative error) on a 2-core AMD EPYC, both cores. The probes measure one factor: how much
+/// slower or faster this machine's ray caster is (see [`calibrate`]).
+const CPU_SHAPE: CpuCosts = CpuCosts {
+    per_call: 1e-3,
+    per_image_triangle: 1.5e-8,
+    per_pixel: 4.15e-8,
+    per_box_ray: 0.0,
+    per_box_ray_log2: 3.8e-9,
+    build_per_triangle: 4.5e-7,
+};
+
+/// The same for a software rasterizer (`wgpu::DeviceType::Cpu`: lavapipe, Mesa 22.3, on the
+/// same machine), whose costs are shaped as the CPU's are: per triangle, per pixel, and per
+/// fragment.
+const LAVAPIPE_SHAPE: GpuCosts = GpuCosts {
+    per_call: 1e-3,
+    per_triangle: 2.15e-7,
+    per_pixel: 1.15e-8,
+    per_box_pixel: 1.7e-8,
+    upload_per_triangle: 7e-8,
+};
 
 #[derive(Debug, Clone)]
 pub struct CostModel {
@@ -236,8 +339,8 @@ impl CostModel {
         if c.build_per_triangle <= 0.0 {
             c.build_per_triangle = with.cpu.build_per_triangle;
         }
-        if c.per_ray + c.per_ray_log2 * 100_000f64.log2() <= 0.0 {
-            (c.per_ray, c.per_ray_log2) = (with.cpu.per_ray, with.cpu.per_ray_log2);
+        if c.per_box_ray + c.per_box_ray_log2 * 100_000f64.log2() <= 0.0 {
+            (c.per_box_ray, c.per_box_ray_log2) = (with.cpu.per_box_ray, with.cpu.per_box_ray_log2);
         }
         if let (Ok(g), Ok(w)) = (self.gpu.as_mut(), with.gpu.as_ref()) {
             if g.per_pixel <= 0.0 {
@@ -252,33 +355,23 @@ impl CostModel {
     /// The model `auto` uses where no calibration file can be kept (`why`): fixed
     /// coefficients, so that every process on the machine decides alike. The CPU's and a
     /// software rasterizer's (`wgpu::DeviceType::Cpu`: lavapipe) are the probes' on a 2-core
-    /// AMD EPYC with lavapipe (Mesa 22.3), the per-ray and per-pixel costs divided by the
-    /// worker threads / 2; a hardware GPU draws about a billion triangles and ten billion
-    /// pixels a second, behind a fixed cost per call.
+    /// AMD EPYC with lavapipe (Mesa 22.3), rounded, the per-ray, per-pixel and per-triangle
+    /// costs divided by the worker threads / 2; a hardware GPU draws about a billion triangles
+    /// and ten billion pixels a second, behind a fixed cost per call.
     pub fn builtin(
         kind: Option<wgpu::DeviceType>,
         gpu: std::result::Result<(), String>,
         why: &str,
     ) -> CostModel {
         let cores = rayon::current_num_threads().max(1) as f64 / 2.0;
-        let cpu = CpuCosts {
-            per_call: 5e-4,
-            per_call_triangle: 4.5e-8,
-            per_ray: 0.0,
-            per_ray_log2: 6e-9 / cores,
-            build_per_triangle: 2.5e-7 / cores,
-        };
+        let cpu = CPU_SHAPE.scaled(1.0 / cores);
         let gpu = gpu.map(|()| match kind {
-            Some(wgpu::DeviceType::Cpu) => GpuCosts {
-                per_call: 4e-4,
-                per_triangle: 2e-7 / cores,
-                per_pixel: 1.5e-9 / cores,
-                upload_per_triangle: 4e-9,
-            },
+            Some(wgpu::DeviceType::Cpu) => LAVAPIPE_SHAPE.scaled(1.0 / cores),
             _ => GpuCosts {
                 per_call: 3e-4,
                 per_triangle: 1e-9,
                 per_pixel: 1e-10,
+                per_box_pixel: 0.0,
                 upload_per_triangle: 2e-9,
             },
         });
@@ -290,8 +383,9 @@ impl CostModel {
         }
     }
 
-    /// Whether every cost grows with the work it stands for: each backend's per-pixel (per-ray)
-    /// cost at 100K triangles, the raster's per-triangle cost and the BVH build are positive.
+    /// Whether every cost grows with the work it stands for: each backend's per-pixel cost at
+    /// 100K triangles, the ray caster's per box ray, the raster's per triangle and the BVH build
+    /// are positive.
     pub fn plausible(&self) -> bool {
         let probe = Workload {
             triangles: 100_000,
@@ -300,9 +394,11 @@ impl CostModel {
             bvh_built: true,
             uploaded: true,
             fits_gpu: true,
+            box_fraction: 0.5,
         };
         let c = &self.cpu;
         let cpu = c.build_per_triangle > 0.0
+            && c.per_box_ray + c.per_box_ray_log2 * 100_000f64.log2() > 0.0
             && self.predict_cpu(&Workload {
                 pixels: 1 << 21,
                 ..probe
@@ -322,19 +418,22 @@ impl CostModel {
         } else {
             g.upload_per_triangle * t
         };
-        Some(g.per_call + n * (g.per_triangle * t + g.per_pixel * p) + upload)
+        let per_pixel = g.per_pixel + w.box_fraction.clamp(0.0, 1.0) * g.per_box_pixel;
+        Some(g.per_call + n * (g.per_triangle * t + per_pixel * p) + upload)
     }
 
     pub fn predict_cpu(&self, w: &Workload) -> f64 {
         let c = &self.cpu;
-        let (t, p, n) = (w.triangles.max(2) as f64, w.pixels as f64, w.images as f64);
+        let (t, p, n) = (w.triangles as f64, w.pixels as f64, w.images as f64);
         let build = if w.bvh_built {
             0.0
         } else {
             c.build_per_triangle * t
         };
-        let per_ray = (c.per_ray + c.per_ray_log2 * t.log2()).max(0.0);
-        c.per_call + c.per_call_triangle * t + n * p * per_ray + build
+        let log_t = t.max((2 * PROBE_K[0] * PROBE_K[0]) as f64).log2();
+        let per_box_ray = (c.per_box_ray + c.per_box_ray_log2 * log_t).max(0.0);
+        let per_pixel = c.per_pixel + w.box_fraction.clamp(0.0, 1.0) * per_box_ray;
+        c.per_call + n * (c.per_image_triangle * t + p * per_pixel) + build
     }
 
     /// The faster predicted backend for `w`, and why.
@@ -366,13 +465,14 @@ impl CostModel {
                 (
                     backend,
                     format!(
-                        "predicted gpu {:.1} ms vs cpu {:.1} ms ({} triangles, {} x {} pixels; \
-                         BVH {bvh}, scene {up}; model: {})",
+                        "predicted gpu {:.1} ms vs cpu {:.1} ms ({} triangles, {} x {} pixels, \
+                         {:.0}% of them on the scene's box; BVH {bvh}, scene {up}; model: {})",
                         g * 1e3,
                         cpu * 1e3,
                         w.triangles,
                         w.images,
                         w.pixels,
+                        w.box_fraction * 100.0,
                         self.source
                     ),
                 )
@@ -420,21 +520,23 @@ pub fn decide(scene: &Scene, cameras: &[Camera], choice: BackendChoice) -> Resul
     })
 }
 
-/// A height field of `2·k²` triangles over the unit square, bumpy enough that rays and
-/// triangles overlap as in a real scene.
+/// A torus of `2·k²` triangles (`k` around each circle), its tube bumpy: a closed surface whose
+/// far side hides behind its near one, as a scanned or modelled object's does.
 fn probe_scene(k: u32) -> Result<Scene> {
-    let mut vertices = Vec::with_capacity(((k + 1) * (k + 1)) as usize);
-    for j in 0..=k {
-        for i in 0..=k {
-            let (x, y) = (i as f32 / k as f32, j as f32 / k as f32);
-            let z = 0.05 * ((x * 23.0).sin() * (y * 17.0).cos()) + 0.02 * ((x + y) * 61.0).sin();
-            vertices.push([x - 0.5, y - 0.5, z]);
+    let tau = std::f32::consts::TAU;
+    let mut vertices = Vec::with_capacity((k * k) as usize);
+    for i in 0..k {
+        for j in 0..k {
+            let (u, v) = (tau * i as f32 / k as f32, tau * j as f32 / k as f32);
+            let r = 0.15 + 0.012 * (u * 23.0).sin() * (v * 17.0).cos();
+            let ring = 0.35 + r * v.cos();
+            vertices.push([ring * u.cos(), ring * u.sin(), r * v.sin()]);
         }
     }
+    let at = |i: u32, j: u32| (i % k) * k + (j % k);
     let mut faces = Vec::with_capacity((2 * k * k) as usize);
-    let at = |i: u32, j: u32| j * (k + 1) + i;
-    for j in 0..k {
-        for i in 0..k {
+    for i in 0..k {
+        for j in 0..k {
             faces.push([at(i, j), at(i + 1, j), at(i + 1, j + 1)]);
             faces.push([at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
         }
@@ -442,9 +544,12 @@ fn probe_scene(k: u32) -> Result<Scene> {
     Scene::from_arrays(vertices, faces, None, None)
 }
 
-fn probe_camera(side: u32) -> Result<Camera> {
+/// The probe's views of the torus: `side`² pixels from `distance` times the near eye's
+/// distance (near: the torus covers about a third of the frame and its box three quarters;
+/// from 2.5 times as far, a twentieth and a tenth).
+fn probe_camera(side: u32, distance: f64) -> Result<Camera> {
     Camera::look_at(
-        DVec3::new(0.3, -0.9, 0.8),
+        DVec3::new(0.42, -1.26, 1.12) * distance,
         DVec3::ZERO,
         DVec3::Z,
         0.9,
@@ -455,25 +560,16 @@ fn probe_camera(side: u32) -> Result<Camera> {
     )
 }
 
-/// The best of two timed runs of `f` (after the first has warmed caches).
-fn best_of_two(mut f: impl FnMut() -> Result<()>) -> Result<f64> {
+/// The best of three timed runs of `f`, after one that warms caches.
+fn best_of_three(mut f: impl FnMut() -> Result<()>) -> Result<f64> {
+    f()?;
     let mut best = f64::INFINITY;
-    for _ in 0..2 {
+    for _ in 0..3 {
         let start = Instant::now();
         f()?;
         best = best.min(start.elapsed().as_secs_f64());
     }
     Ok(best)
-}
-
-/// Seconds of the best of two warm calls at each of the two probe sizes, on one scene: the
-/// per-pixel slope and the intercept of the line through them.
-fn line(p: [f64; 2], mut call: impl FnMut(usize) -> Result<()>) -> Result<(f64, f64)> {
-    call(0)?; // warm-up
-    let t0 = best_of_two(|| call(0))?;
-    let t1 = best_of_two(|| call(1))?;
-    let slope = (t1 - t0) / (p[1] - p[0]);
-    Ok((slope, t0 - slope * p[0]))
 }
 
 /// `(a, b)` of `y = a + b·x` through two points, `b` at least 0.
@@ -482,51 +578,115 @@ fn through(x: [f64; 2], y: [f64; 2]) -> (f64, f64) {
     (y[0] - b * x[0], b)
 }
 
+/// The probe's views: near at 384² and 768², far at 768².
+struct ProbeViews {
+    cams: [Camera; 3],
+    pixels: [f64; 3],
+}
+
+impl ProbeViews {
+    fn new() -> Result<Self> {
+        let cams = [
+            probe_camera(384, 1.0)?,
+            probe_camera(768, 1.0)?,
+            probe_camera(768, 2.5)?,
+        ];
+        let pixels = cams
+            .each_ref()
+            .map(|c| f64::from(c.width) * f64::from(c.height));
+        Ok(Self { cams, pixels })
+    }
+
+    fn one(&self, i: usize) -> &[Camera] {
+        std::slice::from_ref(&self.cams[i])
+    }
+}
+
+/// The best of three warm calls of `call` on each probe view of each torus, summed.
+fn probe_seconds(
+    scenes: &[Scene; 2],
+    views: &ProbeViews,
+    call: impl Fn(&Scene, &[Camera]) -> Result<DepthImages>,
+) -> Result<f64> {
+    let mut sum = 0.0;
+    for scene in scenes {
+        for i in 0..views.cams.len() {
+            sum += best_of_three(|| call(scene, views.one(i)).map(|_| ()))?;
+        }
+    }
+    Ok(sum)
+}
+
+/// What the probes would take on the machine a shape was fitted on: `model`'s predictions
+/// summed over the probe views (`cpu`: the ray caster's, else the raster's).
+fn probe_shape_seconds(
+    scenes: &[Scene; 2],
+    views: &ProbeViews,
+    model: &CostModel,
+    cpu: bool,
+) -> f64 {
+    let mut sum = 0.0;
+    for scene in scenes {
+        for i in 0..views.cams.len() {
+            let w = Workload::of(scene, views.one(i));
+            sum += if cpu {
+                model.predict_cpu(&w)
+            } else {
+                model.predict_gpu(&w).unwrap_or(0.0)
+            };
+        }
+    }
+    sum
+}
+
+/// The model on this machine. The ray caster and a software rasterizer keep the shape of
+/// their costs ([`CPU_SHAPE`], [`LAVAPIPE_SHAPE`]) and are scaled by one factor each: the
+/// probes' measured time over the time the shape predicts for them. One factor from the sum
+/// of six calls is steady where six coefficients fitted to the differences between them are
+/// not: on a shared 2-core machine the best of three runs of one call still varies by 10-20%,
+/// and the differences by far more. The BVH build is timed as it is. A hardware GPU, whose
+/// costs have another shape (a fixed cost per call, little per pixel), gets lines through
+/// its near views: per call and per triangle from the two tori, per pixel from the two sizes.
 fn calibrate() -> Result<CostModel> {
     let start = Instant::now();
-    let scenes = [probe_scene(48)?, probe_scene(256)?];
-    let cams = [probe_camera(256)?, probe_camera(512)?];
+    let scenes = [probe_scene(PROBE_K[0])?, probe_scene(PROBE_K[1])?];
+    let views = ProbeViews::new()?;
     let t = scenes.each_ref().map(|s| s.triangle_count() as f64);
-    let p = [256.0 * 256.0, 512.0 * 512.0];
-    let one = |i: usize| std::slice::from_ref(&cams[i]);
+    let shape = CostModel {
+        gpu: Ok(LAVAPIPE_SHAPE),
+        cpu: CPU_SHAPE,
+        calibration_seconds: 0.0,
+        source: "shape".into(),
+    };
 
     // CPU: the large probe's BVH build (timed by the ray caster), then warm traces.
-    let built = discretize_traced(&scenes[1], one(0), false)?;
+    let built = discretize_traced(&scenes[1], views.one(0), false)?;
     let build_per_triangle = built.timings.get("bvh").unwrap_or(0.0) / t[1];
-    let mut fits = Vec::with_capacity(2);
-    for scene in &scenes {
-        fits.push(line(p, |c| {
-            discretize_traced(scene, one(c), false).map(|_| ())
-        })?);
-    }
-    let [(s0, i0), (s1, i1)] = [fits[0], fits[1]];
-    let (per_ray, per_ray_log2) = through(t.map(f64::log2), [s0, s1]);
-    let (per_call, per_call_triangle) = through(t, [i0, i1]);
+    let traced = probe_seconds(&scenes, &views, |s, c| discretize_traced(s, c, false))?;
+    let k = traced
+        / probe_shape_seconds(&scenes, &views, &shape, true)
+        / PROBE_FACTOR_ON_SHAPE_MACHINE.0;
     let cpu = CpuCosts {
-        per_call: per_call.max(0.0),
-        per_call_triangle,
-        per_ray,
-        per_ray_log2,
         build_per_triangle,
+        ..CPU_SHAPE.scaled(k)
     };
 
     let gpu = match gpu::context() {
         Err(e) => Err(e.to_string()),
-        Ok(_) => {
-            let first = discretize_conventional(&scenes[1], one(0), false)?;
+        Ok(ctx) => {
+            let first = discretize_conventional(&scenes[1], views.one(0), false)?;
             let upload_per_triangle = first.timings.get("upload").unwrap_or(0.0) / t[1];
-            let mut fits = Vec::with_capacity(2);
-            for scene in &scenes {
-                fits.push(line(p, |c| {
-                    discretize_conventional(scene, one(c), false).map(|_| ())
-                })?);
-            }
-            let (per_call, per_triangle) = through(t, [fits[0].1, fits[1].1]);
+            let costs = if ctx.info.device_type == wgpu::DeviceType::Cpu {
+                let drawn =
+                    probe_seconds(&scenes, &views, |s, c| discretize_conventional(s, c, false))?;
+                let shaped = probe_shape_seconds(&scenes, &views, &shape, false);
+                LAVAPIPE_SHAPE.scaled(drawn / shaped / PROBE_FACTOR_ON_SHAPE_MACHINE.1)
+            } else {
+                hardware_lines(&scenes, &views, t)?
+            };
             Ok(GpuCosts {
-                per_call: per_call.max(0.0),
-                per_triangle,
-                per_pixel: ((fits[0].0 + fits[1].0) / 2.0).max(0.0),
                 upload_per_triangle,
+                ..costs
             })
         }
     };
@@ -535,6 +695,29 @@ fn calibrate() -> Result<CostModel> {
         cpu,
         calibration_seconds: start.elapsed().as_secs_f64(),
         source: "probes".into(),
+    })
+}
+
+/// A hardware GPU's costs: per scene, the line through its two near views' times gives the
+/// cost per pixel and per call; the two scenes give how the latter grows with the triangles.
+fn hardware_lines(scenes: &[Scene; 2], views: &ProbeViews, t: [f64; 2]) -> Result<GpuCosts> {
+    let mut fits = Vec::with_capacity(2);
+    for scene in scenes {
+        let mut y = [0.0; 2];
+        for (i, y) in y.iter_mut().enumerate() {
+            *y = best_of_three(|| discretize_conventional(scene, views.one(i), false).map(|_| ()))?;
+        }
+        let p = [views.pixels[0], views.pixels[1]];
+        let slope = (y[1] - y[0]) / (p[1] - p[0]);
+        fits.push((slope, y[0] - slope * p[0]));
+    }
+    let (per_call, per_triangle) = through(t, [fits[0].1, fits[1].1]);
+    Ok(GpuCosts {
+        per_call: per_call.max(0.0),
+        per_triangle,
+        per_pixel: ((fits[0].0 + fits[1].0) / 2.0).max(0.0),
+        per_box_pixel: 0.0,
+        upload_per_triangle: 0.0,
     })
 }
 
@@ -553,9 +736,10 @@ pub mod cache {
     const FILE: &str = "cost-model.json";
     /// Machine keys one file keeps.
     const KEEP: usize = 8;
-    /// Bumped when the model's formulas or probes change, or a backend's speed does (2: the
-    /// CPU backend settles edge pixels by the raster's rule), so that older files are not used.
-    const FORMAT: u32 = 2;
+    /// Bumped when the model's formulas or probes change, so that older files are not used (2:
+    /// the CPU backend settles edge pixels by the raster's rule; 3: its per-triangle cost is
+    /// per image, and the probes see their scene as orbiting views see theirs).
+    const FORMAT: u32 = 3;
 
     pub fn path() -> Option<PathBuf> {
         let dir = match std::env::var_os("SCENESAMPLE_CACHE_DIR") {
@@ -647,6 +831,7 @@ pub mod cache {
                 "per_call": g.per_call,
                 "per_triangle": g.per_triangle,
                 "per_pixel": g.per_pixel,
+                "per_box_pixel": g.per_box_pixel,
                 "upload_per_triangle": g.upload_per_triangle,
             })
         });
@@ -655,9 +840,10 @@ pub mod cache {
             "probe_seconds": model.calibration_seconds,
             "cpu": {
                 "per_call": c.per_call,
-                "per_call_triangle": c.per_call_triangle,
-                "per_ray": c.per_ray,
-                "per_ray_log2": c.per_ray_log2,
+                "per_image_triangle": c.per_image_triangle,
+                "per_pixel": c.per_pixel,
+                "per_box_ray": c.per_box_ray,
+                "per_box_ray_log2": c.per_box_ray_log2,
                 "build_per_triangle": c.build_per_triangle,
             },
             "gpu": gpu,
@@ -674,9 +860,10 @@ pub mod cache {
         let c = v.get("cpu")?;
         let cpu = CpuCosts {
             per_call: num(c, "per_call")?,
-            per_call_triangle: num(c, "per_call_triangle")?,
-            per_ray: num(c, "per_ray")?,
-            per_ray_log2: num(c, "per_ray_log2")?,
+            per_image_triangle: num(c, "per_image_triangle")?,
+            per_pixel: num(c, "per_pixel")?,
+            per_box_ray: num(c, "per_box_ray")?,
+            per_box_ray_log2: num(c, "per_box_ray_log2")?,
             build_per_triangle: num(c, "build_per_triangle")?,
         };
         let gpu = match v.get("gpu")? {
@@ -685,6 +872,7 @@ pub mod cache {
                 per_call: num(g, "per_call")?,
                 per_triangle: num(g, "per_triangle")?,
                 per_pixel: num(g, "per_pixel")?,
+                per_box_pixel: num(g, "per_box_pixel")?,
                 upload_per_triangle: num(g, "upload_per_triangle")?,
             }),
         };
@@ -740,6 +928,7 @@ mod tests {
                     per_call: 1e-3,
                     per_triangle: 4e-7,
                     per_pixel: 2e-8,
+                    per_box_pixel: 1e-8,
                     upload_per_triangle: 2e-8,
                 })
             } else {
@@ -747,9 +936,10 @@ mod tests {
             },
             cpu: CpuCosts {
                 per_call: 1e-3,
-                per_call_triangle: 4e-8,
-                per_ray: 5e-8,
-                per_ray_log2: 7e-9,
+                per_image_triangle: 4e-8,
+                per_pixel: 3e-8,
+                per_box_ray: 2e-8,
+                per_box_ray_log2: 7e-9,
                 build_per_triangle: 5e-7,
             },
             calibration_seconds: 0.0,
@@ -765,7 +955,39 @@ mod tests {
             bvh_built,
             uploaded: true,
             fits_gpu: true,
+            box_fraction: 0.5,
         }
+    }
+
+    #[test]
+    fn box_fraction_counts_the_rays_that_meet_the_box() {
+        let cam = |eye: DVec3, target: DVec3| {
+            Camera::look_at(eye, target, DVec3::Z, 0.8, 320, 240, None, None).unwrap()
+        };
+        let unit = [DVec3::splat(-1.0), DVec3::splat(1.0)];
+        // Inside the box every ray meets it; looking away from it, none do.
+        let inside = cam(DVec3::ZERO, DVec3::X);
+        assert_eq!(box_fraction(&inside, unit), 1.0);
+        let away = cam(DVec3::new(5.0, 0.0, 0.0), DVec3::new(10.0, 0.0, 0.0));
+        assert_eq!(box_fraction(&away, unit), 0.0);
+        // Head on, the face's share of the frame: a square of side 2 at distance 4 (the near
+        // face), through a vertical field of view of 0.8 rad on a 4:3 frame.
+        let ahead = cam(DVec3::new(-5.0, 0.0, 0.0), DVec3::ZERO);
+        let half_h = (0.4f64).tan() * 4.0;
+        let want = (1.0 / (half_h * 4.0 / 3.0)).min(1.0) * (1.0 / half_h).min(1.0);
+        let got = box_fraction(&ahead, unit);
+        assert!((got - want).abs() < 0.03, "{got} vs {want}");
+        // The same view from three times as far: a ninth as many, and the CPU's prediction
+        // falls with it while the raster's per-triangle cost stays.
+        let far = cam(DVec3::new(-15.0, 0.0, 0.0), DVec3::ZERO);
+        let sparse = box_fraction(&far, unit);
+        assert!(sparse < got / 6.0 && sparse > 0.0, "{sparse} vs {got}");
+        let m = model(true);
+        let at = |b: f64| Workload {
+            box_fraction: b,
+            ..work(100_000, true)
+        };
+        assert!(m.predict_cpu(&at(sparse)) < m.predict_cpu(&at(got)));
     }
 
     #[test]
@@ -836,7 +1058,7 @@ mod tests {
             let m = model(gpu);
             let v = cache::to_json(&m, "this machine");
             let (cpu, g) = cache::from_json(&v, "this machine").expect("its own machine");
-            assert_eq!(cpu.per_ray_log2, m.cpu.per_ray_log2);
+            assert_eq!(cpu.per_box_ray_log2, m.cpu.per_box_ray_log2);
             assert_eq!(g.is_some(), gpu);
             if let (Some(g), Ok(mg)) = (g, &m.gpu) {
                 assert_eq!(g.per_pixel, mg.per_pixel);
@@ -845,20 +1067,20 @@ mod tests {
         }
         // A missing or non-numeric coefficient is not a model.
         let mut v = cache::to_json(&model(true), "m");
-        v["cpu"]["per_ray"] = serde_json::Value::String("fast".into());
+        v["cpu"]["per_box_ray"] = serde_json::Value::String("fast".into());
         assert!(cache::from_json(&v, "m").is_none());
         assert!(model(true).plausible() && model(false).plausible());
         let mut flat = model(true);
         if let Ok(g) = flat.gpu.as_mut() {
             g.per_pixel = 0.0;
         }
-        (flat.cpu.per_ray, flat.cpu.per_ray_log2) = (0.0, -1e-9);
+        (flat.cpu.per_box_ray, flat.cpu.per_box_ray_log2) = (0.0, -1e-9);
         assert!(!flat.plausible());
         // Mended from another model, a flat slope takes that model's; the others stay.
         let with = CostModel::builtin(Some(wgpu::DeviceType::Cpu), Ok(()), "t");
         flat.mend(&with);
         assert!(flat.plausible());
-        assert_eq!(flat.cpu.per_ray_log2, with.cpu.per_ray_log2);
+        assert_eq!(flat.cpu.per_box_ray_log2, with.cpu.per_box_ray_log2);
         assert_eq!(
             flat.cpu.build_per_triangle,
             model(true).cpu.build_per_triangle

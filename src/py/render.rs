@@ -52,10 +52,11 @@ pub fn discretize_conventional<'py>(
 }
 
 /// What `backend="auto"` would choose for a request of this size (see
-/// `discretize::backend`; `auto` itself weighs every request prepared, as the defaults do);
-/// calibrates the cost model on first use.
+/// `discretize::backend`; `auto` itself weighs every request prepared, as the defaults do),
+/// where `box_fraction` of the pixels see the scene's bounding box (0.75 by default: an
+/// orbiting view of an object); calibrates the cost model on first use.
 #[pyfunction]
-#[pyo3(signature = (triangles, pixels, images=1, bvh_built=true, uploaded=true))]
+#[pyo3(signature = (triangles, pixels, images=1, bvh_built=true, uploaded=true, box_fraction=0.75))]
 pub fn choose_backend<'py>(
     py: Python<'py>,
     triangles: u64,
@@ -63,7 +64,14 @@ pub fn choose_backend<'py>(
     images: u64,
     bvh_built: bool,
     uploaded: bool,
+    box_fraction: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
+    if !(0.0..=1.0).contains(&box_fraction) {
+        return Err(super::errors::input(
+            py,
+            format!("box_fraction must be in [0, 1], got {box_fraction}"),
+        ));
+    }
     let w = Workload {
         triangles,
         pixels,
@@ -72,6 +80,7 @@ pub fn choose_backend<'py>(
         uploaded,
         // Only the pixel count is given: the image's sides are not known here.
         fits_gpu: true,
+        box_fraction,
     };
     let (decision, model) = super::run(py, || {
         let model = CostModel::get()?;
@@ -87,14 +96,16 @@ pub fn choose_backend<'py>(
     let coefficients = PyDict::new(py);
     let c = &model.cpu;
     coefficients.set_item("cpu_per_call", c.per_call)?;
-    coefficients.set_item("cpu_per_call_triangle", c.per_call_triangle)?;
-    coefficients.set_item("cpu_per_ray", c.per_ray)?;
-    coefficients.set_item("cpu_per_ray_log2", c.per_ray_log2)?;
+    coefficients.set_item("cpu_per_image_triangle", c.per_image_triangle)?;
+    coefficients.set_item("cpu_per_pixel", c.per_pixel)?;
+    coefficients.set_item("cpu_per_box_ray", c.per_box_ray)?;
+    coefficients.set_item("cpu_per_box_ray_log2", c.per_box_ray_log2)?;
     coefficients.set_item("cpu_build_per_triangle", c.build_per_triangle)?;
     if let Ok(g) = &model.gpu {
         coefficients.set_item("gpu_per_call", g.per_call)?;
         coefficients.set_item("gpu_per_triangle", g.per_triangle)?;
         coefficients.set_item("gpu_per_pixel", g.per_pixel)?;
+        coefficients.set_item("gpu_per_box_pixel", g.per_box_pixel)?;
         coefficients.set_item("gpu_upload_per_triangle", g.upload_per_triangle)?;
     }
     d.set_item("coefficients", coefficients)?;
