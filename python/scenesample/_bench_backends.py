@@ -1,18 +1,25 @@
 """``python -m scenesample.bench backends``: conventional depth images from the GPU raster path,
-the CPU ray-cast path and ``backend="auto"``, side by side, on the shared real scenes of at least
-10K triangles and one large scene (four copies of the largest shared scene, over 4M triangles);
-then depth peeling (4 layers) the same way on the smallest and largest real scene and the large
-one.
+the CPU ray-cast path and ``backend="auto"``, side by side, on every shared real scene and one
+large scene (four copies of the largest shared scene, over 4M triangles), at 640x480 and 1024²,
+each from two sets of four views: the demo's orbit (the scene fills a third of the frame) and
+the same views from three times as far ("sparse": a few percent of the pixels see the scene).
+Then depth peeling (4 layers) the same way on the smallest real scene of at least 10K triangles,
+the largest and the large one, from one view at 1024².
 
 Every time is the best of ``repeats`` interleaved rounds after one warm-up call (so the scene
 is on the GPU and its BVH built, as in a session that makes many images of one scene); ``auto``
-then sees both prepared, which its cost model accounts for. The target: on every scene
-``auto`` is within 15% of the faster backend. Also printed: ``auto``'s prediction for both
-backends beside the measured times, and where the CPU's triangle ids differ from the GPU's.
+then sees both prepared, which its cost model accounts for. The target: on every scene, size
+and set of views the backend ``auto`` picks is within 10% of the faster one. That is judged on
+the two backends' own times (best of the same rounds), since ``auto``'s call runs the backend
+it picks; its own time is printed beside them, and differs from that backend's by lavapipe's
+noise and the decision (a grid of at most 64x64 box tests per view). Also printed: ``auto``'s
+prediction for both backends beside the measured times, and where the CPU's triangle ids
+differ from the GPU's.
 """
 
 from __future__ import annotations
 
+import re
 import time
 import warnings
 from typing import Any
@@ -21,9 +28,16 @@ import numpy as np
 
 import scenesample as ss
 
-TARGET = 1.15
+from .demo import orbit
+
+TARGET = 1.10
 PEEL_LAYERS = 4
-MIN_TRIANGLES = 10_000
+#: Peeling's smallest scene is the smallest with at least this many triangles.
+PEEL_MIN_TRIANGLES = 10_000
+SIZES = ((640, 480), (1024, 1024))
+VIEWS = 4
+#: How much farther the sparse views are than the orbit's.
+SPARSE_DISTANCE = 3.0
 BACKENDS = ("gpu", "cpu", "auto")
 
 
@@ -32,13 +46,11 @@ def _scenes(quick: bool) -> list[tuple[str, ss.Scene]]:
     for name, path in ss.scenes.shared_scene_files().items():
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ss.SceneWarning)
-            scene = ss.Scene.load(path)
-        if scene.triangle_count >= MIN_TRIANGLES:
-            out.append((name, scene))
+            out.append((name, ss.Scene.load(path)))
     if not out:
         return [("procedural: shapes(detail=4)", ss.scenes.shapes(seed=0, detail=4))]
     if quick:
-        out = [min(out, key=lambda x: x[1].triangle_count)]
+        out = [min(out, key=lambda x: abs(x[1].triangle_count - 20_000))]
     else:
         name, big = max(out, key=lambda x: x[1].triangle_count)
         out.append((f"{name} x4 (tiled)", _tiled(big, 2)))
@@ -68,44 +80,55 @@ def _camera(scene: ss.Scene, size: int) -> ss.Camera:
     return ss.Camera.look_at(eye, c, up, yfov=0.8, width=size, height=size)
 
 
-def run(quick: bool = False, repeats: int = 5, size: int = 1024) -> dict[str, Any]:
-    """Measure every scene; returns the rows and the device."""
-    size = 256 if quick else size
+def views(scene: ss.Scene, kind: str, width: int, height: int) -> list[ss.Camera]:
+    """The demo's orbit of ``VIEWS`` views (``kind="orbit"``), or the same views from
+    ``SPARSE_DISTANCE`` times as far from the scene's centre (``"sparse"``)."""
+    cams = orbit(scene, VIEWS, width, height)
+    if kind == "orbit":
+        return cams
+    lo, hi = scene.bounds.astype(np.float64)
+    c = (lo + hi) / 2
+    return [
+        ss.Camera.look_at(
+            c + (np.asarray(cam.eye) - c) * SPARSE_DISTANCE, c, yfov=0.8, width=width, height=height
+        )
+        for cam in cams
+    ]
+
+
+def _predicted(reason: str) -> tuple[float, float]:
+    """``auto``'s predictions (seconds) from its reason ("predicted gpu X ms vs cpu Y ms ...");
+    NaN where it decided without predicting (no adapter, a size only one backend takes)."""
+    m = re.search(r"predicted gpu ([0-9.]+) ms vs cpu ([0-9.]+) ms", reason)
+    return (float(m[1]) / 1e3, float(m[2]) / 1e3) if m else (float("nan"), float("nan"))
+
+
+def run(quick: bool = False, repeats: int = 5) -> dict[str, Any]:
+    """Measure every scene, size and set of views; returns the rows and the device."""
+    sizes = ((320, 240),) if quick else SIZES
     rows, peel_rows = [], []
     scenes = _scenes(quick)
     for name, scene in scenes:
-        cam = _camera(scene, size)
-        times, images = _timed(scene, cam, repeats)
-        g, c = images["gpu"], images["cpu"]
-        either = (g.triangle >= 0) | (c.triangle >= 0)
-        differ = g.triangle != c.triangle
-        hit = (g.triangle >= 0) & (c.triangle >= 0)
-        split = differ & hit
-        rel = np.abs(g.depth[hit].astype(np.float64) - c.depth[hit]) / g.depth[hit]
-        predicted = ss.device_info(
-            triangles=scene.triangle_count, pixels=size * size, bvh_built=True
-        )["auto"]
-        rows.append(
-            {
-                "scene": name,
-                "triangles": scene.triangle_count,
-                "gpu": times["gpu"],
-                "cpu": times["cpu"],
-                "auto": times["auto"],
-                "auto_backend": images["auto"].backend,
-                "predicted_gpu": predicted["gpu_seconds"],
-                "predicted_cpu": predicted["cpu_seconds"],
-                "same_ids": float(1.0 - differ.mean()),
-                "same_ids_covered": float(1.0 - differ[either].mean()) if either.any() else 1.0,
-                "differ_adjacent": _adjacent(scene, g.triangle[split], c.triangle[split]),
-                "depth_rel_median": float(np.median(rel)) if rel.size else 0.0,
-                "depth_rel_p999": float(np.quantile(rel, 0.999)) if rel.size else 0.0,
-            }
-        )
-        print(_row(rows[-1]), flush=True)
+        for width, height in sizes:
+            for kind in ("orbit", "sparse"):
+                cams = views(scene, kind, width, height)
+                times, images = _timed(scene, cams, repeats)
+                rows.append(
+                    {
+                        "scene": name,
+                        "triangles": scene.triangle_count,
+                        "size": [width, height],
+                        "views": kind,
+                        "covered": float(images["gpu"].mask.mean()),
+                        **_compared(scene, times, images),
+                    }
+                )
+                print(_row(rows[-1]), flush=True)
     # Peeling: the smallest and largest real scene (by triangles) and the tiling.
     by_size = sorted(scenes, key=lambda x: x[1].triangle_count)
-    chosen = by_size if quick else [by_size[0], *by_size[-2:]]
+    sizable = [x for x in by_size if x[1].triangle_count >= PEEL_MIN_TRIANGLES] or by_size
+    chosen = by_size if quick else [sizable[0], *by_size[-2:]]
+    size = 256 if quick else 1024
     for name, scene in chosen:
         cam = _camera(scene, size)
         times, images = _timed(scene, cam, repeats, "peeling", layers=PEEL_LAYERS)
@@ -129,13 +152,42 @@ def run(quick: bool = False, repeats: int = 5, size: int = 1024) -> dict[str, An
         "rows": rows,
         "peeling": peel_rows,
         "size": size,
+        "sizes": [list(x) for x in sizes],
         "repeats": repeats,
         "device": info,
     }
 
 
+def _compared(scene: ss.Scene, times: dict[str, float], images: dict[str, Any]) -> dict[str, Any]:
+    """The times, auto's choice and predictions, and how the two backends' images agree."""
+    g, c = images["gpu"], images["cpu"]
+    either = (g.triangle >= 0) | (c.triangle >= 0)
+    differ = g.triangle != c.triangle
+    hit = (g.triangle >= 0) & (c.triangle >= 0)
+    split = differ & hit
+    rel = np.abs(g.depth[hit].astype(np.float64) - c.depth[hit]) / g.depth[hit]
+    predicted_gpu, predicted_cpu = _predicted(images["auto"].backend_reason)
+    return {
+        "gpu": times["gpu"],
+        "cpu": times["cpu"],
+        "auto": times["auto"],
+        "auto_backend": images["auto"].backend,
+        "predicted_gpu": predicted_gpu,
+        "predicted_cpu": predicted_cpu,
+        "same_ids": float(1.0 - differ.mean()),
+        "same_ids_covered": float(1.0 - differ[either].mean()) if either.any() else 1.0,
+        "differ_adjacent": _adjacent(scene, g.triangle[split], c.triangle[split]),
+        "depth_rel_median": float(np.median(rel)) if rel.size else 0.0,
+        "depth_rel_p999": float(np.quantile(rel, 0.999)) if rel.size else 0.0,
+    }
+
+
 def _timed(
-    scene: ss.Scene, cam: ss.Camera, repeats: int, method: str = "conventional", **options: Any
+    scene: ss.Scene,
+    cam: ss.Camera | list[ss.Camera],
+    repeats: int,
+    method: str = "conventional",
+    **options: Any,
 ) -> tuple[dict[str, float], dict[str, Any]]:
     """Best of ``repeats`` interleaved rounds of ``discretize(scene, cam, method, **options,
     backend=b)`` per backend, after a warm-up call of each; the times and each last result."""
@@ -163,12 +215,18 @@ def _adjacent(scene: ss.Scene, a: np.ndarray, b: np.ndarray) -> float:
     return float(same.any((1, 2)).mean())
 
 
+def choice_ratio(r: dict[str, Any]) -> float:
+    """The time of the backend ``auto`` picked over the faster backend's."""
+    return r[r["auto_backend"]] / min(r["gpu"], r["cpu"])
+
+
 def _row(r: dict[str, Any]) -> str:
-    fastest = min(r["gpu"], r["cpu"])
-    ratio = r["auto"] / fastest
+    ratio = choice_ratio(r)
+    w, h = r["size"]
     return (
         f"| {r['scene']} | {r['triangles']:,} | {r['gpu'] * 1e3:.0f} | {r['cpu'] * 1e3:.0f} | "
-        f"{r['auto'] * 1e3:.0f} ({r['auto_backend']}) | {ratio:.2f}x | "
+        f"{r['auto'] * 1e3:.0f} ({r['auto_backend']}) | {ratio:.2f}x | {w}x{h} | "
+        f"{r['views']} | {r['covered'] * 100:.0f}% | "
         f"{r['predicted_gpu'] * 1e3:.0f} / {r['predicted_cpu'] * 1e3:.0f} | "
         f"{r['same_ids'] * 100:.3f}% | {r['same_ids_covered'] * 100:.3f}% | "
         f"{r['differ_adjacent'] * 100:.1f}% | {r['depth_rel_p999']:.1e} |"
@@ -186,31 +244,36 @@ def _peel_row(r: dict[str, Any]) -> str:
 
 def report(r: dict[str, Any]) -> str:
     rows = r["rows"]
-    ratios = [x["auto"] / min(x["gpu"], x["cpu"]) for x in rows]
+    ratios = [choice_ratio(x) for x in rows]
     worst = int(np.argmax(ratios))
     dev = r["device"]
     lines = [
         f"# `python -m scenesample.bench backends`, {time.strftime('%Y-%m-%d')}",
         "",
-        f"{dev['name']} ({dev['device_type']}); conventional images at {r['size']}², best of "
-        f"{r['repeats']} interleaved rounds after a warm-up (scene uploaded, BVH built). Times "
-        "in ms; auto / fastest is auto's time over the faster backend's (target <= "
-        f"{TARGET:.2f}x on every scene); predicted: the cost model's gpu / cpu estimate; same "
+        f"{dev['name']} ({dev['device_type']}); {VIEWS} conventional images per call, from the "
+        f"demo's orbit views or from {SPARSE_DISTANCE:g} times as far (sparse), best of "
+        f"{r['repeats']} interleaved rounds after a warm-up (scene uploaded, BVH built). "
+        "Covered: pixels that see a surface. Times in ms; auto: its own call's time and the "
+        "backend it picked; auto / fastest: the picked backend's time over the faster one's "
+        f"(target <= {TARGET:.2f}x on every row); predicted: the cost "
+        "model's gpu / cpu estimate; same "
         "ids: pixels where both name the same triangle (or none), of all pixels and of those "
         "where either sees a surface; at an edge: of the pixels where both see a different "
         "triangle, those whose two triangles share a vertex; depth: 99.9th percentile of "
         "|gpu - cpu| / gpu where both see a surface.",
         "",
-        "| scene | triangles | gpu | cpu | auto | auto / fastest | predicted | same ids | "
-        "same ids (covered) | at an edge | depth |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| scene | triangles | gpu | cpu | auto | auto / fastest | size | views | covered | "
+        "predicted | same ids | same ids (covered) | at an edge | depth |",
+        "|---|---:|---:|---:|---:|---:|---|---|---:|---:|---:|---:|---:|---:|",
     ]
     lines += [_row(x) for x in rows]
     verdict = "met" if max(ratios) <= TARGET else "NOT met"
     lines += [
         "",
-        f"Worst scene: {rows[worst]['scene']}, auto {ratios[worst]:.2f}x the faster backend "
-        f"(target <= {TARGET:.2f}x): {verdict}.",
+        f"Worst scene: {rows[worst]['scene']} at {rows[worst]['size'][0]}x"
+        f"{rows[worst]['size'][1]} ({rows[worst]['views']} views), auto {ratios[worst]:.2f}x "
+        f"the faster backend (target <= {TARGET:.2f}x on every row): {verdict}. Rows over the "
+        f"target: {sum(x > TARGET for x in ratios)} of {len(ratios)}.",
     ]
     peel = r.get("peeling", [])
     if peel:
