@@ -35,7 +35,7 @@ ROOMS: dict[str, tuple[str, ...]] = {
     "bench.py": ("test_bench.py",),
     "src/discretize/conventional.rs": ("test_depth_images.py", "test_backends.py"),
     "src/discretize/raster_rule.rs": ("test_backends.py",),
-    "src/discretize/backend.rs": ("test_backends.py",),
+    "src/discretize/backend/": ("test_backends.py", "test_plan.py"),
     "src/gpu/": ("test_depth_images.py", "test_backends.py", "test_nonredundant.py"),
     "_depth.py": ("test_depth_images.py", "test_nonredundant.py", "test_reconstruct.py"),
     "src/discretize/nonredundant.rs": ("test_nonredundant.py",),

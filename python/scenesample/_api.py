@@ -188,7 +188,9 @@ def device_info(
     ``calibration_seconds`` (the cost model's probes, run in this process; 0 when another
     process had run them), ``calibration`` (the calibration file's path, or ``"built-in (...)"``
     where no file can be kept) and ``coefficients`` (seconds per call, triangle, pixel and ray;
-    see ``src/discretize/backend.rs``). ``discretize`` weighs every request as one whose BVH
+    see ``src/discretize/backend/``), for views where three quarters of the pixels see the
+    scene's bounding box (``discretize`` counts them for its cameras). ``discretize`` weighs
+    every request as one whose BVH
     is built and whose GPU copy is made, whatever ran before, so that its choice depends only
     on the call; ``bvh_built=False`` or ``uploaded=False`` predict a first call instead."""
     try:
