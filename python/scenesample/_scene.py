@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import warnings
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Optional
 
@@ -290,12 +291,12 @@ class Scene:
                     k = index[key]
                 else:
                     raise InputError(f"no object named {key!r}; the objects are {objects[:8]}...")
-                m = np.asarray(m, dtype=np.float64)
+                m = _matrices(m, f"the transform of {key!r}")
                 if m.shape != (4, 4):
                     raise InputError(f"the transform of {key!r} must be 4x4, got {m.shape}")
                 out[k] = m
         else:
-            out = np.asarray(transforms, dtype=np.float64)
+            out = _matrices(transforms, "transforms")
             if out.shape != (len(objects), 4, 4):
                 raise InputError(
                     f"transforms must have shape ({len(objects)}, 4, 4) (one per object), "
@@ -310,17 +311,25 @@ class Scene:
         Unnamed clips are ``animation0``, ``animation1``, ..."""
         return self._core.animations
 
-    def at(self, t: float, animation: int | str = 0) -> Scene:
-        """The scene posed at ``t`` seconds into one animation clip (glTF node animations:
-        translation, rotation and scale, STEP, LINEAR or CUBICSPLINE).
+    def key_times(self, animation: int | str = 0) -> np.ndarray:
+        """(K,) float64: every key time of one clip (its index in :attr:`animations`, or its
+        name) over all its channels, in seconds, ascending, each once: the frames where its
+        keys sit, for sampling it at its keys or between them."""
+        return self._core.key_times(self._clip(animation))
+
+    def at(self, t: float, animation: int | str | Sequence[int | str] = 0) -> Scene:
+        """The scene posed at ``t`` seconds into one animation clip, or several played together
+        (glTF node animations: translation, rotation and scale, STEP, LINEAR or CUBICSPLINE).
 
         Parameters
         ----------
         t : float
-            Seconds into the clip; clamped to ``[0, duration]``, as glTF's samplers hold their
-            first and last keys. Must be finite.
-        animation : int or str
-            The clip's index in :attr:`animations`, or its name.
+            Seconds into the clip; clamped to ``[0, duration]`` (each clip's own), as glTF's
+            samplers hold their first and last keys. A finite real number (not a bool).
+        animation : int, str, or a sequence of them
+            The clip's index in :attr:`animations`, or its name; a list or tuple plays those
+            clips together, and where two of them key the same property of a node, the later
+            one in the list wins.
 
         Returns
         -------
@@ -331,17 +340,33 @@ class Scene:
             As glTF asks, winding follows the sign of each node's world determinant: an
             object that the clip mirrors relative to its place as loaded has its faces wound
             the other way, so its counter-clockwise side stays its front (``posed`` keeps the
-            faces as they are). Skins and morph targets stay in their rest pose (the load
-            warned about them).
+            faces as they are). A zero scale hides its object at that time (or flattens it,
+            when only some axes are 0): its triangles have no area and no ray meets them; an
+            object loaded with a zero scale keeps only what the scale left of it. On a posed
+            scene, ``scene.posed(T).at(t)``, the clip moves each object first and the pose
+            after: object ``o`` is at ``T[o] @ A_t[o]`` in world space (the pose's lights and
+            cameras are the clip's), and a further ``at`` composes with ``T`` again. Skins and
+            morph targets stay in their rest pose (the load warned about them).
         """
-        if isinstance(animation, bool) or not isinstance(animation, (int, np.integer, str)):
+        if isinstance(t, (bool, np.bool_)) or not isinstance(t, (int, float, np.number)):
+            raise InputError(f"t must be a finite number of seconds, got {t!r}")
+        clips = list(animation) if isinstance(animation, (list, tuple)) else [animation]
+        if not clips:
+            raise InputError("animation must name at least one clip")
+        return Scene(self._core.at(float(t), [self._clip(c) for c in clips]))
+
+    def _clip(self, animation: Any) -> str:
+        """A clip's index or name, checked, as the core takes it (text)."""
+        if isinstance(animation, (bool, np.bool_)) or not isinstance(
+            animation, (int, np.integer, str)
+        ):
             raise InputError(f"animation must be an index or a name, got {animation!r}")
         if not self.animations:
             raise InputError("the scene has no animations")
         if not isinstance(animation, str):
             if not 0 <= animation < len(self.animations):
                 raise InputError(f"no animation {animation}: the scene has {len(self.animations)}")
-        return Scene(self._core.at(float(t), str(animation)))
+        return str(animation)
 
     @property
     def transforms(self) -> Optional[np.ndarray]:
@@ -479,6 +504,16 @@ def _from_posed_state(state: dict[str, Any]) -> Scene:
     base = Scene.from_arrays(**state["base"])
     rows = np.ascontiguousarray(state["transforms"], dtype=np.float64).reshape(-1, 4)
     return Scene(base._core.posed(rows, state["rewinds"], state["lights"]))
+
+
+def _matrices(value: Any, what: str) -> np.ndarray:
+    """``value`` as a float64 array, or an InputError naming ``what`` when it is not numbers in
+    a regular shape (text, None, ragged lists)."""
+    try:
+        out = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise InputError(f"{what} must be numbers in a regular (..., 4, 4) array: {e}") from None
+    return out
 
 
 def _placed(meshes: list, transforms: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -142,9 +142,17 @@ impl PyScene {
         self.inner.animations()
     }
 
-    /// The scene posed at `t` seconds into animation `clip` (an index or a name, as text).
-    fn at(&self, py: Python<'_>, t: f64, clip: String) -> PyResult<Self> {
-        let scene = super::run(py, || self.inner.at(t, &clip))?;
+    /// Every key time of animation `clip` (an index or a name, as text), ascending, each once.
+    fn key_times<'py>(&self, py: Python<'py>, clip: String) -> PyResult<Bound<'py, PyAny>> {
+        let times = super::run(py, || self.inner.key_times(&clip))?;
+        Ok(numpy::PyArray1::from_vec(py, times).into_any())
+    }
+
+    /// The scene posed at `t` seconds into animation clips `clips` (indices or names, as text),
+    /// played together.
+    fn at(&self, py: Python<'_>, t: f64, clips: Vec<String>) -> PyResult<Self> {
+        let names: Vec<&str> = clips.iter().map(String::as_str).collect();
+        let scene = super::run(py, || self.inner.at(t, &names))?;
         Ok(Self {
             inner: Arc::new(scene),
         })

@@ -82,6 +82,31 @@ pub struct At {
     pub cameras: Vec<Option<DMat4>>,
 }
 
+/// The map from an object's vertices as loaded back to its mesh's space: the inverse of `loaded`,
+/// or where a zero scale made it singular (an object loaded hidden or flattened), its
+/// pseudo-inverse, which recovers what the load kept (the directions the scale did not zero)
+/// and maps the rest to the node's origin. So a clip that moves such a node's parents moves what
+/// is left of it, and never makes a transform that is not finite.
+pub fn undo(loaded: &DMat4) -> DMat4 {
+    let l = glam::DMat3::from_mat4(*loaded);
+    let size = l.x_axis.length_squared() + l.y_axis.length_squared() + l.z_axis.length_squared();
+    if l.determinant().abs() > 1e-12 * size.powf(1.5) {
+        return loaded.inverse();
+    }
+    // (LᵀL + εI)⁻¹Lᵀ: the pseudo-inverse where L's singular values are 0 or well above ε.
+    let gram = l.transpose() * l;
+    let eps = 1e-12 * size.max(f64::MIN_POSITIVE);
+    let p = (gram + glam::DMat3::from_diagonal(DVec3::splat(eps))).inverse() * l.transpose();
+    let p = if p.is_finite() { p } else { glam::DMat3::ZERO };
+    let t = -(p * loaded.w_axis.truncate());
+    DMat4::from_cols(
+        p.x_axis.extend(0.0),
+        p.y_axis.extend(0.0),
+        p.z_axis.extend(0.0),
+        t.extend(1.0),
+    )
+}
+
 impl Channel {
     /// The property's value at `t` (clamped to the keys).
     fn sample(&self, t: f64) -> [f64; 4] {
@@ -156,35 +181,68 @@ impl Animations {
 
     /// Clip `clip` sampled at `t` seconds (clamped to the clip): objects, lights and cameras.
     pub fn at(&self, clip: usize, t: f64) -> Result<At> {
+        self.at_clips(&[clip], t)
+    }
+
+    /// Every key time of clip `clip` over its channels, ascending, each once (seconds).
+    pub fn key_times(&self, clip: usize) -> Result<Vec<f64>> {
         let Some(c) = self.clips.get(clip) else {
             return input_err!("no animation {clip}: the scene has {}", self.clips.len());
         };
+        let mut times: Vec<f64> = c
+            .channels
+            .iter()
+            .flat_map(|ch| ch.times.iter().map(|&t| f64::from(t)))
+            .collect();
+        times.sort_by(f64::total_cmp);
+        times.dedup();
+        Ok(times)
+    }
+
+    /// Clips `clips` played together, sampled at `t` seconds (clamped to each clip): objects,
+    /// lights and cameras. Where two clips key the same property of a node, the later wins.
+    pub fn at_clips(&self, clips: &[usize], t: f64) -> Result<At> {
         if !t.is_finite() {
             return input_err!("the time must be finite, got {t}");
         }
-        let t = t.clamp(0.0, c.duration);
         let mut trs: Vec<Option<(DVec3, DQuat, DVec3)>> = vec![None; self.nodes.len()];
-        for ch in &c.channels {
-            let v = ch.sample(t);
-            let (tr, rot, sc) = trs[ch.node].get_or_insert(self.nodes[ch.node].trs);
-            match ch.property {
-                Property::Translation => *tr = DVec3::new(v[0], v[1], v[2]),
-                Property::Scale => *sc = DVec3::new(v[0], v[1], v[2]),
-                Property::Rotation => *rot = DQuat::from_array(v).normalize(),
+        for &clip in clips {
+            let Some(c) = self.clips.get(clip) else {
+                return input_err!("no animation {clip}: the scene has {}", self.clips.len());
+            };
+            let t = t.clamp(0.0, c.duration);
+            for ch in &c.channels {
+                self.apply(ch, t, &mut trs);
             }
         }
+        self.sampled(&trs)
+    }
+
+    /// Channel `ch`'s value at `t` written into its node's sampled TRS.
+    fn apply(&self, ch: &Channel, t: f64, trs: &mut [Option<(DVec3, DQuat, DVec3)>]) {
+        let v = ch.sample(t);
+        let (tr, rot, sc) = trs[ch.node].get_or_insert(self.nodes[ch.node].trs);
+        match ch.property {
+            Property::Translation => *tr = DVec3::new(v[0], v[1], v[2]),
+            Property::Scale => *sc = DVec3::new(v[0], v[1], v[2]),
+            Property::Rotation => *rot = DQuat::from_array(v).normalize(),
+        }
+    }
+
+    /// Objects, lights and cameras from each node's sampled TRS (`None`: not animated).
+    fn sampled(&self, trs: &[Option<(DVec3, DQuat, DVec3)>]) -> Result<At> {
         // World transforms at t of the nodes with an animated ancestor (or themselves).
         let mut world: Vec<Option<Option<DMat4>>> = vec![None; self.nodes.len()];
         let mut worlds = |places: &[Placed]| -> Vec<Option<DMat4>> {
             places
                 .iter()
-                .map(|p| self.world_at(p.node, &trs, &mut world))
+                .map(|p| self.world_at(p.node, trs, &mut world))
                 .collect()
         };
         let objects = worlds(&self.objects)
             .into_iter()
             .zip(&self.objects)
-            .map(|(w, p)| w.map_or(DMat4::IDENTITY, |w| w * p.instance * p.loaded.inverse()))
+            .map(|(w, p)| w.map_or(DMat4::IDENTITY, |w| w * p.instance * undo(&p.loaded)))
             .collect();
         Ok(At {
             objects,

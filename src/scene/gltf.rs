@@ -71,12 +71,16 @@ fn load_parts(path: &Path) -> Result<SceneParts> {
         std::fs::read(path).map_err(|e| file_err(path, format!("cannot read the file: {e}")))?;
     let gltf::Gltf { document, blob } =
         gltf::Gltf::from_slice_without_validation(&bytes).map_err(|e| {
-            file_err(
-                path,
-                format!("not a readable glTF/GLB file (truncated or corrupt?): {e}"),
-            )
+            let why = match version_one(&bytes) {
+                Some(v) => refuse_version_one(&v),
+                None => format!("not a readable glTF/GLB file (truncated or corrupt?): {e}"),
+            };
+            file_err(path, why)
         })?;
     let mut root = document.into_json();
+    if root.asset.version.trim().starts_with('1') {
+        return Err(file_err(path, refuse_version_one(&root.asset.version)));
+    }
     let mut warnings = Vec::new();
     for ext in &root.extensions_required {
         if !honourable(ext) {
@@ -120,12 +124,93 @@ fn load_parts(path: &Path) -> Result<SceneParts> {
     Ok(loader.parts)
 }
 
+/// What makes channel `ch` of animation `anim` unreadable before the glTF reader touches it
+/// (its accessors unwrap these): a sampler, node or accessor index out of range. `None` when it
+/// can be read. (A target path or interpolation that glTF 2.0 does not name, §3.11, refuses the
+/// whole file in `prevalidate`.)
+fn channel_problem(doc: &gltf::Document, anim: usize, ch: usize) -> Option<String> {
+    use gltf::json::validation::Checked;
+    let root = doc.as_json();
+    let a = &root.animations[anim];
+    let c = &a.channels[ch];
+    let Some(sampler) = a.samplers.get(c.sampler.value()) else {
+        return Some(format!(
+            "sampler {} does not exist (the animation has {})",
+            c.sampler.value(),
+            a.samplers.len()
+        ));
+    };
+    if c.target.node.value() >= root.nodes.len() {
+        return Some(format!(
+            "target node {} does not exist (the file has {} nodes)",
+            c.target.node.value(),
+            root.nodes.len()
+        ));
+    }
+    // Target paths and interpolations were checked by `prevalidate` (the file is refused).
+    if matches!(c.target.path, Checked::Invalid)
+        || matches!(sampler.interpolation, Checked::Invalid)
+    {
+        return Some("its target path or interpolation is not one glTF 2.0 names".into());
+    }
+    for (what, index) in [("input", sampler.input), ("output", sampler.output)] {
+        if index.value() >= root.accessors.len() {
+            return Some(format!(
+                "its {what} accessor {} does not exist",
+                index.value()
+            ));
+        }
+    }
+    None
+}
+
+/// The `asset.version` of a glTF 1.0 file (JSON, or binary glTF 1.0: a GLB header of version
+/// 1), which the glTF 2.0 reader cannot parse; `None` for anything else.
+fn version_one(bytes: &[u8]) -> Option<String> {
+    if bytes.len() >= 8 && &bytes[..4] == b"glTF" {
+        let version = u32::from_le_bytes([bytes[4], bytes[5], bytes[6], bytes[7]]);
+        return (version == 1).then(|| "1.0 (binary glTF)".to_string());
+    }
+    let json: serde_json::Value = serde_json::from_slice(bytes).ok()?;
+    let version = json.get("asset")?.get("version")?;
+    let v = version
+        .as_str()
+        .map_or_else(|| version.to_string(), str::to_string);
+    v.trim().starts_with('1').then_some(v)
+}
+
+fn refuse_version_one(version: &str) -> String {
+    format!(
+        "glTF {version} is not supported: scenesample reads glTF 2.0 (asset.version \"2.0\"); \
+         convert the file to glTF 2.0 first (Khronos' glTF 1.0 to 2.0 converters, or Blender's \
+         importer and exporter)"
+    )
+}
+
 /// Checks gltf's validator needs before it runs (it indexes accessors without bounds checks),
 /// and the one requirement it enforces that we relax: the spec requires `min`/`max` on POSITION
 /// accessors, but exporters omit them and nothing here reads them (bounds come from the data),
 /// so missing ones are filled with placeholders rather than rejecting the file.
 fn prevalidate(root: &mut gltf::json::Root) -> std::result::Result<(), String> {
     use gltf::json::validation::Checked;
+    for (i, a) in root.animations.iter().enumerate() {
+        for (c, ch) in a.channels.iter().enumerate() {
+            if let Checked::Invalid = ch.target.path {
+                return Err(format!(
+                    "animation {i} channel {c}: its target path is not one glTF 2.0 names \
+                     (translation, rotation, scale, weights)"
+                ));
+            }
+        }
+        for (k, sampler) in a.samplers.iter().enumerate() {
+            if let Checked::Invalid = sampler.interpolation {
+                return Err(format!(
+                    "animation {i} sampler {k}: its interpolation is not one glTF 2.0 names \
+                     (STEP, LINEAR, CUBICSPLINE)"
+                ));
+            }
+        }
+    }
     let n = root.accessors.len();
     let mut positions = Vec::new();
     for (m, mesh) in root.meshes.iter().enumerate() {
@@ -446,6 +531,14 @@ impl Loader<'_> {
         for anim in doc.animations() {
             let mut channels = Vec::new();
             for ch in anim.channels() {
+                if let Some(m) = channel_problem(doc, anim.index(), ch.index()) {
+                    self.warn(format!(
+                        "animation {} channel {}: {m}; skipped",
+                        anim.index(),
+                        ch.index()
+                    ));
+                    continue;
+                }
                 match self.channel(&ch) {
                     Ok(Some(c)) => channels.push(c),
                     Ok(None) => morph = true,

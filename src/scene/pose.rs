@@ -25,6 +25,9 @@ pub struct Pose {
     pub transforms: Arc<Vec<DMat4>>,
     /// Whether the faces of mirrored objects were wound the other way (`Scene::at`).
     pub rewinds: bool,
+    /// A user's pose that a clip's pose was composed with (`posed(T).at(t)`: object `o` at
+    /// `T[o] · A_t[o]`), kept so that the next `at` composes with it too; `None` otherwise.
+    pub after: Option<Arc<Vec<DMat4>>>,
 }
 
 /// What posing needs from a scene as loaded, built once per scene: each vertex's object, and
@@ -96,8 +99,22 @@ fn transform_point(m: &DMat4, p: [f32; 3]) -> [f32; 3] {
     std::array::from_fn(|a| (c[a] * x + c[4 + a] * y + c[8 + a] * z + c[12 + a]) as f32)
 }
 
-/// Check that `m` is a finite, non-singular affine transform (its last row 0, 0, 0, 1).
-pub fn check_transform(m: &DMat4, what: &str) -> Result<()> {
+/// How `m` moves normals: the inverse transpose of its linear part; where that is singular (a
+/// zero scale), its cofactor matrix (the inverse transpose times the determinant, which exists
+/// for every matrix): a flattened object's normals then point across its plane, and a hidden
+/// one's are 0 (normalised later, where they are not 0).
+fn normal_map(m: &DMat4) -> DMat3 {
+    let l = DMat3::from_mat4(*m);
+    let inverse = l.inverse();
+    if l.determinant() != 0.0 && inverse.is_finite() {
+        return inverse.transpose();
+    }
+    let (x, y, z) = (l.x_axis, l.y_axis, l.z_axis);
+    DMat3::from_cols(y.cross(z), z.cross(x), x.cross(y))
+}
+
+/// Check that `m` is finite and affine (its last row 0, 0, 0, 1).
+pub fn check_affine(m: &DMat4, what: &str) -> Result<()> {
     if !m.is_finite() {
         return input_err!("the transform of {what} is not finite");
     }
@@ -107,6 +124,12 @@ pub fn check_transform(m: &DMat4, what: &str) -> Result<()> {
             m.row(3).to_array()
         );
     }
+    Ok(())
+}
+
+/// Check that `m` is a finite, non-singular affine transform (its last row 0, 0, 0, 1).
+pub fn check_transform(m: &DMat4, what: &str) -> Result<()> {
+    check_affine(m, what)?;
     let l = DMat3::from_mat4(*m);
     let scale = l.x_axis.length() * l.y_axis.length() * l.z_axis.length();
     let det = l.determinant();
@@ -140,17 +163,37 @@ impl Scene {
             .collect()
     }
 
-    /// The scene posed at `t` seconds into the animation `clip` (its index or name; `t`
-    /// clamped to the clip).
-    pub fn at(self: &Arc<Self>, t: f64, clip: &str) -> Result<Scene> {
+    /// The scene posed at `t` seconds into the animation clips `clips` (indices or names,
+    /// played together; `t` clamped to each clip; where two key the same property of a node, the
+    /// later one in `clips` wins). On a scene a user posed, the clips move each object first
+    /// and the pose after (object `o` at `T[o] · A_t[o]`); a clip's pose of such a scene keeps
+    /// the user's pose for its next `at`.
+    pub fn at(self: &Arc<Self>, t: f64, clips: &[&str]) -> Result<Scene> {
         let Some(a) = &self.parts.animations else {
             return input_err!("the scene has no animations");
         };
-        let at = a.at(a.clip(clip)?, t)?;
+        if clips.is_empty() {
+            return input_err!("at needs at least one animation clip");
+        }
+        let indices = clips
+            .iter()
+            .map(|c| a.clip(c))
+            .collect::<Result<Vec<_>>>()?;
+        let mut at = a.at_clips(&indices, t)?;
+        let after = match &self.pose {
+            Some(p) if !p.rewinds => Some(p.transforms.clone()),
+            Some(p) => p.after.clone(),
+            None => None,
+        };
+        if let Some(user) = &after {
+            for (m, u) in at.objects.iter_mut().zip(user.iter()) {
+                *m = *u * *m;
+            }
+        }
         // Lights and cameras on animated nodes go where their nodes are at `t`; a camera's
         // pose keeps only the node's rotation and translation, as at load. Winding follows the
         // sign of each node's world determinant (glTF 2.0 §3.7.4), as at load.
-        self.posed_with(&at.objects, true, |parts| {
+        self.posed_with(&at.objects, true, after, |parts| {
             for (light, w) in parts.lights.iter_mut().zip(&at.lights) {
                 if let Some(w) = w {
                     light.place(w);
@@ -164,6 +207,14 @@ impl Scene {
         })
     }
 
+    /// Every key time of animation `clip` (its index or name), ascending, each once.
+    pub fn key_times(&self, clip: &str) -> Result<Vec<f64>> {
+        let Some(a) = &self.parts.animations else {
+            return input_err!("the scene has no animations");
+        };
+        a.key_times(a.clip(clip)?)
+    }
+
     /// What posing `self` (a scene as loaded) needs, built on first use.
     pub fn rig(&self) -> Arc<Rig> {
         self.derived(|| Rig::of(self))
@@ -174,7 +225,7 @@ impl Scene {
     /// inverse transpose. The faces, ids, colours, materials and lights are shared with the
     /// scene as loaded; a vertex that faces of two objects share is split into one per object.
     pub fn posed(self: &Arc<Self>, transforms: &[DMat4]) -> Result<Scene> {
-        self.posed_with(transforms, false, |_| {})
+        self.posed_with(transforms, false, None, |_| {})
     }
 
     /// A pose made again from what it is made of: [`Scene::posed`] (or, with `rewinds`, as
@@ -187,7 +238,7 @@ impl Scene {
         rewinds: bool,
         lights: Option<Vec<crate::scene::Light>>,
     ) -> Result<Scene> {
-        self.posed_with(transforms, rewinds, |parts| {
+        self.posed_with(transforms, rewinds, None, |parts| {
             if let Some(lights) = lights {
                 parts.lights = lights;
             }
@@ -202,6 +253,7 @@ impl Scene {
         self: &Arc<Self>,
         transforms: &[DMat4],
         rewind: bool,
+        after: Option<Arc<Vec<DMat4>>>,
         place: impl FnOnce(&mut SceneParts),
     ) -> Result<Scene> {
         let base = match &self.pose {
@@ -217,7 +269,13 @@ impl Scene {
             );
         }
         for (m, name) in transforms.iter().zip(objects) {
-            check_transform(m, &format!("object '{name}'"))?;
+            let what = format!("object '{name}'");
+            if rewind {
+                // A clip's zero scale hides (or flattens) its object at that time.
+                check_affine(m, &what)?;
+            } else {
+                check_transform(m, &what)?;
+            }
         }
         let rig = base.rig();
         let identity = DMat4::IDENTITY;
@@ -239,10 +297,7 @@ impl Scene {
                 objects[o as usize]
             );
         }
-        let normal_maps: Vec<DMat3> = transforms
-            .iter()
-            .map(|m| DMat3::from_mat4(*m).inverse().transpose())
-            .collect();
+        let normal_maps: Vec<DMat3> = transforms.iter().map(normal_map).collect();
         let normals = rig.normals.as_ref().map(|ns| {
             ns.par_iter()
                 .zip(&rig.vertex_object)
@@ -272,6 +327,7 @@ impl Scene {
             base: base.clone(),
             transforms: Arc::new(transforms.to_vec()),
             rewinds: rewind,
+            after,
         };
         // Determinants only where they decide something (a plain pose keeps the faces).
         let mirrored: Vec<bool> = if rewind {
@@ -330,6 +386,23 @@ mod tests {
         // Posing a posed scene starts from the scene as loaded.
         let q = Arc::new(p).posed(&[DMat4::IDENTITY; 2]).unwrap();
         assert!(q.vertices().iter().all(|v| v[2] == 0.0));
+    }
+
+    #[test]
+    fn normals_follow_a_zero_scale_by_the_cofactor_matrix() {
+        use glam::DVec3;
+        // Non-singular: the inverse transpose, bit for bit as before.
+        let m = DMat4::from_scale_rotation_translation(
+            DVec3::new(2.0, -1.0, 0.5),
+            glam::DQuat::from_rotation_z(0.3),
+            DVec3::ONE,
+        );
+        assert_eq!(normal_map(&m), DMat3::from_mat4(m).inverse().transpose());
+        // Flattened along z: every normal points along z; hidden: every normal is 0.
+        let flat = normal_map(&DMat4::from_scale(DVec3::new(2.0, 3.0, 0.0)));
+        let n = flat * DVec3::new(0.3, -0.2, 0.9);
+        assert!(n.x == 0.0 && n.y == 0.0 && n.z > 0.0, "{n}");
+        assert_eq!(normal_map(&DMat4::from_scale(DVec3::ZERO)), DMat3::ZERO);
     }
 
     #[test]
