@@ -367,3 +367,76 @@ def test_a_posed_scene_pickles_as_its_base_and_transforms(scenes):
     np.testing.assert_array_equal(there.transforms, again.transforms)
     # A scene as loaded still pickles as its arrays.
     assert pickle.loads(pickle.dumps(base)).transforms is None
+
+
+def _wave(v, amplitude=0.3):
+    """A smooth deformation: every vertex lifted by a wave over x and y and sheared a little."""
+    v = np.asarray(v, np.float64)
+    lift = amplitude * np.sin(1.3 * v[:, 0]) * np.cos(0.9 * v[:, 1])
+    return (v + np.stack([0.1 * v[:, 2], 0 * lift, lift], 1)).astype(np.float32)
+
+
+@pytest.mark.parametrize("posed_first", [False, True])
+def test_a_deformed_scene_matches_the_same_geometry_built_flat(scenes, posed_first):
+    """Rays, images and point queries on a deformed scene (its tree refit) against the same
+    vertices built flat; of a scene as loaded and of a posed one (refit from its base)."""
+    base, posed, _ = scenes
+    source = posed if posed_first else base
+    deformed = source.deformed(_wave(source.vertices))
+    flat = _flat(deformed)
+    assert deformed.transforms is None and deformed.normals is None
+    np.testing.assert_array_equal(deformed.faces, source.faces)
+    np.testing.assert_array_equal(deformed.object_ids, source.object_ids)
+    o, d = _rays(deformed)
+    a, b = ss.cast_rays(deformed, o, d), ss.cast_rays(flat, o, d)
+    assert (a.triangle >= 0).mean() > 0.5
+    np.testing.assert_array_equal(a.triangle, b.triangle)
+    np.testing.assert_array_equal(a.t, b.t)
+    np.testing.assert_array_equal(ss.occluded(deformed, o, d), ss.occluded(flat, o, d))
+    cam = ss.Camera.look_at((0, -9, 5), (0, 0, 0), (0, 0, 1), yfov=0.9, width=96, height=80)
+    ia = ss.discretize(deformed, cameras=[cam], backend="cpu")
+    ib = ss.discretize(flat, cameras=[cam], backend="cpu")
+    np.testing.assert_array_equal(ia.triangle, ib.triangle)
+    pts = np.random.default_rng(1).uniform(-5, 5, (2000, 3))
+    ca, cb = ss.closest_points(deformed, pts), ss.closest_points(flat, pts)
+    np.testing.assert_array_equal(ca.triangle, cb.triangle)
+
+
+def test_a_deformation_that_scatters_the_tree_is_built_afresh(scenes):
+    """Refit while the tree keeps its quality (a wave: surface-area cost within 1.3x the rest
+    pose's, a tree unlike a fresh build's); built afresh when the vertices are scattered (the
+    same tree as a fresh build, and the same hits either way)."""
+    base, _, _ = scenes
+    gentle = base.deformed(_wave(base.vertices))
+    rest = ss.bvh_stats(base)["sah"]
+    refit = ss.bvh_stats(gentle)
+    assert refit["sah"] <= 1.3 * rest
+    assert refit["sah"] != ss.bvh_stats(_flat(gentle))["sah"]
+    rng = np.random.default_rng(2)
+    scattered = base.deformed(base.vertices[rng.permutation(len(base.vertices))])
+    fresh = _flat(scattered)
+    assert ss.bvh_stats(scattered)["sah"] == ss.bvh_stats(fresh)["sah"]
+    o, d = _rays(scattered, 20_000)
+    np.testing.assert_array_equal(
+        ss.cast_rays(scattered, o, d).triangle, ss.cast_rays(fresh, o, d).triangle
+    )
+
+
+@pytest.mark.parametrize(
+    "vertices, match",
+    [
+        (np.zeros((5, 3)), r"shape \(\d+, 3\) \(one per vertex\), got \(5, 3\)"),
+        ("soft", "vertices must be numbers"),
+        ([[0, 0], [1]], "vertices must be numbers"),
+    ],
+)
+def test_bad_deformations_are_refused(scenes, vertices, match):
+    base, _, _ = scenes
+    with pytest.raises(ss.InputError, match=match):
+        base.deformed(vertices)
+    v = base.vertices.copy()
+    v[3, 1] = np.nan
+    with pytest.raises(ss.InputError, match="deformed vertex 3 is not finite"):
+        base.deformed(v)
+    with pytest.raises(ss.InputError, match="normals must have shape"):
+        base.deformed(base.vertices, normals=np.zeros((2, 3)))

@@ -305,6 +305,39 @@ class Scene:
         flat = np.ascontiguousarray(out).reshape(-1, 4)
         return Scene(self._core.posed(flat))
 
+    def deformed(self, vertices: Any, normals: Any = None) -> Scene:
+        """This scene with every vertex moved (cloth, a soft body, a deforming scan), its
+        faces, objects and materials unchanged.
+
+        Parameters
+        ----------
+        vertices : (len(vertices), 3) array_like of float
+            The new position of each of this scene's :attr:`vertices`, finite.
+        normals : (len(vertices), 3) array_like of float, optional
+            Per-vertex normals of the deformed surface. Without them the result has none: the
+            normals that came with this scene no longer fit it.
+
+        Returns
+        -------
+        Scene
+            A scene whose every query and method works as on any other; triangle ids are the
+            faces' indices. Its BVH is not built again: the trees of the scene it deforms (the
+            scene as loaded, for a posed or deformed one) are refit to the new corners, on
+            every core, unless the refit tree's surface-area cost grows past
+            ``1.3`` times the rest pose's (a deformation that scatters what the tree kept
+            together), when it is built afresh. Lights and cameras stay; the result has no
+            animations (its vertices are yours) and :attr:`transforms` is None.
+        """
+        v = _matrices(vertices, "vertices", np.float32)
+        n = None if normals is None else _matrices(normals, "normals", np.float32)
+        count = len(self.vertices)
+        for name, a in (("vertices", v), ("normals", n)):
+            if a is not None and a.shape != (count, 3):
+                raise InputError(
+                    f"deformed {name} must have shape ({count}, 3) (one per vertex), got {a.shape}"
+                )
+        return Scene(self._core.deformed(v, n))
+
     @property
     def animations(self) -> list[tuple[str, float]]:
         """The glTF animation clips as ``(name, duration in seconds)``; empty without any.
@@ -506,13 +539,13 @@ def _from_posed_state(state: dict[str, Any]) -> Scene:
     return Scene(base._core.posed(rows, state["rewinds"], state["lights"]))
 
 
-def _matrices(value: Any, what: str) -> np.ndarray:
-    """``value`` as a float64 array, or an InputError naming ``what`` when it is not numbers in
-    a regular shape (text, None, ragged lists)."""
+def _matrices(value: Any, what: str, dtype: Any = np.float64) -> np.ndarray:
+    """``value`` as an array of ``dtype``, or an InputError naming ``what`` when it is not
+    numbers in a regular shape (text, None, ragged lists)."""
     try:
-        out = np.asarray(value, dtype=np.float64)
+        out = np.asarray(value, dtype=dtype)
     except (TypeError, ValueError) as e:
-        raise InputError(f"{what} must be numbers in a regular (..., 4, 4) array: {e}") from None
+        raise InputError(f"{what} must be numbers in a regular array: {e}") from None
     return out
 
 

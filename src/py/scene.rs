@@ -122,6 +122,29 @@ impl PyScene {
         })
     }
 
+    /// This scene with its vertices at `vertices` ((n_vertices, 3) float32, finite) and, if
+    /// given, per-vertex `normals` ((n_vertices, 3)); its BVH is refit, not rebuilt.
+    #[pyo3(signature = (vertices, normals=None))]
+    fn deformed(
+        &self,
+        py: Python<'_>,
+        vertices: &Bound<'_, PyAny>,
+        normals: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<Self> {
+        let v = rows_f32::<3>(vertices, "vertices")?;
+        let n = normals.map(|n| rows_f32::<3>(n, "normals")).transpose()?;
+        // `run` takes an `Fn`: the arrays are handed over once, not copied.
+        let given = std::sync::Mutex::new(Some((v, n)));
+        let scene = super::run(py, || {
+            let taken = given.lock().unwrap_or_else(|e| e.into_inner()).take();
+            let (v, n) = taken.expect("run calls its work once");
+            self.inner.deformed(v, n)
+        })?;
+        Ok(Self {
+            inner: Arc::new(scene),
+        })
+    }
+
     /// The scene this one was posed from (as loaded), or None for a scene as loaded.
     #[getter]
     fn base(&self) -> Option<Self> {

@@ -5,6 +5,7 @@
 
 pub mod adjacency;
 pub mod animation;
+pub mod deform;
 pub mod gltf;
 pub mod obj;
 pub mod pose;
@@ -121,6 +122,8 @@ pub struct Scene {
     degenerate_count: usize,
     /// The scene this one was posed from and each object's transform ([`Scene::posed`]).
     pose: Option<pose::Pose>,
+    /// The scene whose object trees this one's BVH is refit from ([`Scene::deformed`]).
+    refit_from: Option<Arc<Scene>>,
     /// What the rooms derive from the scene (see [`Scene::derived`]).
     derived: Derived,
 }
@@ -186,6 +189,7 @@ impl Scene {
             degenerate,
             degenerate_count,
             pose,
+            refit_from: None,
             derived: Derived::default(),
         }
     }

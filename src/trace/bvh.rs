@@ -38,6 +38,11 @@ pub struct BvhStats {
     pub sah: f64,
 }
 
+/// How much a deformed scene's refit tree may cost (its surface-area cost, relative to its
+/// root's area) over its rest pose's before the scene's BVH is built afresh instead
+/// (`Scene::deformed`; measured in `bench scenes`).
+pub const REFIT_LIMIT: f64 = 1.3;
+
 impl Bvh {
     pub fn build(scene: &Scene) -> Self {
         Self::build_with(scene, build::BuildParams::standard())
@@ -56,6 +61,23 @@ impl Bvh {
                 tree: trees.posed(scene.vertices(), scene.faces()),
                 build_seconds: start.elapsed().as_secs_f64(),
             };
+        }
+        if let Some(source) = scene.refit_from() {
+            // A deformed scene: its source's object trees refit to the new corners, unless
+            // the refit tree's surface-area cost has grown past REFIT_LIMIT times the rest
+            // pose's (a deformation that scatters what the tree keeps together), when it is
+            // built afresh below.
+            let trees = source.derived(|| {
+                let objects = source.objects().len();
+                refit::ObjectTrees::of(&source.rig(), source.object_ids(), objects, params)
+            });
+            let tree = trees.posed(scene.vertices(), scene.faces());
+            if tree.sah() <= REFIT_LIMIT * trees.rest_sah() {
+                return Self {
+                    tree,
+                    build_seconds: start.elapsed().as_secs_f64(),
+                };
+            }
         }
         let v = scene.vertices();
         let tris: Vec<Tri> = scene

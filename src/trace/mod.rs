@@ -50,6 +50,6 @@ pub use api::{
     all_hits, cast_rays, cast_rays_kept, cast_rays_with, count_hits, nearest_hits,
     nearest_hits_facing, occluded, AllHits, HitCounts, Occlusion, RayHits,
 };
-pub use bvh::{Bvh, BvhStats, MAX_TRIANGLES};
+pub use bvh::{Bvh, BvhStats, MAX_TRIANGLES, REFIT_LIMIT};
 pub use query::{Query, Threads};
 pub use rays::INTERLEAVE_BYTES;

@@ -28,6 +28,11 @@ pub struct ObjectTrees {
     top_count: usize,
     objects: Vec<Object>,
     depth: u32,
+    /// The objects' nodes grouped by their depth below their object's root, deepest last: a
+    /// refit runs level by level from the deepest, each level's nodes in parallel.
+    levels: Vec<Vec<u32>>,
+    /// The surface-area cost of the tree of the scene as loaded ([`Bvh8::sah`]).
+    rest_sah: f64,
 }
 
 /// An object's part of [`ObjectTrees`]: its nodes (the root first), and its root's triangle
@@ -87,13 +92,23 @@ impl ObjectTrees {
                 stats,
             });
         }
-        ObjectTrees {
+        let levels = levels_of(&out.nodes, &parts);
+        let mut trees = ObjectTrees {
             nodes: out.nodes,
             blocks: out.blocks,
             top_count,
             objects: parts,
             depth: out.depth,
-        }
+            levels,
+            rest_sah: 0.0,
+        };
+        trees.rest_sah = trees.posed(&rig.vertices, rig.faces()).sah();
+        trees
+    }
+
+    /// The surface-area cost of the tree of the scene as loaded.
+    pub fn rest_sah(&self) -> f64 {
+        self.rest_sah
     }
 
     /// The tree of the posed scene whose `vertices` and `faces` are given (`Scene::posed`
@@ -121,15 +136,18 @@ impl ObjectTrees {
             })
             .collect();
         let mut nodes = self.nodes.clone();
-        // Each object's nodes apart, in order.
-        let mut work = Vec::with_capacity(self.objects.len());
-        let mut rest = &mut nodes[self.top_count..];
-        for o in &self.objects {
-            let (n, tail) = std::mem::take(&mut rest).split_at_mut(o.nodes.len());
-            rest = tail;
-            work.push((o, n));
+        // Level by level from the deepest: a node's children are one level deeper, refit
+        // already. Each level's nodes in parallel (one object or many).
+        for level in self.levels.iter().rev() {
+            let refit: Vec<Node8> = level
+                .par_iter()
+                .with_min_len(64)
+                .map(|&i| refit_node(nodes[i as usize], &nodes, &blocks))
+                .collect();
+            for (&i, n) in level.iter().zip(refit) {
+                nodes[i as usize] = n;
+            }
         }
-        work.into_par_iter().for_each(|(o, n)| refit(n, &blocks, o));
         let mut items: Vec<(Aabb, usize)> = self
             .objects
             .iter()
@@ -168,32 +186,49 @@ fn top_node_count(n: usize) -> usize {
     nodes.len()
 }
 
-/// Object `o`'s nodes (`nodes`, whose references are the whole tree's, as are the indices
-/// into `blocks`, the whole tree's blocks with their corners posed) with their boxes refit from
-/// the leaves up (children follow their parents). The any-hit order is the one built for the
-/// object as loaded.
-fn refit(nodes: &mut [Node8], blocks: &[Tri4], o: &Object) {
-    for i in (0..nodes.len()).rev() {
-        for k in 0..8 {
-            let c = nodes[i].child[k];
-            if c == EMPTY {
-                continue;
-            }
-            let bx = if c & LEAF != 0 {
-                let mut bx = Aabb::EMPTY;
-                for b in &blocks[leaf_blocks(c)] {
-                    for lane in (0..4).filter(|&l| b.id[l] != u32::MAX) {
-                        bx.grow(&padded_box(&b.tri(lane)));
-                    }
-                }
-                bx
-            } else {
-                box_of(&nodes[node_index(c) - o.nodes.start])
-            };
-            set_box(&mut nodes[i], k, &bx);
+/// Node `n` with its children's boxes refit: a leaf's from its blocks' posed corners, an inner
+/// child's from that child in `nodes` (refit already). The any-hit order is the one built for
+/// the object as loaded.
+fn refit_node(mut n: Node8, nodes: &[Node8], blocks: &[Tri4]) -> Node8 {
+    for k in 0..8 {
+        let c = n.child[k];
+        if c == EMPTY {
+            continue;
         }
-        nodes[i].set_order();
+        let bx = if c & LEAF != 0 {
+            let mut bx = Aabb::EMPTY;
+            for b in &blocks[leaf_blocks(c)] {
+                for lane in (0..4).filter(|&l| b.id[l] != u32::MAX) {
+                    bx.grow(&padded_box(&b.tri(lane)));
+                }
+            }
+            bx
+        } else {
+            box_of(&nodes[node_index(c)])
+        };
+        set_box(&mut n, k, &bx);
     }
+    n.set_order();
+    n
+}
+
+/// The objects' nodes (`nodes`: the whole tree's, references global) by depth below their
+/// object's root.
+fn levels_of(nodes: &[Node8], objects: &[Object]) -> Vec<Vec<u32>> {
+    let mut levels: Vec<Vec<u32>> = Vec::new();
+    let mut frontier: Vec<u32> = objects.iter().map(|o| o.nodes.start as u32).collect();
+    while !frontier.is_empty() {
+        let mut next = Vec::new();
+        for &i in &frontier {
+            for &c in &nodes[i as usize].child {
+                if c != EMPTY && c & LEAF == 0 {
+                    next.push(node_index(c) as u32);
+                }
+            }
+        }
+        levels.push(std::mem::replace(&mut frontier, next));
+    }
+    levels
 }
 
 fn box_of(n: &Node8) -> Aabb {
