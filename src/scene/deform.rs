@@ -27,7 +27,10 @@ impl Scene {
                 vertices.len()
             );
         }
-        if let Some(i) = vertices.iter().position(|v| v.iter().any(|x| !x.is_finite())) {
+        if let Some(i) = vertices
+            .iter()
+            .position(|v| v.iter().any(|x| !x.is_finite()))
+        {
             return input_err!("deformed vertex {i} is not finite: {:?}", vertices[i]);
         }
         if let Some(ns) = &normals {
