@@ -72,7 +72,7 @@ impl Bvh {
                 refit::ObjectTrees::of(&source.rig(), source.object_ids(), objects, params)
             });
             let tree = trees.posed(scene.vertices(), scene.faces());
-            if tree.sah() <= REFIT_LIMIT * trees.rest_sah() {
+            if tree.sah() <= REFIT_LIMIT * trees.rest_sah(&source.rig()) {
                 return Self {
                     tree,
                     build_seconds: start.elapsed().as_secs_f64(),

@@ -31,8 +31,9 @@ pub struct ObjectTrees {
     /// The objects' nodes grouped by their depth below their object's root, deepest last: a
     /// refit runs level by level from the deepest, each level's nodes in parallel.
     levels: Vec<Vec<u32>>,
-    /// The surface-area cost of the tree of the scene as loaded ([`Bvh8::sah`]).
-    rest_sah: f64,
+    /// The surface-area cost of the tree of the scene as loaded ([`Bvh8::sah`]), made on the
+    /// first deformation (poses do not need it).
+    rest_sah: std::sync::OnceLock<f64>,
 }
 
 /// An object's part of [`ObjectTrees`]: its nodes (the root first), and its root's triangle
@@ -93,22 +94,22 @@ impl ObjectTrees {
             });
         }
         let levels = levels_of(&out.nodes, &parts);
-        let mut trees = ObjectTrees {
+        ObjectTrees {
             nodes: out.nodes,
             blocks: out.blocks,
             top_count,
             objects: parts,
             depth: out.depth,
             levels,
-            rest_sah: 0.0,
-        };
-        trees.rest_sah = trees.posed(&rig.vertices, rig.faces()).sah();
-        trees
+            rest_sah: std::sync::OnceLock::new(),
+        }
     }
 
-    /// The surface-area cost of the tree of the scene as loaded.
-    pub fn rest_sah(&self) -> f64 {
-        self.rest_sah
+    /// The surface-area cost of the tree of the scene as loaded (whose rig is `rig`).
+    pub fn rest_sah(&self, rig: &Rig) -> f64 {
+        *self
+            .rest_sah
+            .get_or_init(|| self.posed(&rig.vertices, rig.faces()).sah())
     }
 
     /// The tree of the posed scene whose `vertices` and `faces` are given (`Scene::posed`

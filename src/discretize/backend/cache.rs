@@ -94,10 +94,19 @@ pub fn machine(adapter: Option<&wgpu::AdapterInfo>) -> String {
         |a| format!("{} ({} {})", a.name, a.driver, a.driver_info),
     );
     format!(
-        "scenesample {} ({}) format {FORMAT}; cpu {cpu}; {} threads; gpu {gpu}",
-        env!("CARGO_PKG_VERSION"),
-        env!("SCENESAMPLE_SOURCE_HASH"),
+        "{}; cpu {cpu}; {} threads; gpu {gpu}",
+        build(),
         rayon::current_num_threads()
+    )
+}
+
+/// The part of a machine key that names this build: the package, its sources' hash and the
+/// file's format.
+pub fn build() -> String {
+    format!(
+        "scenesample {} ({}) format {FORMAT}",
+        env!("CARGO_PKG_VERSION"),
+        env!("SCENESAMPLE_SOURCE_HASH")
     )
 }
 
@@ -179,11 +188,16 @@ pub fn write(path: &Path, machine: &str, model: &CostModel) -> std::io::Result<(
     }
     let mut all = models(path);
     all.remove(machine);
+    // Other builds' models go first (an older build's can never be read again by this one),
+    // so that a full file never loses a model this build's processes are reading: one that
+    // another process then measured again would decide differently (same call, same result).
+    let ours = format!("{}; ", build());
     while all.len() >= KEEP {
-        let Some(first) = all.keys().next().cloned() else {
+        let victim = all.keys().find(|k| !k.starts_with(&ours));
+        let Some(victim) = victim.or_else(|| all.keys().next()).cloned() else {
             break;
         };
-        all.remove(&first);
+        all.remove(&victim);
     }
     all.insert(machine.to_string(), to_json(model, machine));
     let tmp = path.with_extension(format!("json.{}", std::process::id()));
