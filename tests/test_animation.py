@@ -432,3 +432,24 @@ def test_mutated_animated_files_load_or_name_what_is_wrong(tmp_path):
                     scene.at(1e9, k)
         except ss.ScenesampleError as e:
             assert "internal error" not in str(e), (i, str(e))
+
+
+def test_a_clip_of_morph_weights_lasts_as_long_as_its_keys(tmp_path):
+    """AnimatedMorphCube's one clip keys only morph target weights: its duration and key times
+    count them (morphs themselves are not applied yet, and the load says so)."""
+    doc = document(TRI)
+    i = add_accessor(doc, np.array([[0.0], [1.5], [4.2]], np.float32), "SCALAR")
+    o = add_accessor(doc, np.array([[0.0], [1.0], [0.0]], np.float32), "SCALAR")
+    doc["animations"] = [
+        {
+            "name": "Square",
+            "samplers": [{"input": i, "output": o, "interpolation": "LINEAR"}],
+            "channels": [{"sampler": 0, "target": {"node": 0, "path": "weights"}}],
+        }
+    ]
+    with pytest.warns(ss.SceneWarning, match="morph target weights are not animated"):
+        scene = ss.Scene.load(write(doc, tmp_path / "morph.gltf"))
+    [(name, duration)] = scene.animations
+    assert name == "Square" and duration == pytest.approx(4.2)
+    np.testing.assert_allclose(scene.key_times("Square"), [0.0, 1.5, 4.2], rtol=1e-6)
+    np.testing.assert_array_equal(scene.at(2.0).vertices, scene.vertices)

@@ -56,9 +56,11 @@ pub struct Channel {
 #[derive(Debug, Clone)]
 pub struct Clip {
     pub name: String,
-    /// The last key time over its channels, in seconds.
+    /// The last key time over its channels, in seconds (weights channels included).
     pub duration: f64,
     pub channels: Vec<Channel>,
+    /// Key times of its channels that are read but not applied (morph target weights).
+    pub unapplied: Vec<f32>,
 }
 
 /// A scene's node hierarchy, where its objects hang in it, and its clips.
@@ -192,7 +194,9 @@ impl Animations {
         let mut times: Vec<f64> = c
             .channels
             .iter()
-            .flat_map(|ch| ch.times.iter().map(|&t| f64::from(t)))
+            .flat_map(|ch| &ch.times)
+            .chain(&c.unapplied)
+            .map(|&t| f64::from(t))
             .collect();
         times.sort_by(f64::total_cmp);
         times.dedup();

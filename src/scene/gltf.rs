@@ -530,6 +530,8 @@ impl Loader<'_> {
         let mut morph = false;
         for anim in doc.animations() {
             let mut channels = Vec::new();
+            // Key times of the channels read but not applied (morph target weights).
+            let mut unapplied: Vec<f32> = Vec::new();
             for ch in anim.channels() {
                 if let Some(m) = channel_problem(doc, anim.index(), ch.index()) {
                     self.warn(format!(
@@ -540,8 +542,11 @@ impl Loader<'_> {
                     continue;
                 }
                 match self.channel(&ch) {
-                    Ok(Some(c)) => channels.push(c),
-                    Ok(None) => morph = true,
+                    Ok(Ok(c)) => channels.push(c),
+                    Ok(Err(times)) => {
+                        morph = true;
+                        unapplied.extend(times);
+                    }
                     Err(m) => self.warn(format!(
                         "animation {} channel {}: {m}; skipped",
                         anim.index(),
@@ -549,9 +554,12 @@ impl Loader<'_> {
                     )),
                 }
             }
+            // Every channel counts, weights included (glTF 2.0 §3.11: a clip lasts until its
+            // last key).
             let duration = channels
                 .iter()
                 .filter_map(|c| c.times.last())
+                .chain(unapplied.last())
                 .fold(0.0f64, |a, &b| a.max(f64::from(b)));
             clips.push(Clip {
                 name: anim
@@ -559,6 +567,7 @@ impl Loader<'_> {
                     .map_or_else(|| format!("animation{}", anim.index()), str::to_string),
                 duration,
                 channels,
+                unapplied,
             });
         }
         if morph {
@@ -573,11 +582,13 @@ impl Loader<'_> {
         }));
     }
 
-    /// One channel's keys, checked (`None` for morph target weights).
+    /// One channel's keys, checked; for morph target weights (not applied), only their key
+    /// times (`Ok(Err(times))`).
+    #[allow(clippy::type_complexity)]
     fn channel(
         &self,
         ch: &gltf::animation::Channel,
-    ) -> std::result::Result<Option<Channel>, String> {
+    ) -> std::result::Result<std::result::Result<Channel, Vec<f32>>, String> {
         use gltf::animation::util::ReadOutputs;
         let buffers = &self.buffers;
         let reader = ch.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
@@ -585,6 +596,9 @@ impl Loader<'_> {
             .read_inputs()
             .ok_or("its key times cannot be read")?
             .collect();
+        if times.iter().any(|t| !t.is_finite()) || times.windows(2).any(|w| w[1] < w[0]) {
+            return Err("its key times are not finite and non-decreasing".into());
+        }
         let (property, values): (Property, Vec<[f32; 4]>) =
             match reader.read_outputs().ok_or("its values cannot be read")? {
                 ReadOutputs::Translations(v) => (
@@ -596,7 +610,7 @@ impl Loader<'_> {
                     v.map(|p| [p[0], p[1], p[2], 0.0]).collect(),
                 ),
                 ReadOutputs::Rotations(v) => (Property::Rotation, v.into_f32().collect()),
-                ReadOutputs::MorphTargetWeights(_) => return Ok(None),
+                ReadOutputs::MorphTargetWeights(_) => return Ok(Err(times)),
             };
         let interpolation = match ch.sampler().interpolation() {
             gltf::animation::Interpolation::Step => Interpolation::Step,
@@ -615,13 +629,10 @@ impl Loader<'_> {
                 times.len()
             ));
         }
-        if times.iter().any(|t| !t.is_finite()) || times.windows(2).any(|w| w[1] < w[0]) {
-            return Err("its key times are not finite and non-decreasing".into());
-        }
         if values.iter().flatten().any(|x| !x.is_finite()) {
             return Err("a value is not finite".into());
         }
-        Ok(Some(Channel {
+        Ok(Ok(Channel {
             node: ch.target().node().index(),
             property,
             interpolation,
