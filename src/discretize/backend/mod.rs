@@ -719,16 +719,17 @@ mod tests {
         assert!(cache::read(&path, "a").is_none());
         cache::write(&path, "a", &a).unwrap();
         assert!(cache::read(&path, "a").is_some());
-        // A full file evicts other builds' models before this build's, whatever their order.
+        // A full file evicts other builds' models before this build's, whatever their order:
+        // the other keys sort after this build's, so evicting the first key would take ours.
         let ours = |gpu: &str| format!("{}; cpu x; 2 threads; gpu {gpu}", cache::build());
         cache::write(&path, &ours("one"), &a).unwrap();
         for k in 0..20 {
-            cache::write(&path, &format!("another build {k:02}"), &b).unwrap();
+            cache::write(&path, &format!("zz another build {k:02}"), &b).unwrap();
         }
         cache::write(&path, &ours("two"), &b).unwrap();
         assert!(cache::read(&path, &ours("one")).is_some());
         assert!(cache::read(&path, &ours("two")).is_some());
-        assert!(cache::read(&path, "another build 19").is_some());
+        assert!(cache::read(&path, "zz another build 19").is_some());
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }
