@@ -357,7 +357,7 @@ def test_a_channel_whose_index_is_out_of_range_is_named_not_a_panic(tmp_path):
         ss.Scene.load(tmp_path / "sampler.gltf")
 
 
-@pytest.mark.parametrize("t", [None, True, "1", [1.0], np.bool_(False)])
+@pytest.mark.parametrize("t", [None, True, "1", [1.0], np.bool_(False), 1j])
 def test_a_time_that_is_not_a_number_is_an_input_error(scene, t):
     with pytest.raises(ss.InputError, match="t must be a finite number"):
         scene.at(t)

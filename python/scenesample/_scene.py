@@ -291,12 +291,12 @@ class Scene:
                     k = index[key]
                 else:
                     raise InputError(f"no object named {key!r}; the objects are {objects[:8]}...")
-                m = _matrices(m, f"the transform of {key!r}")
+                m = _float_array(m, f"the transform of {key!r}")
                 if m.shape != (4, 4):
                     raise InputError(f"the transform of {key!r} must be 4x4, got {m.shape}")
                 out[k] = m
         else:
-            out = _matrices(transforms, "transforms")
+            out = _float_array(transforms, "transforms")
             if out.shape != (len(objects), 4, 4):
                 raise InputError(
                     f"transforms must have shape ({len(objects)}, 4, 4) (one per object), "
@@ -328,8 +328,8 @@ class Scene:
             together), when it is built afresh. Lights and cameras stay; the result has no
             animations (its vertices are yours) and :attr:`transforms` is None.
         """
-        v = _matrices(vertices, "vertices", np.float32)
-        n = None if normals is None else _matrices(normals, "normals", np.float32)
+        v = _float_array(vertices, "vertices", np.float32)
+        n = None if normals is None else _float_array(normals, "normals", np.float32)
         count = len(self.vertices)
         for name, a in (("vertices", v), ("normals", n)):
             if a is not None and a.shape != (count, 3):
@@ -381,7 +381,8 @@ class Scene:
             cameras are the clip's), and a further ``at`` composes with ``T`` again. Skins and
             morph targets stay in their rest pose (the load warned about them).
         """
-        if isinstance(t, (bool, np.bool_)) or not isinstance(t, (int, float, np.number)):
+        real = (int, float, np.integer, np.floating)
+        if isinstance(t, (bool, np.bool_)) or not isinstance(t, real):
             raise InputError(f"t must be a finite number of seconds, got {t!r}")
         clips = list(animation) if isinstance(animation, (list, tuple)) else [animation]
         if not clips:
@@ -539,7 +540,7 @@ def _from_posed_state(state: dict[str, Any]) -> Scene:
     return Scene(base._core.posed(rows, state["rewinds"], state["lights"]))
 
 
-def _matrices(value: Any, what: str, dtype: Any = np.float64) -> np.ndarray:
+def _float_array(value: Any, what: str, dtype: Any = np.float64) -> np.ndarray:
     """``value`` as an array of ``dtype``, or an InputError naming ``what`` when it is not
     numbers in a regular shape (text, None, ragged lists)."""
     try:
