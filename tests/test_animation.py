@@ -12,7 +12,7 @@ import warnings
 import numpy as np
 import pytest
 import scenesample as ss
-from gltf_builder import add_accessor, document, write
+from gltf_builder import add_accessor, data_uri, document, write
 
 TRI = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], dtype=np.float32)
 ROOT = np.array([10.0, 0.0, 0.0])
@@ -182,14 +182,28 @@ def test_a_broken_channel_is_skipped_with_a_warning(tmp_path):
     np.testing.assert_array_equal(s.at(0.5).vertices, s.vertices)
 
 
-def test_skins_warn_and_stay_in_their_rest_pose(tmp_path):
+def test_a_skin_whose_joint_has_no_clip_loads_skinned_and_stays(tmp_path):
+    """One joint, no inverse bind matrices (the identity), no clip: the skinned triangle sits
+    where its joint puts it, silently (test_skins.py checks skins against the spec)."""
     doc = document(TRI)
-    doc["nodes"] = [{"mesh": 0, "skin": 0}, {"name": "joint"}]
+    doc["nodes"] = [{"mesh": 0, "skin": 0}, {"name": "joint", "translation": [0, 0, 2]}]
     doc["scenes"] = [{"nodes": [0, 1]}]
     doc["skins"] = [{"joints": [1]}]
-    with pytest.warns(ss.SceneWarning, match="skins are not posed"):
+    j = add_accessor(doc, np.zeros((3, 4)), "VEC4")
+    w = add_accessor(doc, np.tile([1.0, 0, 0, 0], (3, 1)), "VEC4")
+    doc["accessors"][j]["componentType"] = 5126
+    doc["meshes"][0]["primitives"][0]["attributes"].update({"JOINTS_0": j, "WEIGHTS_0": w})
+    with pytest.raises(ss.SceneError, match="JOINTS_0: accessor .* expected"):
+        ss.Scene.load(write(doc, tmp_path / "skinned.gltf"))
+    blob = np.zeros((3, 4), np.uint16).tobytes()
+    doc["buffers"][doc["accessors"][j]["bufferView"]]["uri"] = data_uri(blob)
+    doc["buffers"][doc["accessors"][j]["bufferView"]]["byteLength"] = len(blob)
+    doc["bufferViews"][doc["accessors"][j]["bufferView"]]["byteLength"] = len(blob)
+    doc["accessors"][j]["componentType"] = 5123
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
         s = ss.Scene.load(write(doc, tmp_path / "skinned.gltf"))
-    np.testing.assert_array_equal(s.vertices, TRI)
+    np.testing.assert_array_equal(s.vertices, TRI + [0, 0, 2])
 
 
 def test_a_clip_that_mirrors_a_node_keeps_its_fronts(tmp_path):
@@ -436,8 +450,10 @@ def test_mutated_animated_files_load_or_name_what_is_wrong(tmp_path):
 
 def test_a_clip_of_morph_weights_lasts_as_long_as_its_keys(tmp_path):
     """AnimatedMorphCube's one clip keys only morph target weights: its duration and key times
-    count them (morphs themselves are not applied yet, and the load says so)."""
+    count them, and the weights move the triangle's vertices."""
     doc = document(TRI)
+    d = add_accessor(doc, np.array([[0, 0, 1], [0, 0, 1], [0, 0, 1]], np.float32), "VEC3")
+    doc["meshes"][0]["primitives"][0]["targets"] = [{"POSITION": d}]
     i = add_accessor(doc, np.array([[0.0], [1.5], [4.2]], np.float32), "SCALAR")
     o = add_accessor(doc, np.array([[0.0], [1.0], [0.0]], np.float32), "SCALAR")
     doc["animations"] = [
@@ -447,9 +463,12 @@ def test_a_clip_of_morph_weights_lasts_as_long_as_its_keys(tmp_path):
             "channels": [{"sampler": 0, "target": {"node": 0, "path": "weights"}}],
         }
     ]
-    with pytest.warns(ss.SceneWarning, match="morph target weights are not animated"):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
         scene = ss.Scene.load(write(doc, tmp_path / "morph.gltf"))
     [(name, duration)] = scene.animations
     assert name == "Square" and duration == pytest.approx(4.2)
     np.testing.assert_allclose(scene.key_times("Square"), [0.0, 1.5, 4.2], rtol=1e-6)
-    np.testing.assert_array_equal(scene.at(2.0).vertices, scene.vertices)
+    np.testing.assert_array_equal(scene.vertices, TRI)
+    np.testing.assert_allclose(scene.at(1.5).vertices, TRI + [0, 0, 1], atol=1e-7)
+    np.testing.assert_allclose(scene.at(0.75).vertices, TRI + [0, 0, 0.5], atol=1e-7)

@@ -352,7 +352,8 @@ class Scene:
 
     def at(self, t: float, animation: int | str | Sequence[int | str] = 0) -> Scene:
         """The scene posed at ``t`` seconds into one animation clip, or several played together
-        (glTF node animations: translation, rotation and scale, STEP, LINEAR or CUBICSPLINE).
+        (glTF animations: translation, rotation, scale and morph target weights, STEP, LINEAR
+        or CUBICSPLINE; skins and morph targets move their meshes' vertices).
 
         Parameters
         ----------
@@ -378,8 +379,18 @@ class Scene:
             object loaded with a zero scale keeps only what the scale left of it. On a posed
             scene, ``scene.posed(T).at(t)``, the clip moves each object first and the pose
             after: object ``o`` is at ``T[o] @ A_t[o]`` in world space (the pose's lights and
-            cameras are the clip's), and a further ``at`` composes with ``T`` again. Skins and
-            morph targets stay in their rest pose (the load warned about them).
+            cameras are the clip's), and a further ``at`` composes with ``T`` again.
+
+            Skins and morph targets (glTF 2.0 §3.7.2.2 and §3.7.3) move vertices: a mesh's
+            POSITION is displaced by its morph targets with the weights at ``t`` (the node's
+            ``weights`` channel, else the node's or the mesh's default weights), and a skinned
+            mesh is then blended by its joints' world transforms at ``t`` times their inverse
+            bind matrices (linear blend skinning; the skinned mesh's own node transform is
+            ignored, as the spec says, and its entry in :attr:`transforms` is the identity).
+            The scene as loaded is in this rest pose too. Morph NORMAL displacements are not
+            read: a glTF scene's normals are its faces' (:attr:`normals` is None). Where skins
+            or morphs moved vertices, the BVH is refit as :meth:`deformed`'s is (or built
+            afresh past the same limit).
         """
         real = (int, float, np.integer, np.floating)
         if isinstance(t, (bool, np.bool_)) or not isinstance(t, real):
@@ -503,7 +514,8 @@ class Scene:
         objects and lights travel; glTF cameras, animations and load warnings do not. A posed
         scene travels as the scene it was posed from and its transforms, and is posed again
         where it lands: its :attr:`transforms` and the meaning of a further :meth:`posed`
-        (which maps the objects as loaded) are the same in every process."""
+        (which maps the objects as loaded) are the same in every process. A pose whose skins or
+        morph targets moved vertices carries its vertices too."""
         base = self._core.base
         if base is None:
             return (_from_state, (_state(self._core),))
@@ -512,6 +524,7 @@ class Scene:
             "transforms": self.transforms,
             "rewinds": self._core.rewinds,
             "lights": self.lights,
+            "vertices": self.vertices if self._core.deforms else None,
         }
         return (_from_posed_state, (state,))
 
@@ -537,7 +550,8 @@ def _from_state(state: dict[str, Any]) -> Scene:
 def _from_posed_state(state: dict[str, Any]) -> Scene:
     base = Scene.from_arrays(**state["base"])
     rows = np.ascontiguousarray(state["transforms"], dtype=np.float64).reshape(-1, 4)
-    return Scene(base._core.posed(rows, state["rewinds"], state["lights"]))
+    vertices = state.get("vertices")
+    return Scene(base._core.posed(rows, state["rewinds"], state["lights"], vertices))
 
 
 def _float_array(value: Any, what: str, dtype: Any = np.float64) -> np.ndarray:

@@ -92,13 +92,14 @@ impl PyScene {
     /// objects' 4×4 matrices stacked (row-major), each mapping its object as loaded. `rewinds`
     /// and `lights` remake a pose as it was (unpickling): mirrored objects wound the other way,
     /// as `at` does, and the lights as they were placed.
-    #[pyo3(signature = (transforms, rewinds=false, lights=None))]
+    #[pyo3(signature = (transforms, rewinds=false, lights=None, vertices=None))]
     fn posed(
         &self,
         py: Python<'_>,
         transforms: &Bound<'_, PyAny>,
         rewinds: bool,
         lights: Option<Vec<Bound<'_, PyDict>>>,
+        vertices: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
         let rows = rows_f64::<4>(transforms, "transforms")?;
         if rows.len() % 4 != 0 {
@@ -116,7 +117,11 @@ impl PyScene {
             ),
             None => None,
         };
-        let scene = super::run(py, || self.inner.posed_again(&ms, rewinds, lights.clone()))?;
+        let vertices = vertices.map(|v| rows_f32::<3>(v, "vertices")).transpose()?;
+        let scene = super::run(py, || {
+            self.inner
+                .posed_again(&ms, rewinds, lights.clone(), vertices.clone())
+        })?;
         Ok(Self {
             inner: Arc::new(scene),
         })
@@ -157,6 +162,13 @@ impl PyScene {
     #[getter]
     fn rewinds(&self) -> bool {
         self.inner.pose().is_some_and(|p| p.rewinds)
+    }
+
+    /// Whether some of this pose's vertices are not their object's transform of the base's
+    /// (a clip's skins or morph targets moved them).
+    #[getter]
+    fn deforms(&self) -> bool {
+        self.inner.pose().is_some_and(|p| p.deforms)
     }
 
     /// The animation clips as (name, duration in seconds).

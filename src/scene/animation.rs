@@ -1,11 +1,13 @@
-//! glTF node animations (glTF 2.0 §3.11, and Appendix C for the interpolations): per clip,
-//! channels that key a node's translation, rotation or scale, sampled STEP, LINEAR (rotations
-//! by spherical interpolation) or CUBICSPLINE (Hermite, with the keys' in- and out-tangents).
-//! A clip at a time gives each object of the scene the transform from its place as loaded to
-//! its place then, which [`Scene::posed`](super::Scene::posed) applies.
+//! glTF animations (glTF 2.0 §3.11, and Appendix C for the interpolations): per clip, channels
+//! that key a node's translation, rotation, scale or morph target weights, sampled STEP, LINEAR
+//! (rotations by spherical interpolation) or CUBICSPLINE (Hermite, with the keys' in- and
+//! out-tangents). A clip at a time gives each object of the scene the transform from its place
+//! as loaded to its place then, which [`Scene::posed`](super::Scene::posed) applies, and the
+//! vertices of the objects that skins or morph targets move ([`super::skin`]).
 
 use glam::{DMat4, DQuat, DVec3};
 
+use super::skin::{Place, Rigging};
 use crate::error::Result;
 use crate::input_err;
 
@@ -33,6 +35,8 @@ pub enum Property {
     Translation,
     Rotation,
     Scale,
+    /// Morph target weights: one value per target.
+    Weights,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -42,15 +46,17 @@ pub enum Interpolation {
     CubicSpline,
 }
 
-/// One animated property of one node: key times (seconds, non-decreasing) and values (xyz, or
-/// a quaternion's xyzw); CUBICSPLINE keys hold in-tangent, value and out-tangent, in that order.
+/// One animated property of one node: key times (seconds, non-decreasing) and per key `width`
+/// values (xyz, a quaternion's xyzw, or one weight per morph target); CUBICSPLINE keys hold
+/// in-tangent, value and out-tangent, in that order.
 #[derive(Debug, Clone)]
 pub struct Channel {
     pub node: usize,
     pub property: Property,
     pub interpolation: Interpolation,
     pub times: Vec<f32>,
-    pub values: Vec<[f32; 4]>,
+    pub width: usize,
+    pub values: Vec<f32>,
 }
 
 #[derive(Debug, Clone)]
@@ -59,27 +65,34 @@ pub struct Clip {
     /// The last key time over its channels, in seconds (weights channels included).
     pub duration: f64,
     pub channels: Vec<Channel>,
-    /// Key times of its channels that are read but not applied (morph target weights).
-    pub unapplied: Vec<f32>,
 }
 
 /// A scene's node hierarchy, where its objects hang in it, and its clips.
 #[derive(Debug, Clone, Default)]
 pub struct Animations {
     pub nodes: Vec<Node>,
+    /// Each node's world transform as loaded.
+    pub rest: Vec<DMat4>,
     pub objects: Vec<Placed>,
     /// The nodes of the scene's lights and cameras, in the scene's order.
     pub lights: Vec<Placed>,
     pub cameras: Vec<Placed>,
     pub clips: Vec<Clip>,
+    /// The skins, and the objects that skins or morph targets move.
+    pub rigging: Rigging,
 }
 
 /// A clip sampled at one time: each object's transform from its place as loaded (the identity
 /// exactly under no animated node), and the world transform of each light's and camera's node
-/// (`None` under no animated node: it stays where it was loaded).
+/// (`None` under no animated node: it stays where it was loaded). An object that a skin moves
+/// has the identity (its node's transform is ignored), and the objects whose skins or morph
+/// weights the clip moves are in `deformed`.
 #[derive(Debug, Clone)]
 pub struct At {
     pub objects: Vec<DMat4>,
+    /// Per moved deformable object: the object, its first vertex, and its vertices in world
+    /// space (in the order of the scene's).
+    pub deformed: Vec<(usize, usize, Vec<DVec3>)>,
     pub lights: Vec<Option<DMat4>>,
     pub cameras: Vec<Option<DMat4>>,
 }
@@ -110,44 +123,49 @@ pub fn undo(loaded: &DMat4) -> DMat4 {
 }
 
 impl Channel {
-    /// The property's value at `t` (clamped to the keys).
-    fn sample(&self, t: f64) -> [f64; 4] {
-        let times = &self.times;
+    /// The property's value at `t` (clamped to the keys): `width` numbers.
+    fn sample(&self, t: f64) -> Vec<f64> {
+        let (times, w) = (&self.times, self.width);
         let n = times.len();
         let cubic = self.interpolation == Interpolation::CubicSpline;
-        let value = |k: usize| {
-            let v = self.values[if cubic { 3 * k + 1 } else { k }];
-            v.map(f64::from)
+        // Key k's part `part` (0 in-tangent, 1 value, 2 out-tangent; plain keys are values).
+        let get = |k: usize, part: usize| -> Vec<f64> {
+            let at = if cubic { 3 * k + part } else { k } * w;
+            self.values[at..at + w]
+                .iter()
+                .map(|&x| f64::from(x))
+                .collect()
         };
         if n == 1 || t <= f64::from(times[0]) {
-            return value(0);
+            return get(0, 1);
         }
         if t >= f64::from(times[n - 1]) {
-            return value(n - 1);
+            return get(n - 1, 1);
         }
         // The key at or before t.
         let k = times.partition_point(|&x| f64::from(x) <= t) - 1;
         let (t0, t1) = (f64::from(times[k]), f64::from(times[k + 1]));
         let dt = t1 - t0;
         let s = if dt > 0.0 { (t - t0) / dt } else { 0.0 };
-        let (a, b) = (value(k), value(k + 1));
+        let (a, b) = (get(k, 1), get(k + 1, 1));
         match self.interpolation {
             Interpolation::Step => a,
             Interpolation::Linear if self.property == Property::Rotation => {
-                let q = |v: [f64; 4]| DQuat::from_xyzw(v[0], v[1], v[2], v[3]).normalize();
-                q(a).slerp(q(b), s).to_array()
+                let q = |v: &[f64]| DQuat::from_xyzw(v[0], v[1], v[2], v[3]).normalize();
+                q(&a).slerp(q(&b), s).to_array().to_vec()
             }
-            Interpolation::Linear => std::array::from_fn(|i| a[i] + s * (b[i] - a[i])),
+            Interpolation::Linear => a.iter().zip(&b).map(|(a, b)| a + s * (b - a)).collect(),
             Interpolation::CubicSpline => {
-                let out_a = self.values[3 * k + 2].map(f64::from);
-                let in_b = self.values[3 * (k + 1)].map(f64::from);
+                let (out_a, in_b) = (get(k, 2), get(k + 1, 0));
                 let (s2, s3) = (s * s, s * s * s);
-                std::array::from_fn(|i| {
-                    (2.0 * s3 - 3.0 * s2 + 1.0) * a[i]
-                        + (s3 - 2.0 * s2 + s) * dt * out_a[i]
-                        + (-2.0 * s3 + 3.0 * s2) * b[i]
-                        + (s3 - s2) * dt * in_b[i]
-                })
+                (0..w)
+                    .map(|i| {
+                        (2.0 * s3 - 3.0 * s2 + 1.0) * a[i]
+                            + (s3 - 2.0 * s2 + s) * dt * out_a[i]
+                            + (-2.0 * s3 + 3.0 * s2) * b[i]
+                            + (s3 - s2) * dt * in_b[i]
+                    })
+                    .collect()
             }
         }
     }
@@ -195,7 +213,6 @@ impl Animations {
             .channels
             .iter()
             .flat_map(|ch| &ch.times)
-            .chain(&c.unapplied)
             .map(|&t| f64::from(t))
             .collect();
         times.sort_by(f64::total_cmp);
@@ -210,26 +227,73 @@ impl Animations {
             return input_err!("the time must be finite, got {t}");
         }
         let mut trs: Vec<Option<(DVec3, DQuat, DVec3)>> = vec![None; self.nodes.len()];
+        let mut weights: Vec<Option<Vec<f64>>> = vec![None; self.nodes.len()];
         for &clip in clips {
             let Some(c) = self.clips.get(clip) else {
                 return input_err!("no animation {clip}: the scene has {}", self.clips.len());
             };
             let t = t.clamp(0.0, c.duration);
             for ch in &c.channels {
-                self.apply(ch, t, &mut trs);
+                let v = ch.sample(t);
+                if ch.property == Property::Weights {
+                    weights[ch.node] = Some(v);
+                    continue;
+                }
+                let (tr, rot, sc) = trs[ch.node].get_or_insert(self.nodes[ch.node].trs);
+                match ch.property {
+                    Property::Translation => *tr = DVec3::new(v[0], v[1], v[2]),
+                    Property::Scale => *sc = DVec3::new(v[0], v[1], v[2]),
+                    Property::Rotation => {
+                        *rot = DQuat::from_xyzw(v[0], v[1], v[2], v[3]).normalize()
+                    }
+                    Property::Weights => {}
+                }
             }
         }
-        self.sampled(&trs)
+        let mut at = self.sampled(&trs)?;
+        self.deform(&trs, &weights, &mut at);
+        Ok(at)
     }
 
-    /// Channel `ch`'s value at `t` written into its node's sampled TRS.
-    fn apply(&self, ch: &Channel, t: f64, trs: &mut [Option<(DVec3, DQuat, DVec3)>]) {
-        let v = ch.sample(t);
-        let (tr, rot, sc) = trs[ch.node].get_or_insert(self.nodes[ch.node].trs);
-        match ch.property {
-            Property::Translation => *tr = DVec3::new(v[0], v[1], v[2]),
-            Property::Scale => *sc = DVec3::new(v[0], v[1], v[2]),
-            Property::Rotation => *rot = DQuat::from_array(v).normalize(),
+    /// The deformable objects at the sampled `trs` and morph `weights` (per node, `None` where
+    /// no clip keys them) written into `at`: a skinned object's transform is the identity, and
+    /// its vertices are skinned where a joint moves or its weights are keyed; an unskinned one's
+    /// vertices are morphed where its weights are keyed (else its transform places it).
+    fn deform(
+        &self,
+        trs: &[Option<(DVec3, DQuat, DVec3)>],
+        weights: &[Option<Vec<f64>>],
+        at: &mut At,
+    ) {
+        let mut world = vec![None; self.nodes.len()];
+        for d in &self.rigging.deformables {
+            let keyed = weights[d.node].as_deref();
+            let w = keyed.unwrap_or(&d.weights);
+            let moved = match d.skin {
+                Some(s) => {
+                    at.objects[d.object] = DMat4::IDENTITY;
+                    let joints = &self.rigging.skins[s].joints;
+                    let placed: Vec<Option<DMat4>> = joints
+                        .iter()
+                        .map(|&j| self.world_at(j, trs, &mut world))
+                        .collect();
+                    if keyed.is_none() && placed.iter().all(Option::is_none) {
+                        continue;
+                    }
+                    let mats = self.rigging.skins[s]
+                        .matrices(|j| self.world_at(j, trs, &mut world).unwrap_or(self.rest[j]));
+                    d.positions(w, &Place::Joints(&mats))
+                }
+                None => {
+                    if keyed.is_none() {
+                        continue;
+                    }
+                    let node = self.world_at(d.node, trs, &mut world);
+                    let place = node.unwrap_or(self.rest[d.node]) * d.instance;
+                    d.positions(w, &Place::Node(place))
+                }
+            };
+            at.deformed.push((d.object, d.first, moved));
         }
     }
 
@@ -250,6 +314,7 @@ impl Animations {
             .collect();
         Ok(At {
             objects,
+            deformed: Vec::new(),
             lights: worlds(&self.lights),
             cameras: worlds(&self.cameras),
         })
@@ -273,21 +338,12 @@ impl Animations {
             (None, None) | (Some((_, None)), None) => None,
             (None, Some(l)) => Some(l),
             (Some((p, pw)), l) => {
-                let pw = pw.unwrap_or_else(|| self.rest_world(p));
+                let pw = pw.unwrap_or(self.rest[p]);
                 Some(pw * l.unwrap_or(n.local))
             }
         };
         world[i] = Some(w);
         w
-    }
-
-    /// Node `i`'s world transform as loaded.
-    fn rest_world(&self, i: usize) -> DMat4 {
-        let n = &self.nodes[i];
-        match n.parent {
-            None => n.local,
-            Some(p) => self.rest_world(p) * n.local,
-        }
     }
 }
 
@@ -301,7 +357,8 @@ mod tests {
             property,
             interpolation,
             times: vec![0.0, 1.0, 3.0],
-            values,
+            width: 4,
+            values: values.into_iter().flatten().collect(),
         }
     }
 

@@ -10,6 +10,7 @@ pub mod gltf;
 pub mod obj;
 pub mod pose;
 pub mod shapes;
+pub mod skin;
 
 use std::any::{Any, TypeId};
 use std::collections::HashMap;

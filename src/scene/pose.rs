@@ -28,6 +28,19 @@ pub struct Pose {
     /// A user's pose that a clip's pose was composed with (`posed(T).at(t)`: object `o` at
     /// `T[o] · A_t[o]`), kept so that the next `at` composes with it too; `None` otherwise.
     pub after: Option<Arc<Vec<DMat4>>>,
+    /// Whether some vertices are not their object's transform of the base's: a clip's skins
+    /// or morph targets moved them (`Scene::at`), or they were given (`Scene::posed_again`).
+    /// The BVH of such a pose is refit as a deformed scene's is ([`Scene::deformed`]).
+    pub deforms: bool,
+}
+
+/// The vertices of a pose besides its transforms: none, the objects a clip's skins or morph
+/// targets moved (each object, its first vertex, and its vertices in world space before the
+/// user's pose), or every vertex (a pose made again from its vertices).
+enum Moved<'a> {
+    Rigid,
+    Objects(&'a [(usize, usize, Vec<DVec3>)]),
+    All(Vec<[f32; 3]>),
 }
 
 /// What posing needs from a scene as loaded, built once per scene: each vertex's object, and
@@ -193,18 +206,24 @@ impl Scene {
         // Lights and cameras on animated nodes go where their nodes are at `t`; a camera's
         // pose keeps only the node's rotation and translation, as at load. Winding follows the
         // sign of each node's world determinant (glTF 2.0 §3.7.4), as at load.
-        self.posed_with(&at.objects, true, after, |parts| {
-            for (light, w) in parts.lights.iter_mut().zip(&at.lights) {
-                if let Some(w) = w {
-                    light.place(w);
+        self.posed_with(
+            &at.objects,
+            true,
+            after,
+            Moved::Objects(&at.deformed),
+            |parts| {
+                for (light, w) in parts.lights.iter_mut().zip(&at.lights) {
+                    if let Some(w) = w {
+                        light.place(w);
+                    }
                 }
-            }
-            for (camera, w) in parts.cameras.iter_mut().zip(&at.cameras) {
-                if let Some(w) = w {
-                    camera.pose = crate::camera::rigid_from(*w);
+                for (camera, w) in parts.cameras.iter_mut().zip(&at.cameras) {
+                    if let Some(w) = w {
+                        camera.pose = crate::camera::rigid_from(*w);
+                    }
                 }
-            }
-        })
+            },
+        )
     }
 
     /// Every key time of animation `clip` (its index or name), ascending, each once.
@@ -225,20 +244,23 @@ impl Scene {
     /// inverse transpose. The faces, ids, colours, materials and lights are shared with the
     /// scene as loaded; a vertex that faces of two objects share is split into one per object.
     pub fn posed(self: &Arc<Self>, transforms: &[DMat4]) -> Result<Scene> {
-        self.posed_with(transforms, false, None, |_| {})
+        self.posed_with(transforms, false, None, Moved::Rigid, |_| {})
     }
 
     /// A pose made again from what it is made of: [`Scene::posed`] (or, with `rewinds`, as
     /// [`Scene::at`] winds mirrored objects), with `lights` in place of the scene as loaded's
-    /// when given. Unpickling a posed scene takes this way, so that the scene it poses from
-    /// travels with it.
+    /// when given, and `vertices` (one per vertex of the pose, finite) in place of the
+    /// transformed ones when given (a pose whose skins or morph targets moved vertices).
+    /// Unpickling a posed scene takes this way, so that the scene it poses from travels with it.
     pub fn posed_again(
         self: &Arc<Self>,
         transforms: &[DMat4],
         rewinds: bool,
         lights: Option<Vec<crate::scene::Light>>,
+        vertices: Option<Vec<[f32; 3]>>,
     ) -> Result<Scene> {
-        self.posed_with(transforms, rewinds, None, |parts| {
+        let moved = vertices.map_or(Moved::Rigid, Moved::All);
+        self.posed_with(transforms, rewinds, None, moved, |parts| {
             if let Some(lights) = lights {
                 parts.lights = lights;
             }
@@ -254,6 +276,7 @@ impl Scene {
         transforms: &[DMat4],
         rewind: bool,
         after: Option<Arc<Vec<DMat4>>>,
+        moved: Moved,
         place: impl FnOnce(&mut SceneParts),
     ) -> Result<Scene> {
         let base = match &self.pose {
@@ -278,15 +301,8 @@ impl Scene {
             }
         }
         let rig = base.rig();
-        let identity = DMat4::IDENTITY;
-        let of = |o: u32| transforms.get(o as usize).unwrap_or(&identity);
-        let vertices: Vec<[f32; 3]> = rig
-            .vertices
-            .par_iter()
-            .zip(&rig.vertex_object)
-            .with_min_len(4096)
-            .map(|(&p, &o)| transform_point(of(o), p))
-            .collect();
+        let deforms = !matches!(moved, Moved::Rigid);
+        let vertices = moved_vertices(&rig, transforms, moved, after.as_deref())?;
         if let Some(i) = vertices
             .iter()
             .position(|v| v.iter().any(|x| !x.is_finite()))
@@ -328,6 +344,7 @@ impl Scene {
             transforms: Arc::new(transforms.to_vec()),
             rewinds: rewind,
             after,
+            deforms,
         };
         // Determinants only where they decide something (a plain pose keeps the faces).
         let mirrored: Vec<bool> = if rewind {
@@ -348,6 +365,56 @@ impl Scene {
         };
         Ok(Scene::assemble(parts, shared, Some(pose)))
     }
+}
+
+/// The vertices of a pose: each of `rig`'s moved by its object's transform, then those that
+/// `moved` gives instead (a clip's skinned or morphed objects, placed by the user's pose
+/// `after` if any; or every vertex, checked).
+fn moved_vertices(
+    rig: &Rig,
+    transforms: &[DMat4],
+    moved: Moved,
+    after: Option<&Vec<DMat4>>,
+) -> Result<Vec<[f32; 3]>> {
+    if let Moved::All(vertices) = moved {
+        if vertices.len() != rig.vertices.len() {
+            return input_err!(
+                "the pose's vertices must be one per vertex ({}), got {}",
+                rig.vertices.len(),
+                vertices.len()
+            );
+        }
+        if let Some(i) = vertices
+            .iter()
+            .position(|v| v.iter().any(|x| !x.is_finite()))
+        {
+            return input_err!("the pose's vertex {i} is not finite: {:?}", vertices[i]);
+        }
+        return Ok(vertices);
+    }
+    let identity = DMat4::IDENTITY;
+    let of = |o: u32| transforms.get(o as usize).unwrap_or(&identity);
+    let mut vertices: Vec<[f32; 3]> = rig
+        .vertices
+        .par_iter()
+        .zip(&rig.vertex_object)
+        .with_min_len(4096)
+        .map(|(&p, &o)| transform_point(of(o), p))
+        .collect();
+    if let Moved::Objects(objects) = moved {
+        for (o, first, ps) in objects {
+            let user = after.and_then(|a| a.get(*o)).copied();
+            let out = &mut vertices[*first..*first + ps.len()];
+            out.par_iter_mut()
+                .zip(ps)
+                .with_min_len(4096)
+                .for_each(|(v, p)| {
+                    let p = user.map_or(*p, |m| m.transform_point3(*p));
+                    *v = p.as_vec3().to_array();
+                });
+        }
+    }
+    Ok(vertices)
 }
 
 #[cfg(test)]

@@ -50,29 +50,23 @@ impl Bvh {
 
     pub fn build_with(scene: &Scene, params: build::BuildParams) -> Self {
         let start = Instant::now();
-        if let Some(pose) = scene.pose() {
-            // A posed scene: its base's object trees, moved and refit.
-            let base = &pose.base;
-            let trees = base.derived(|| {
-                let objects = base.objects().len();
-                refit::ObjectTrees::of(&base.rig(), base.object_ids(), objects, params)
-            });
-            return Self {
-                tree: trees.posed(scene.vertices(), scene.faces()),
-                build_seconds: start.elapsed().as_secs_f64(),
-            };
-        }
-        if let Some(source) = scene.refit_from() {
-            // A deformed scene: its source's object trees refit to the new corners, unless
-            // the refit tree's surface-area cost has grown past REFIT_LIMIT times the rest
-            // pose's (a deformation that scatters what the tree keeps together), when it is
-            // built afresh below.
+        // A posed scene refits its base's object trees, a deformed one its source's; where
+        // vertices moved other than rigidly (a deformation, a clip's skins or morph targets),
+        // the scene is built afresh instead when the refit tree's surface-area cost has grown
+        // past REFIT_LIMIT times the rest pose's (a deformation that scatters what the tree
+        // keeps together).
+        let source = match (scene.pose(), scene.refit_from()) {
+            (Some(pose), _) => Some((&pose.base, pose.deforms)),
+            (None, Some(source)) => Some((source, true)),
+            (None, None) => None,
+        };
+        if let Some((source, deforms)) = source {
             let trees = source.derived(|| {
                 let objects = source.objects().len();
                 refit::ObjectTrees::of(&source.rig(), source.object_ids(), objects, params)
             });
             let tree = trees.posed(scene.vertices(), scene.faces());
-            if tree.sah() <= REFIT_LIMIT * trees.rest_sah(&source.rig()) {
+            if !deforms || tree.sah() <= REFIT_LIMIT * trees.rest_sah(&source.rig()) {
                 return Self {
                     tree,
                     build_seconds: start.elapsed().as_secs_f64(),

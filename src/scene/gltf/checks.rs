@@ -106,10 +106,42 @@ pub(super) fn prevalidate(root: &mut gltf::json::Root) -> std::result::Result<()
                     return Err(format!("mesh {m} primitive {p} {what} refers to accessor {i}, but the file has {n} accessors"));
                 }
             }
+            for (t, target) in prim.targets.iter().flatten().enumerate() {
+                let refs = [&target.positions, &target.normals, &target.tangents];
+                for i in refs.into_iter().flatten().map(|i| i.value()) {
+                    if i >= n {
+                        return Err(format!("mesh {m} primitive {p} morph target {t} refers to accessor {i}, but the file has {n} accessors"));
+                    }
+                }
+            }
             for (k, v) in &prim.attributes {
                 if matches!(k, Checked::Valid(gltf::json::mesh::Semantic::Positions)) {
                     positions.push(v.value());
                 }
+            }
+        }
+    }
+    let nodes = root.nodes.len();
+    for (k, skin) in root.skins.iter().enumerate() {
+        let joints = skin.joints.iter().chain(&skin.skeleton).map(|j| j.value());
+        if let Some(j) = joints.into_iter().find(|&j| j >= nodes) {
+            return Err(format!(
+                "skin {k} names node {j}, but the file has {nodes} nodes"
+            ));
+        }
+        if let Some(i) = skin.inverse_bind_matrices.map(|i| i.value()) {
+            if i >= n {
+                return Err(format!("skin {k} inverseBindMatrices refers to accessor {i}, but the file has {n} accessors"));
+            }
+        }
+    }
+    for (k, node) in root.nodes.iter().enumerate() {
+        if let Some(s) = node.skin.map(|s| s.value()) {
+            if s >= root.skins.len() {
+                return Err(format!(
+                    "node {k} names skin {s}, but the file has {} skins",
+                    root.skins.len()
+                ));
             }
         }
     }

@@ -10,22 +10,13 @@ use super::Loader;
 use crate::scene::animation::{Animations, Channel, Clip, Interpolation, Node, Property};
 
 impl Loader<'_> {
-    /// The node animations (`animation::Animations`), kept only when the file has some. A
-    /// channel that cannot be read is skipped with a warning; skins and morph targets are not
-    /// posed (a warning says so, once each).
+    /// The animations (`animation::Animations`), kept only when the file has some: the node
+    /// hierarchy, the clips, and the skins and deformable objects they move. A channel that
+    /// cannot be read is skipped with a warning.
     pub(super) fn animations(&mut self) {
         let doc = self.doc;
-        if doc.skins().next().is_some() {
-            self.warn("skins are not posed: skinned meshes stay in their rest pose");
-        }
         if doc.animations().next().is_none() {
             return;
-        }
-        let mut parent = vec![None; doc.nodes().len()];
-        for n in doc.nodes() {
-            for c in n.children() {
-                parent[c.index()] = Some(n.index());
-            }
         }
         let nodes = doc
             .nodes()
@@ -35,7 +26,7 @@ impl Loader<'_> {
                     DMat4::from_cols_array_2d(&t.clone().matrix().map(|c| c.map(f64::from)));
                 let (tr, r, sc) = t.decomposed();
                 Node {
-                    parent: parent[n.index()],
+                    parent: self.parents[n.index()],
                     local,
                     trs: (
                         DVec3::from(tr.map(f64::from)),
@@ -46,26 +37,13 @@ impl Loader<'_> {
             })
             .collect();
         let mut clips = Vec::new();
-        let mut morph = false;
         for anim in doc.animations() {
             let mut channels = Vec::new();
-            // Key times of the channels read but not applied (morph target weights).
-            let mut unapplied: Vec<f32> = Vec::new();
             for ch in anim.channels() {
-                if let Some(m) = channel_problem(doc, anim.index(), ch.index()) {
-                    self.warn(format!(
-                        "animation {} channel {}: {m}; skipped",
-                        anim.index(),
-                        ch.index()
-                    ));
-                    continue;
-                }
-                match self.channel(&ch) {
-                    Ok(Ok(c)) => channels.push(c),
-                    Ok(Err(times)) => {
-                        morph = true;
-                        unapplied.extend(times);
-                    }
+                let problem = channel_problem(doc, anim.index(), ch.index())
+                    .map_or_else(|| self.channel(&ch), Err);
+                match problem {
+                    Ok(c) => channels.push(c),
                     Err(m) => self.warn(format!(
                         "animation {} channel {}: {m}; skipped",
                         anim.index(),
@@ -78,7 +56,6 @@ impl Loader<'_> {
             let duration = channels
                 .iter()
                 .filter_map(|c| c.times.last())
-                .chain(unapplied.last())
                 .fold(0.0f64, |a, &b| a.max(f64::from(b)));
             clips.push(Clip {
                 name: anim
@@ -86,28 +63,22 @@ impl Loader<'_> {
                     .map_or_else(|| format!("animation{}", anim.index()), str::to_string),
                 duration,
                 channels,
-                unapplied,
             });
-        }
-        if morph {
-            self.warn("morph target weights are not animated: meshes keep their base shape");
         }
         self.parts.animations = Some(Arc::new(Animations {
             nodes,
+            rest: std::mem::take(&mut self.rest),
             objects: std::mem::take(&mut self.placed),
             lights: std::mem::take(&mut self.placed_lights),
             cameras: std::mem::take(&mut self.placed_cameras),
             clips,
+            rigging: std::mem::take(&mut self.rigging),
         }));
     }
 
-    /// One channel's keys, checked; for morph target weights (not applied), only their key
-    /// times (`Ok(Err(times))`).
-    #[allow(clippy::type_complexity)]
-    fn channel(
-        &self,
-        ch: &gltf::animation::Channel,
-    ) -> std::result::Result<std::result::Result<Channel, Vec<f32>>, String> {
+    /// One channel's keys, checked: as many values per key as the property has (three, four,
+    /// or for morph weights one per target of the node's mesh), all finite.
+    fn channel(&self, ch: &gltf::animation::Channel) -> Result<Channel, String> {
         use gltf::animation::util::ReadOutputs;
         let buffers = &self.buffers;
         let reader = ch.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
@@ -118,29 +89,41 @@ impl Loader<'_> {
         if times.iter().any(|t| !t.is_finite()) || times.windows(2).any(|w| w[1] < w[0]) {
             return Err("its key times are not finite and non-decreasing".into());
         }
-        let (property, values): (Property, Vec<[f32; 4]>) =
-            match reader.read_outputs().ok_or("its values cannot be read")? {
-                ReadOutputs::Translations(v) => (
-                    Property::Translation,
-                    v.map(|p| [p[0], p[1], p[2], 0.0]).collect(),
-                ),
-                ReadOutputs::Scales(v) => (
-                    Property::Scale,
-                    v.map(|p| [p[0], p[1], p[2], 0.0]).collect(),
-                ),
-                ReadOutputs::Rotations(v) => (Property::Rotation, v.into_f32().collect()),
-                ReadOutputs::MorphTargetWeights(_) => return Ok(Err(times)),
-            };
+        let node = ch.target().node();
+        let (property, width, values): (Property, usize, Vec<f32>) = match reader
+            .read_outputs()
+            .ok_or("its values cannot be read")?
+        {
+            ReadOutputs::Translations(v) => (Property::Translation, 3, v.flatten().collect()),
+            ReadOutputs::Scales(v) => (Property::Scale, 3, v.flatten().collect()),
+            ReadOutputs::Rotations(v) => (Property::Rotation, 4, v.into_f32().flatten().collect()),
+            ReadOutputs::MorphTargetWeights(v) => {
+                let targets = node.mesh().map_or(0, |m| {
+                    m.primitives()
+                        .map(|p| p.morph_targets().len())
+                        .max()
+                        .unwrap_or(0)
+                });
+                if targets == 0 {
+                    return Err(format!(
+                        "it keys the morph weights of node {}, which has no morph targets",
+                        node.index()
+                    ));
+                }
+                (Property::Weights, targets, v.into_f32().collect())
+            }
+        };
         let interpolation = match ch.sampler().interpolation() {
             gltf::animation::Interpolation::Step => Interpolation::Step,
             gltf::animation::Interpolation::Linear => Interpolation::Linear,
             gltf::animation::Interpolation::CubicSpline => Interpolation::CubicSpline,
         };
-        let per_key = if interpolation == Interpolation::CubicSpline {
-            3
-        } else {
-            1
-        };
+        let per_key = width
+            * if interpolation == Interpolation::CubicSpline {
+                3
+            } else {
+                1
+            };
         if times.is_empty() || values.len() != per_key * times.len() {
             return Err(format!(
                 "{} values for {} key times ({per_key} per key expected)",
@@ -148,15 +131,16 @@ impl Loader<'_> {
                 times.len()
             ));
         }
-        if values.iter().flatten().any(|x| !x.is_finite()) {
+        if values.iter().any(|x| !x.is_finite()) {
             return Err("a value is not finite".into());
         }
-        Ok(Ok(Channel {
-            node: ch.target().node().index(),
+        Ok(Channel {
+            node: node.index(),
             property,
             interpolation,
             times,
+            width,
             values,
-        }))
+        })
     }
 }

@@ -13,12 +13,14 @@ use gltf::accessor::{DataType, Dimensions};
 use gltf::mesh::Mode;
 
 use super::animation::Placed;
+use super::skin::{self, Rigging};
 use super::{Light, LightKind, Material, Scene, SceneParts};
 use crate::camera::{rigid_from, Camera, Projection};
 use crate::error::{Error, Result};
 
 mod checks;
 mod clips;
+mod skins;
 
 use checks::{prevalidate, refuse_version_one, version_one};
 
@@ -121,6 +123,10 @@ fn load_parts(path: &Path) -> Result<SceneParts> {
         placed: Vec::new(),
         placed_lights: Vec::new(),
         placed_cameras: Vec::new(),
+        parents: Vec::new(),
+        rest: Vec::new(),
+        rigging: Rigging::default(),
+        skin_index: Default::default(),
     };
     loader.materials();
     loader.nodes()?;
@@ -213,6 +219,12 @@ pub(super) struct Loader<'a> {
     /// The nodes of `parts.lights` and `parts.cameras`, in order, for animations to move.
     placed_lights: Vec<Placed>,
     placed_cameras: Vec<Placed>,
+    /// Each node's parent and its world transform as loaded.
+    parents: Vec<Option<usize>>,
+    rest: Vec<DMat4>,
+    /// The skins and the objects that skins or morph targets move.
+    rigging: Rigging,
+    skin_index: skins::SkinIndex,
 }
 
 impl Loader<'_> {
@@ -297,6 +309,15 @@ impl Loader<'_> {
 
     fn nodes(&mut self) -> Result<()> {
         let doc = self.doc;
+        let mut parents = vec![None; doc.nodes().len()];
+        for n in doc.nodes() {
+            for c in n.children() {
+                parents[c.index()] = Some(n.index());
+            }
+        }
+        let locals: Vec<DMat4> = doc.nodes().map(|n| local_of(&n)).collect();
+        self.rest = skin::worlds(&parents, &locals);
+        self.parents = parents;
         let roots: Vec<gltf::Node> = match doc.default_scene().or_else(|| doc.scenes().next()) {
             Some(s) => s.nodes().collect(),
             None => {
@@ -324,8 +345,7 @@ impl Loader<'_> {
                 node.index()
             )));
         }
-        let local = DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(f64::from)));
-        let world = parent * local;
+        let world = parent * local_of(&node);
         if !world.is_finite() {
             return Err(self.err(format!("node {} has a non-finite transform", node.index())));
         }
@@ -344,12 +364,12 @@ impl Loader<'_> {
             match self.instances(&node)? {
                 None => {
                     self.placed.push(place(DMat4::IDENTITY));
-                    self.mesh(&mesh, world, name)?
+                    self.mesh(&mesh, &node, world, DMat4::IDENTITY, name)?
                 }
                 Some(inst) => {
                     for (i, m) in inst.iter().enumerate() {
                         self.placed.push(place(*m));
-                        self.mesh(&mesh, world * *m, format!("{name}#{i}"))?;
+                        self.mesh(&mesh, &node, world * *m, *m, format!("{name}#{i}"))?;
                     }
                 }
             }
@@ -374,10 +394,23 @@ impl Loader<'_> {
         Ok(())
     }
 
-    fn mesh(&mut self, mesh: &gltf::Mesh, world: DMat4, name: String) -> Result<()> {
+    /// Object `name`: the triangle primitives of `mesh` under `node`, placed by `world` (the
+    /// node's world transform times `instance`, its `EXT_mesh_gpu_instancing` transform); a
+    /// skin or morph targets place them instead (`skins.rs`), in their rest pose.
+    fn mesh(
+        &mut self,
+        mesh: &gltf::Mesh,
+        node: &gltf::Node,
+        world: DMat4,
+        instance: DMat4,
+        name: String,
+    ) -> Result<()> {
         let object = self.parts.objects.len() as i32;
         self.parts.objects.push(name);
-        let flip = world.determinant() < 0.0;
+        let mut deform = self.deformation(mesh, node, instance, object as usize)?;
+        // A skinned mesh ignores its node's transform, so its winding too (glTF 2.0 §3.7.4).
+        let skinned = deform.as_ref().is_some_and(|d| d.skin.is_some());
+        let flip = !skinned && world.determinant() < 0.0;
         for prim in mesh.primitives() {
             let what = format!("mesh {} primitive {}", mesh.index(), prim.index());
             match prim.mode() {
@@ -390,6 +423,9 @@ impl Loader<'_> {
                 }
             }
             let (positions, indices, colors) = self.read_primitive(&prim, &what)?;
+            if let Some(d) = deform.as_mut() {
+                self.add_primitive(d, &prim, &what, &positions)?;
+            }
             let material = prim.material().index().map_or(-1, |i| i as i32);
             let base = material_color(&self.parts.materials, material);
             let offset = self.parts.vertices.len() as u32;
@@ -411,6 +447,9 @@ impl Loader<'_> {
                 self.parts.material_ids.push(material);
                 self.parts.object_ids.push(object);
             }
+        }
+        if let Some(d) = deform {
+            self.place_deformable(d);
         }
         Ok(())
     }
@@ -561,6 +600,11 @@ impl Loader<'_> {
         self.parts.cameras.push(c);
         Ok(())
     }
+}
+
+/// A node's local transform (its matrix, or its TRS composed), in f64.
+fn local_of(node: &gltf::Node) -> DMat4 {
+    DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(f64::from)))
 }
 
 fn material_color(materials: &[Material], id: i32) -> [f32; 4] {
