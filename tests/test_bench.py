@@ -3,6 +3,8 @@ belong to `python -m scenesample.bench all`, not to a timed test)."""
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 
@@ -43,7 +45,8 @@ def test_bench_all_quick_writes_a_summary_and_every_methods_row(tmp_path, capsys
 
 def test_bench_scenes_quick_poses_a_tiling_and_reports_every_target(tmp_path):
     """`bench scenes` tiles a shared scene into objects, poses it, and reports the pose against
-    a build, posed rays against flat ones and a frame against fcpw and Open3D."""
+    a build, posed rays against flat ones and a frame against fcpw and Open3D, and a skinned
+    frame against the same peers."""
     pytest.importorskip("fcpw")
     pytest.importorskip("open3d")
     from scenesample import bench
@@ -52,8 +55,11 @@ def test_bench_scenes_quick_poses_a_tiling_and_reports_every_target(tmp_path):
     bench.main(["scenes", "--quick", "--rounds", "1", "--scenes", "bunny", "--out", str(out)])
     md = out.read_text()
     assert "| stanford_bunny |" in md
-    for target in ("a new pose <= 2% of a build", "posed rays >= 0.8x flat", "frame >= 2x fcpw"):
+    for target in ("a new pose <= 2% of a build", "posed rays >= 0.8x flat", "frame >= 3x fcpw"):
         assert target in md
+    skinned = md.split("Skinned frame (", 1)[1]
+    assert re.match(r"10,240 triangles, 8 joints; (refit|built afresh)\)", skinned)
+    assert skinned.count("x (") == 2
 
 
 def test_bench_rays_quick_measures_scenes_and_tilings_on_one_core_and_every_core(tmp_path):

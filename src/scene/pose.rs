@@ -301,7 +301,11 @@ impl Scene {
             }
         }
         let rig = base.rig();
-        let deforms = !matches!(moved, Moved::Rigid);
+        let deforms = match &moved {
+            Moved::Rigid => false,
+            Moved::Objects(objects) => !objects.is_empty(),
+            Moved::All(_) => true,
+        };
         let vertices = moved_vertices(&rig, transforms, moved, after.as_deref())?;
         if let Some(i) = vertices
             .iter()

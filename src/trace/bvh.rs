@@ -38,10 +38,25 @@ pub struct BvhStats {
     pub sah: f64,
 }
 
-/// How much a deformed scene's refit tree may cost (its surface-area cost, relative to its
-/// root's area) over its rest pose's before the scene's BVH is built afresh instead
-/// (`Scene::deformed`; measured in `bench scenes`).
+/// How much a deformed scene's refit tree may have lost against its rest pose before the
+/// scene's BVH is built afresh instead (`Scene::deformed`, and a clip's skins and morph
+/// targets; measured in `bench scenes`): see [`refit_keeps`].
 pub const REFIT_LIMIT: f64 = 1.3;
+
+/// Whether a refit tree stays tight enough against its rest pose: its surface-area cost
+/// relative to its root's area (`sah`) within [`REFIT_LIMIT`] times the rest pose's
+/// (`rest_sah`), and its surface areas (`Bvh8::area_parts`: inner nodes, leaves times their
+/// blocks, triangles; `now` against `rest`) grown no more than REFIT_LIMIT times beyond what
+/// they hold: the leaves against the triangles' own boxes, the inner nodes against the leaves.
+/// The first catches vertices scattered over the scene; the second a bend that widens the
+/// root's box, which lowers a fresh tree's relative cost much more than the refit one's (a
+/// skinned tube bent by its joints: 2.5x a fresh tree's cost, 1.28x its rest pose's).
+pub fn refit_keeps(sah: f64, rest_sah: f64, now: [f64; 3], rest: [f64; 3]) -> bool {
+    let grew = |k: usize| now[k] / rest[k].max(f64::MIN_POSITIVE);
+    sah <= REFIT_LIMIT * rest_sah
+        && grew(1) <= REFIT_LIMIT * grew(2)
+        && grew(0) <= REFIT_LIMIT * grew(1)
+}
 
 impl Bvh {
     pub fn build(scene: &Scene) -> Self {
@@ -52,9 +67,8 @@ impl Bvh {
         let start = Instant::now();
         // A posed scene refits its base's object trees, a deformed one its source's; where
         // vertices moved other than rigidly (a deformation, a clip's skins or morph targets),
-        // the scene is built afresh instead when the refit tree's surface-area cost has grown
-        // past REFIT_LIMIT times the rest pose's (a deformation that scatters what the tree
-        // keeps together).
+        // the scene is built afresh instead when the refit tree has lost its tightness
+        // (`refit_keeps`: a deformation that scatters what the tree keeps together).
         let source = match (scene.pose(), scene.refit_from()) {
             (Some(pose), _) => Some((&pose.base, pose.deforms)),
             (None, Some(source)) => Some((source, true)),
@@ -66,7 +80,11 @@ impl Bvh {
                 refit::ObjectTrees::of(&source.rig(), source.object_ids(), objects, params)
             });
             let tree = trees.posed(scene.vertices(), scene.faces());
-            if !deforms || tree.sah() <= REFIT_LIMIT * trees.rest_sah(&source.rig()) {
+            let keeps = || {
+                let (sah, rest) = trees.rest_cost(&source.rig());
+                refit_keeps(tree.sah(), sah, tree.area_parts(), rest)
+            };
+            if !deforms || keeps() {
                 return Self {
                     tree,
                     build_seconds: start.elapsed().as_secs_f64(),

@@ -33,7 +33,7 @@ pub struct ObjectTrees {
     levels: Vec<Vec<u32>>,
     /// The surface-area cost of the tree of the scene as loaded ([`Bvh8::sah`]), made on the
     /// first deformation (poses do not need it).
-    rest_sah: std::sync::OnceLock<f64>,
+    rest_cost: std::sync::OnceLock<(f64, [f64; 3])>,
 }
 
 /// An object's part of [`ObjectTrees`]: its nodes (the root first), and its root's triangle
@@ -101,15 +101,17 @@ impl ObjectTrees {
             objects: parts,
             depth: out.depth,
             levels,
-            rest_sah: std::sync::OnceLock::new(),
+            rest_cost: std::sync::OnceLock::new(),
         }
     }
 
-    /// The surface-area cost of the tree of the scene as loaded (whose rig is `rig`).
-    pub fn rest_sah(&self, rig: &Rig) -> f64 {
-        *self
-            .rest_sah
-            .get_or_init(|| self.posed(&rig.vertices, rig.faces()).sah())
+    /// The surface-area cost relative to the root's area and the surface areas
+    /// (`Bvh8::area_parts`) of the tree of the scene as loaded (whose rig is `rig`).
+    pub fn rest_cost(&self, rig: &Rig) -> (f64, [f64; 3]) {
+        *self.rest_cost.get_or_init(|| {
+            let tree = self.posed(&rig.vertices, rig.faces());
+            (tree.sah(), tree.area_parts())
+        })
     }
 
     /// The tree of the posed scene whose `vertices` and `faces` are given (`Scene::posed`
