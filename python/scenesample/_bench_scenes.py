@@ -26,8 +26,8 @@ import json
 import statistics
 import tempfile
 import time
-from pathlib import Path
 import warnings
+from pathlib import Path
 from typing import Any, Callable, Optional
 
 import numpy as np
