@@ -79,10 +79,10 @@ impl Bvh {
                 let objects = source.objects().len();
                 refit::ObjectTrees::of(&source.rig(), source.object_ids(), objects, params)
             });
-            let tree = trees.posed(scene.vertices(), scene.faces());
+            let (tree, triangles) = trees.posed(scene.vertices(), scene.faces());
             let keeps = || {
                 let (sah, rest) = trees.rest_cost(&source.rig());
-                refit_keeps(tree.sah(), sah, tree.area_parts(), rest)
+                refit_keeps(tree.sah(), sah, tree.area_parts(triangles), rest)
             };
             if !deforms || keeps() {
                 return Self {

@@ -7,7 +7,6 @@
 //! triangles stored lane by lane, tested together by the watertight test (`watertight`).
 //! `traverse` walks the tree; `build` and `refit` make it.
 
-use rayon::prelude::*;
 use std::ops::Range;
 
 use glam::Vec3A;
@@ -322,10 +321,10 @@ impl Bvh8 {
 
     /// The tree's surface areas in world units, summed in three parts: the inner nodes' boxes
     /// (the root's included), the leaves' boxes each times its blocks, and each triangle's own
-    /// box. How the three grow when the corners move says where a refit tree lost its tightness:
+    /// box (`triangles`, given: the refit sums them while it gathers the corners). How the three grow when the corners move says where a refit tree lost its tightness:
     /// leaves that grew more than their triangles hold triangles that moved apart, inner nodes
     /// that grew more than the leaves group leaves that moved apart.
-    pub fn area_parts(&self) -> [f64; 3] {
+    pub fn area_parts(&self, triangles: f64) -> [f64; 3] {
         let (lo, hi) = self.nodes[0].bounds();
         let e: [f64; 3] = std::array::from_fn(|a| (hi[a] - lo[a]).max(0.0) as f64);
         let mut inner = 2.0 * (e[0] * e[1] + e[1] * e[2] + e[2] * e[0]);
@@ -342,23 +341,6 @@ impl Bvh8 {
                 }
             }
         }
-        let triangles = self
-            .blocks
-            .par_iter()
-            .with_min_len(1 << 12)
-            .map(|b| {
-                (0..4)
-                    .filter(|&l| b.id[l] != u32::MAX)
-                    .map(|l| {
-                        let e: [f64; 3] = std::array::from_fn(|a| {
-                            let c = [b.v[0][a][l], b.v[1][a][l], b.v[2][a][l]];
-                            (c[0].max(c[1]).max(c[2]) - c[0].min(c[1]).min(c[2])) as f64
-                        });
-                        2.0 * (e[0] * e[1] + e[1] * e[2] + e[2] * e[0])
-                    })
-                    .sum::<f64>()
-            })
-            .sum();
         [inner, leaves, triangles]
     }
 

@@ -109,35 +109,42 @@ impl ObjectTrees {
     /// (`Bvh8::area_parts`) of the tree of the scene as loaded (whose rig is `rig`).
     pub fn rest_cost(&self, rig: &Rig) -> (f64, [f64; 3]) {
         *self.rest_cost.get_or_init(|| {
-            let tree = self.posed(&rig.vertices, rig.faces());
-            (tree.sah(), tree.area_parts())
+            let (tree, triangles) = self.posed(&rig.vertices, rig.faces());
+            (tree.sah(), tree.area_parts(triangles))
         })
     }
 
     /// The tree of the posed scene whose `vertices` and `faces` are given (`Scene::posed`
     /// moved this tree's scene's rig vertices by their objects' transforms, with the same f64
     /// transform and f32 rounding the blocks' corners need, so they are gathered, not moved
-    /// again).
-    pub fn posed(&self, vertices: &[[f32; 3]], faces: &[[u32; 3]]) -> Bvh8 {
+    /// again), and the sum of its triangles' own box areas (`Bvh8::area_parts`' third part,
+    /// taken while the corners are at hand).
+    pub fn posed(&self, vertices: &[[f32; 3]], faces: &[[u32; 3]]) -> (Bvh8, f64) {
         // Blocks are written once, from the rest tree's ids and the posed corners.
-        let blocks: Vec<Tri4> = self
+        let (blocks, areas): (Vec<Tri4>, Vec<f64>) = self
             .blocks
             .par_iter()
             .with_min_len(1 << 12)
             .map(|b| {
-                let mut out = *b;
+                let (mut out, mut area) = (*b, 0.0);
                 for lane in (0..4).filter(|&l| b.id[l] != u32::MAX) {
                     let face = faces[b.id[lane] as usize];
+                    let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
                     for (c, &k) in face.iter().enumerate() {
                         let p = vertices[k as usize];
                         for (a, &x) in p.iter().enumerate() {
                             out.v[c][a][lane] = x;
+                            lo[a] = lo[a].min(x);
+                            hi[a] = hi[a].max(x);
                         }
                     }
+                    let e: [f64; 3] = std::array::from_fn(|a| f64::from(hi[a] - lo[a]));
+                    area += 2.0 * (e[0] * e[1] + e[1] * e[2] + e[2] * e[0]);
                 }
-                out
+                (out, area)
             })
-            .collect();
+            .unzip();
+        let triangles = areas.iter().sum();
         let mut nodes = self.nodes.clone();
         // Level by level from the deepest: a node's children are one level deeper, refit
         // already. Each level's nodes in parallel (one object or many).
@@ -173,11 +180,12 @@ impl ObjectTrees {
             subtree[o.nodes.start] = o.stats;
         }
         build::rank_first_nodes(&mut nodes, &blocks, self.top_count, &mut subtree);
-        Bvh8 {
+        let tree = Bvh8 {
             nodes,
             blocks,
             depth: top_depth + self.depth,
-        }
+        };
+        (tree, triangles)
     }
 }
 
