@@ -8,7 +8,7 @@
 
 use std::ops::Range;
 
-use glam::Vec3A;
+use glam::{Vec3, Vec3A};
 use rayon::prelude::*;
 
 use super::build::{self, padded_box, Aabb, BuildParams, Out};
@@ -23,7 +23,8 @@ use crate::scene::pose::Rig;
 #[derive(Debug)]
 pub struct ObjectTrees {
     nodes: Vec<Node8>,
-    blocks: Vec<Tri4>,
+    /// The triangle ids of each block (its corners are the pose's, gathered per pose).
+    ids: Vec<[u32; 4]>,
     /// The top tree's node count (it depends only on the number of objects).
     top_count: usize,
     objects: Vec<Object>,
@@ -96,7 +97,7 @@ impl ObjectTrees {
         let levels = levels_of(&out.nodes, &parts);
         ObjectTrees {
             nodes: out.nodes,
-            blocks: out.blocks,
+            ids: out.blocks.iter().map(|b| b.id).collect(),
             top_count,
             objects: parts,
             depth: out.depth,
@@ -121,30 +122,34 @@ impl ObjectTrees {
     /// taken while the corners are at hand).
     pub fn posed(&self, vertices: &[[f32; 3]], faces: &[[u32; 3]]) -> (Bvh8, f64) {
         // Blocks are written once, from the rest tree's ids and the posed corners.
-        let (blocks, areas): (Vec<Tri4>, Vec<f64>) = self
-            .blocks
+        // Each block's padded box (the union of its triangles' `padded_box`, as a build
+        // takes them) and its triangles' own box areas, while the corners are at hand.
+        let (mut blocks, mut boxes) = (Vec::new(), Vec::new());
+        self.ids
             .par_iter()
             .with_min_len(1 << 12)
-            .map(|b| {
-                let (mut out, mut area) = (*b, 0.0);
-                for lane in (0..4).filter(|&l| b.id[l] != u32::MAX) {
-                    let face = faces[b.id[lane] as usize];
-                    let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
-                    for (c, &k) in face.iter().enumerate() {
-                        let p = vertices[k as usize];
-                        for (a, &x) in p.iter().enumerate() {
-                            out.v[c][a][lane] = x;
-                            lo[a] = lo[a].min(x);
-                            hi[a] = hi[a].max(x);
+            .map(|&id| {
+                let mut out = Tri4 { id, ..Tri4::NONE };
+                let (mut bx, mut area) = (Aabb::EMPTY, 0.0);
+                for lane in (0..4).filter(|&l| id[l] != u32::MAX) {
+                    let face = faces[id[lane] as usize];
+                    let tri = Tri {
+                        v: face.map(|k| Vec3A::from(Vec3::from(vertices[k as usize]))),
+                    };
+                    for (c, p) in tri.v.iter().enumerate() {
+                        for a in 0..3 {
+                            out.v[c][a][lane] = p[a];
                         }
                     }
-                    let e: [f64; 3] = std::array::from_fn(|a| f64::from(hi[a] - lo[a]));
-                    area += 2.0 * (e[0] * e[1] + e[1] * e[2] + e[2] * e[0]);
+                    let lo = tri.v[0].min(tri.v[1]).min(tri.v[2]);
+                    let e = (tri.v[0].max(tri.v[1]).max(tri.v[2]) - lo).as_dvec3();
+                    area += 2.0 * (e.x * e.y + e.y * e.z + e.z * e.x);
+                    bx.grow(&padded_box(&tri));
                 }
-                (out, area)
+                (out, (bx, area))
             })
-            .unzip();
-        let triangles = areas.iter().sum();
+            .unzip_into_vecs(&mut blocks, &mut boxes);
+        let triangles = boxes.iter().map(|b| b.1).sum();
         let mut nodes = self.nodes.clone();
         // Level by level from the deepest: a node's children are one level deeper, refit
         // already. Each level's nodes in parallel (one object or many).
@@ -152,7 +157,7 @@ impl ObjectTrees {
             let refit: Vec<Node8> = level
                 .par_iter()
                 .with_min_len(64)
-                .map(|&i| refit_node(nodes[i as usize], &nodes, &blocks))
+                .map(|&i| refit_node(nodes[i as usize], &nodes, &boxes))
                 .collect();
             for (&i, n) in level.iter().zip(refit) {
                 nodes[i as usize] = n;
@@ -200,7 +205,7 @@ fn top_node_count(n: usize) -> usize {
 /// Node `n` with its children's boxes refit: a leaf's from its blocks' posed corners, an inner
 /// child's from that child in `nodes` (refit already). The any-hit order is the one built for
 /// the object as loaded.
-fn refit_node(mut n: Node8, nodes: &[Node8], blocks: &[Tri4]) -> Node8 {
+fn refit_node(mut n: Node8, nodes: &[Node8], blocks: &[(Aabb, f64)]) -> Node8 {
     for k in 0..8 {
         let c = n.child[k];
         if c == EMPTY {
@@ -208,10 +213,8 @@ fn refit_node(mut n: Node8, nodes: &[Node8], blocks: &[Tri4]) -> Node8 {
         }
         let bx = if c & LEAF != 0 {
             let mut bx = Aabb::EMPTY;
-            for b in &blocks[leaf_blocks(c)] {
-                for lane in (0..4).filter(|&l| b.id[l] != u32::MAX) {
-                    bx.grow(&padded_box(&b.tri(lane)));
-                }
+            for (b, _) in &blocks[leaf_blocks(c)] {
+                bx.grow(b);
             }
             bx
         } else {
