@@ -15,6 +15,7 @@ pub mod limits;
 pub mod process;
 pub mod reconstruct;
 pub mod scene;
+pub mod sets;
 pub mod shading;
 pub mod shadows;
 pub mod splat;

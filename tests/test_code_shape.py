@@ -1,7 +1,9 @@
-"""Functions that fit on a screen: no function in src/ or the package over 100 lines of code
-(docstrings, comments and blank lines aside), and no block nested more than 5 deep (the
-function's body is level 1) in the visibility field's room, whose views were the hardest
-code in the house to follow."""
+"""Functions that fit on a screen and files that hold one concern: no function in src/ or the
+package over 100 lines of code (docstrings, comments and blank lines aside), no file in src/,
+python/ or scripts/ over 800 lines (tests aside: a Rust module's tests live in a `*_tests.rs`
+or `tests.rs` file beside it once they would push it past), and no block nested more than 5
+deep (the function's body is level 1) in the visibility field's room, whose views were the
+hardest code in the house to follow."""
 
 from __future__ import annotations
 
@@ -11,6 +13,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 LIMIT = 100
+FILE_LIMIT = 800
 DEPTH = 5
 FN = re.compile(r"^\s*(pub(\([^)]*\))?\s+)?(const\s+)?(unsafe\s+)?(extern \"C\"\s+)?fn\s+(\w+)")
 
@@ -83,6 +86,24 @@ def test_no_function_is_over_100_lines():
         for p in sorted((ROOT / folder).rglob("*.py"))
         for name, line, n in python_functions(p)
         if n > LIMIT
+    ]
+    assert long == []
+
+
+def code_files() -> list[Path]:
+    """Every Rust and Python file of src/, python/ and scripts/, tests aside."""
+    files = [p for p in (ROOT / "src").rglob("*.rs") if not p.name.endswith("tests.rs")]
+    files += [p for folder in ("python", "scripts") for p in (ROOT / folder).rglob("*.py")]
+    return sorted(files)
+
+
+def test_no_file_is_over_800_lines():
+    files = code_files()
+    assert len(files) > 100
+    long = [
+        f"{p.relative_to(ROOT)} ({n} lines)"
+        for p in files
+        if (n := len(p.read_text().splitlines())) > FILE_LIMIT
     ]
     assert long == []
 

@@ -12,6 +12,7 @@ use glam::{DVec2, DVec3};
 use crate::camera::{Camera, Projection};
 use crate::error::Result;
 use crate::scene::Scene;
+use crate::sets::Sets;
 use crate::trace;
 
 /// Which redundancy definition a test uses.
@@ -153,14 +154,7 @@ pub fn coincident_groups(scene: &Scene) -> Option<Vec<u32>> {
         let flat = [a, b, c].map(|p| DVec2::new(p[i], p[j]));
         buckets.entry(key).or_default().push((t as u32, flat));
     }
-    let mut parent: Vec<u32> = (0..n as u32).collect();
-    fn find(parent: &mut [u32], mut x: u32) -> u32 {
-        while parent[x as usize] != x {
-            parent[x as usize] = parent[parent[x as usize] as usize];
-            x = parent[x as usize];
-        }
-        x
-    }
+    let mut sets = Sets::new(n);
     let mut any = false;
     for (_, mut tris) in buckets.into_iter().filter(|(_, v)| v.len() > 1) {
         // Sweep along x: only triangles whose x ranges overlap are tested.
@@ -173,17 +167,13 @@ pub fn coincident_groups(scene: &Scene) -> Option<Vec<u32>> {
             open.retain(|&m| hi_x(&tris[m].1) > start);
             for &m in &open {
                 if overlap(&tris[k].1, &tris[m].1, step) {
-                    let (a, b) = (find(&mut parent, tris[k].0), find(&mut parent, tris[m].0));
-                    if a != b {
-                        parent[a.max(b) as usize] = a.min(b);
-                        any = true;
-                    }
+                    any |= sets.union(tris[k].0, tris[m].0);
                 }
             }
             open.push(k);
         }
     }
-    any.then(|| (0..n as u32).map(|t| find(&mut parent, t)).collect())
+    any.then(|| (0..n as u32).map(|t| sets.find(t)).collect())
 }
 
 /// Whether two triangles of a plane overlap by more than `eps` (2D separating axes; sharing an

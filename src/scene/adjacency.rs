@@ -53,8 +53,9 @@ impl EdgeNeighbours {
     }
 }
 
-/// One id per distinct vertex position (-0.0 and 0.0 are one), per vertex.
-fn weld(scene: &Scene) -> Vec<u32> {
+/// One id per distinct vertex position (-0.0 and 0.0 are one), per vertex: ids count the
+/// positions in sorted order from 0.
+pub fn weld(scene: &Scene) -> Vec<u32> {
     let verts = scene.vertices();
     let key = |i: u32| verts[i as usize].map(|x| (x + 0.0).to_bits());
     let mut order: Vec<u32> = (0..verts.len() as u32).collect();

@@ -10,10 +10,13 @@
 //!   found any.
 
 pub mod build;
+pub mod cells;
 pub mod draw;
 pub mod fallback;
+pub mod lines;
 pub mod reference;
 pub mod resample;
+pub mod slab;
 pub mod view;
 
 pub use build::{

@@ -11,7 +11,7 @@
 //! to the fallback: overflowed when some slab held its line, outside when none did.
 
 use super::build::Slab;
-use super::resample::{Answer, Lines, Marks, Resampling, Samples, SlabRead};
+use super::lines::{Answer, Lines, Marks, Resampling, Samples, SlabRead};
 use crate::camera::Camera;
 use crate::error::Result;
 
