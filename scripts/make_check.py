@@ -80,7 +80,7 @@ ROOMS: dict[str, tuple[str, ...]] = {
     "demo.py": ("test_api.py", "test_first_minutes.py"),
     "gallery.py": ("test_first_minutes.py",),
     "_env.py": ("test_first_minutes.py",),
-    "experiments/": ("test_nonredundant.py", "test_impostors.py", "test_reflections.py"),
+    "tools/experiments/": ("test_nonredundant.py", "test_impostors.py", "test_reflections.py"),
     "notebooks/": ("test_notebooks.py",),
     "shaders/": ("test_depth_images.py", "test_nonredundant.py", "test_splat.py"),
 }

@@ -15,7 +15,7 @@ def test_bench_all_quick_writes_a_summary_and_every_methods_row(tmp_path, capsys
     pytest.importorskip("embreex")
     pytest.importorskip("open3d")
     pytest.importorskip("pyrender")
-    from scenesample import bench
+    from scenesample.tools import bench
 
     out = tmp_path / "all.md"
     bench.main(["all", "--quick", "--repeats", "1", "--out", str(out)])
@@ -49,7 +49,7 @@ def test_bench_scenes_quick_poses_a_tiling_and_reports_every_target(tmp_path):
     frame against the same peers."""
     pytest.importorskip("fcpw")
     pytest.importorskip("open3d")
-    from scenesample import bench
+    from scenesample.tools import bench
 
     out = tmp_path / "scenes.md"
     bench.main(["scenes", "--quick", "--rounds", "1", "--scenes", "bunny", "--out", str(out)])
@@ -68,7 +68,7 @@ def test_bench_rays_quick_measures_scenes_and_tilings_on_one_core_and_every_core
     every target, the build and the memory."""
     pytest.importorskip("embreex")
     pytest.importorskip("open3d")
-    from scenesample import _bench_rays, bench
+    from scenesample.tools import _bench_rays, bench
 
     out = tmp_path / "rays.md"
     bench.main(["rays", "--quick", "--scenes", "bunny", "--out", str(out)])
@@ -89,7 +89,7 @@ def test_bench_rays_quick_measures_scenes_and_tilings_on_one_core_and_every_core
 
 
 def test_bench_backends_quick_compares_gpu_cpu_and_auto(tmp_path, gpu):
-    from scenesample import bench
+    from scenesample.tools import bench
 
     out = tmp_path / "backends.md"
     bench.main(["backends", "--quick", "--repeats", "1", "--out", str(out)])
@@ -136,7 +136,7 @@ def test_bench_points_quick_splits_closed_and_open_scenes_and_reports_every_targ
     for peer in ("open3d", "fcpw", "igl", "point_cloud_utils", "trimesh"):
         pytest.importorskip(peer)
     import scenesample as ss
-    from scenesample import bench
+    from scenesample.tools import bench
 
     files = ss.scenes.shared_scene_files()
     if not {"khr_clearcoat_car_paint", "khr_cameras"} <= set(files):

@@ -185,7 +185,7 @@ def test_bad_input_is_refused(sphere):
 
 
 def test_the_experiment_writes_tables_and_figures(tmp_path):
-    from scenesample.experiments import impostors as experiment
+    from scenesample.tools.experiments import impostors as experiment
 
     experiment.main(
         ["--scenes", "urban", "--distances", "1", "3", "--octree-depth", "1", "--subdivisions", "0"]

@@ -367,7 +367,7 @@ def test_bad_arguments_raise_typed_errors(gpu):
 
 
 def test_experiment_writes_tables_and_figures(gpu, tmp_path):
-    from scenesample.experiments import sampling
+    from scenesample.tools.experiments import sampling
 
     sampling.main(
         [

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import scenesample as ss
 from conftest import SHARED, load_quiet
-from scenesample._bench_points import brute_distances, exact_winding
+from scenesample.tools._bench_points import brute_distances, exact_winding
 
 
 def brute(scene: ss.Scene, pts: np.ndarray) -> np.ndarray:

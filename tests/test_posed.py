@@ -297,7 +297,7 @@ def test_evaluate_a_sequence_reports_error_and_flicker_per_frame():
 
 
 def test_the_animation_experiment_runs_every_method_on_every_frame(tmp_path):
-    from scenesample.experiments import epr_animation
+    from scenesample.tools.experiments import epr_animation
 
     epr_animation.main(["--quick", "--out", str(tmp_path)])
     md = (tmp_path / "epr_animation.md").read_text()

@@ -85,7 +85,7 @@ def test_tradeoff_counts_settings(bars):
 
 
 def test_an_experiment_counts_its_scenes(bars, tmp_path, gpu):
-    from scenesample.experiments import impostors
+    from scenesample.tools.experiments import impostors
 
     impostors.main(
         ["--scenes", "urban", "--distances", "1", "--octree-depth", "1", "--subdivisions", "0"]

@@ -230,7 +230,7 @@ def test_area_light_and_soft_shadow_arguments(gpu):
 
 
 def test_shadow_experiment_writes_tables_and_figures(gpu, tmp_path):
-    from scenesample.experiments import shadows
+    from scenesample.tools.experiments import shadows
 
     shadows.main(
         ["--scenes", "grass", "--resolutions", "64", "--sizes", "1", "--resolution", "64"]
@@ -249,7 +249,7 @@ def test_shadow_experiment_writes_tables_and_figures(gpu, tmp_path):
 
 
 def test_fig9_crossover_is_interpolated_in_log_triangles():
-    from scenesample.experiments.shadows import crossover
+    from scenesample.tools.experiments.shadows import crossover
 
     tris = [1000, 10000, 100000]
     # ours - theirs goes +1 -> -1 between 10^4 and 10^5: halfway in log, 10^4.5.
@@ -260,7 +260,7 @@ def test_fig9_crossover_is_interpolated_in_log_triangles():
 
 @pytest.mark.skipif("cornell_box" not in SHARED, reason="../shared/scenes is absent")
 def test_shadow_experiment_on_the_cornell_box_uses_its_ceiling_light(gpu, tmp_path):
-    from scenesample.experiments import shadows
+    from scenesample.tools.experiments import shadows
 
     scene, camera, light_of, sweep_sizes = shadows.shadow_scene("cornell_box", 32)
     light = light_of(4.0)
@@ -284,7 +284,7 @@ def test_a_surface_facing_away_from_the_light_is_dark(gpu):
 
 
 def test_reconstruction_experiment_reports_surface_metrics(gpu, tmp_path):
-    from scenesample.experiments import reconstruction
+    from scenesample.tools.experiments import reconstruction
 
     reconstruction.main(
         ["--scenes", "urban", "--resolution", "64", "--samples", "2000", "--out", str(tmp_path)]

@@ -126,7 +126,7 @@ def test_bad_input(room):
 
 
 def test_epr_experiment_writes_tables_and_figures(tmp_path):
-    from scenesample.experiments import epr
+    from scenesample.tools.experiments import epr
 
     epr.main(
         ["--spheres", "1", "2", "--resolution", "48", "--rho", "0.5", "--distances", "3.2"]

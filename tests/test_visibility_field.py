@@ -14,7 +14,7 @@ import warnings
 import numpy as np
 import pytest
 import scenesample as ss
-from scenesample.experiments.visibility_field import six_directions
+from scenesample.tools.experiments.visibility_field import six_directions
 
 #: The paper's settings before the scene-derived defaults: 16^4 samples, 16^3 cells per
 #: object, 1 id, 81 rays per sample.
@@ -269,7 +269,7 @@ def test_bad_reconstruct_input_is_refused():
 
 
 def test_the_experiment_writes_tables_and_figures(tmp_path):
-    from scenesample.experiments import visibility_field as experiment
+    from scenesample.tools.experiments import visibility_field as experiment
 
     experiment.main(
         ["--scenes", "sphere", "--resolutions", "6", "--ids", "1", "2", "--subsamples", "1", "2"]
@@ -504,7 +504,7 @@ def test_the_default_view_draws_every_visible_cell_and_little_more(name):
     the look across the edges at the cells' borders finds them; on the balloon, a cell the
     fallback finds only by its four rays around a pixel centre near an edge), and at most 1.3x
     the visible cells are drawn (untrusted reads mark nothing)."""
-    from scenesample._bench_methods import views
+    from scenesample.tools._bench_methods import views
 
     scene = shared_scene(name)
     field = ss.discretize(scene, method="visibility_field", progress=False)

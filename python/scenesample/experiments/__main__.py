@@ -1,31 +1,7 @@
-"""``python -m scenesample.experiments
-{sampling,shadows,reconstruction,epr,epr_animation,visibility_field,impostors} [options]``; see each
-module."""
+"""``python -m scenesample.experiments NAME``: the papers' tables and figures
+(:mod:`scenesample.tools.experiments`)."""
 
-from __future__ import annotations
-
-import argparse
-from typing import Optional
-
-from . import epr, epr_animation, impostors, reconstruction, sampling, shadows, visibility_field
-
-EXPERIMENTS = {
-    "sampling": sampling,
-    "shadows": shadows,
-    "reconstruction": reconstruction,
-    "epr": epr,
-    "epr_animation": epr_animation,
-    "visibility_field": visibility_field,
-    "impostors": impostors,
-}
-
-
-def main(argv: Optional[list[str]] = None) -> None:
-    p = argparse.ArgumentParser(prog="python -m scenesample.experiments")
-    p.add_argument("experiment", choices=sorted(EXPERIMENTS))
-    known, rest = p.parse_known_args(argv)
-    EXPERIMENTS[known.experiment].main(rest)
-
+from ..tools.experiments.__main__ import main
 
 if __name__ == "__main__":
     main()

@@ -34,8 +34,8 @@ import numpy as np
 
 import scenesample as ss
 
-from ._scene import Scene
-from .scenes import shared_scene_files
+from .._scene import Scene
+from ..scenes import shared_scene_files
 
 MIN_TRIANGLES = 5_000
 # 100 tiles of a scene over this many triangles would not fit a 24 GiB machine's rebuilds.

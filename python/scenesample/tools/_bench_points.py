@@ -32,8 +32,8 @@ import numpy as np
 
 import scenesample as ss
 
+from .._surface import sample_surface
 from ._bench_rays import cpu_model
-from ._surface import sample_surface
 
 TARGET_CLOSEST = 2.0  # closest points: the fastest peer's time over ours
 TARGET_RELATIVE_ERROR = 1e-6

@@ -41,9 +41,9 @@ import numpy as np
 
 import scenesample as ss
 
-from .._optional import pyplot
-from .._progress import steps
-from ..imageio import write_png
+from ..._optional import pyplot
+from ..._progress import steps
+from ...imageio import write_png
 from ._tables import write_csv
 
 INTERPOLATIONS = ("none", "uv", "st", "uv+st")

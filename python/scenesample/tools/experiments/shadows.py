@@ -34,9 +34,9 @@ import numpy as np
 
 import scenesample as ss
 
-from .._optional import pyplot
-from .._progress import steps
-from ..imageio import write_png
+from ..._optional import pyplot
+from ..._progress import steps
+from ...imageio import write_png
 from ._tables import write_csv
 
 METHODS = ("nonredundant", "conventional", "peeling")

@@ -18,7 +18,7 @@ from typing import Any, Optional
 
 import scenesample as ss
 
-from .._progress import steps
+from ..._progress import steps
 from ._tables import write_csv
 
 DISCRETIZATIONS = ("conventional", "nonredundant")

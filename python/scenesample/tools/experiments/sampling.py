@@ -22,9 +22,9 @@ import numpy as np
 
 import scenesample as ss
 
-from .._optional import pyplot
-from .._progress import steps
-from ..imageio import linear_to_srgb, write_png
+from ..._optional import pyplot
+from ..._progress import steps
+from ...imageio import linear_to_srgb, write_png
 from ._tables import write_csv
 
 METHODS = ("conventional", "nonredundant", "peeling")

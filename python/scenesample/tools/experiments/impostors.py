@@ -28,9 +28,9 @@ import numpy as np
 
 import scenesample as ss
 
-from .._optional import pyplot
-from .._progress import steps
-from ..imageio import write_png
+from ..._optional import pyplot
+from ..._progress import steps
+from ...imageio import write_png
 from ._tables import write_csv
 
 DIRECTION = np.array([0.3, 0.4, 1.0]) / np.linalg.norm([0.3, 0.4, 1.0])
