@@ -301,7 +301,7 @@ def _child(mode: str, quick: bool, rounds: int, only: Optional[list[str]]) -> di
     """``measure`` in a child process of its own (pinned to one core for ``one``)."""
     with tempfile.TemporaryDirectory() as tmp:
         path = os.path.join(tmp, f"{mode}.json")
-        cmd = [sys.executable, "-m", "scenesample._bench_rays", mode, path, str(rounds)]
+        cmd = [sys.executable, "-m", "scenesample.tools._bench_rays", mode, path, str(rounds)]
         cmd += ["--quick"] * quick + (["--scenes", ",".join(only)] if only else [])
         subprocess.run(cmd, check=True)
         with open(path) as f:
