@@ -55,19 +55,20 @@ STAGES = [
         # Niced: the wheel is on the critical path (pytest waits for it), these are not; they
         # take what the wheel's build leaves of the two cores. Their own target folder lets them
         # build beside the wheel instead of waiting for its lock.
-        "nice -n 15 cargo test --profile checked --no-run"
-        " && nice -n 15 cargo clippy --profile checked --all-targets --features python"
-        " -- -D warnings"
+        "cargo test --profile checked --no-run"
+        " && cargo clippy --profile checked --all-targets --features python -- -D warnings"
         " && cargo test --profile checked",
         env={"CARGO_TARGET_DIR": str(TARGET / "checks")},
         what="cargo tests (debug assertions, overflow checks), clippy -D warnings",
+        nice=15,
     ),
     Stage(
         "deps",
         # numpy and the `test` extra of pyproject.toml (the tools the tests compare against).
-        f"nice -n 10 {PIP} {sh(*pins.requirements(['test']))}",
+        f"{PIP} {sh(*pins.requirements(['test']))}",
         after=("venv",),
         what="numpy and the test extras into target/test-venv",
+        nice=10,
     ),
     Stage(
         "pins",
@@ -114,6 +115,7 @@ STAGES = [
         f"{sh('bash', ROOT / 'scripts/wheel_check.sh')} {sh(DIST)}/scenesample-*.whl",
         after=("wheel", "system"),
         what="that wheel alone in a clean venv: smoke test, quickstart, outside the tree",
+        nice=10,
     ),
 ]
 
