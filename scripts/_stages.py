@@ -80,6 +80,47 @@ def run(stages: list[Stage]) -> int:
     running: dict[str, tuple[subprocess.Popen, float, Stage]] = {}
     done: dict[str, tuple[float, float, str]] = {}
     t0 = time.monotonic()
+    # Every stage is a session of its own, out of reach of the terminal's Ctrl-C: stopping
+    # the runner (Ctrl-C, or SIGTERM from a CI timeout) stops every stage it started.
+    signal.signal(signal.SIGTERM, _interrupt)
+    try:
+        failed = _loop(names, pending, running, done, t0)
+    except KeyboardInterrupt:
+        print("\nstopped, and with it every stage it had started", flush=True)
+        return 130
+    finally:
+        for p, _, _ in running.values():
+            try:
+                os.killpg(p.pid, signal.SIGTERM)
+            except ProcessLookupError:
+                pass
+        for p, _, _ in running.values():
+            p.wait()
+    total = time.monotonic() - t0
+    print(f"\n{'stage':<12} {'start s':>8} {'seconds':>8}  status")
+    for name, (start, secs, status) in sorted(done.items(), key=lambda kv: kv[1][0]):
+        print(f"{name:<12} {start:>8.0f} {secs:>8.0f}  {status}")
+    print(f"{'total':<12} {'':>8} {total:>8.0f}  wall clock")
+    if failed:
+        tail = (LOGS / f"{failed}.log").read_text(errors="replace").splitlines()[-80:]
+        print(f"\n{failed} failed; the end of target/test-logs/{failed}.log:\n" + "\n".join(tail))
+        return 1
+    return 0
+
+
+def _interrupt(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt
+
+
+def _loop(
+    names: set[str],
+    pending: dict[str, Stage],
+    running: dict[str, tuple[subprocess.Popen, float, Stage]],
+    done: dict[str, tuple[float, float, str]],
+    t0: float,
+) -> Optional[str]:
+    """Start each stage once its `after` have passed, until all are done or one fails (the
+    others are then stopped); the failed stage's name, or None."""
     failed = None
     while pending or running:
         for name, s in list(pending.items()):
@@ -121,13 +162,4 @@ def run(stages: list[Stage]) -> int:
                 done[name] = (start - t0, time.monotonic() - start, "stopped")
             running.clear()
             pending.clear()
-    total = time.monotonic() - t0
-    print(f"\n{'stage':<12} {'start s':>8} {'seconds':>8}  status")
-    for name, (start, secs, status) in sorted(done.items(), key=lambda kv: kv[1][0]):
-        print(f"{name:<12} {start:>8.0f} {secs:>8.0f}  {status}")
-    print(f"{'total':<12} {'':>8} {total:>8.0f}  wall clock")
-    if failed:
-        tail = (LOGS / f"{failed}.log").read_text(errors="replace").splitlines()[-80:]
-        print(f"\n{failed} failed; the end of target/test-logs/{failed}.log:\n" + "\n".join(tail))
-        return 1
-    return 0
+    return failed
