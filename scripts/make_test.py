@@ -30,7 +30,20 @@ VENV = TARGET / "test-venv"
 VPY = VENV / "bin" / "python"
 PY = os.environ.get("PYTHON", sys.executable)
 PINS = ROOT / "scripts" / "pins.txt"
-PIP = sh(VPY, "-m", "pip", "install", "--quiet", "--disable-pip-version-check", "-c", PINS)
+#: `--no-compile`: the packages' bytecode is made when a module is first imported, for the
+#: modules the tests import, not ahead of time for every file of every package (open3d, scipy,
+#: matplotlib, ...), which cost CPU the wheel's build needed.
+PIP = sh(
+    VPY,
+    "-m",
+    "pip",
+    "install",
+    "--quiet",
+    "--disable-pip-version-check",
+    "--no-compile",
+    "-c",
+    PINS,
+)
 JUNIT = LOGS / "pytest.xml"
 LINTED = ("python", "tests", "scripts")
 #: Every stage finds the venv's tools (maturin looks for zig through `python3 -m ziglang`).

@@ -17,7 +17,7 @@ esac
 echo "wheel: $(basename "$WHEEL") ($(du -h "$WHEEL" | cut -f1))"
 WORK=$(mktemp -d)
 trap 'rm -rf "$WORK"' EXIT
-pipq() { "$1" -m pip install --quiet --disable-pip-version-check -c "$ROOT/scripts/pins.txt" "${@:2}"; }
+pipq() { "$1" -m pip install --quiet --disable-pip-version-check --no-compile -c "$ROOT/scripts/pins.txt" "${@:2}"; }
 
 "$PY" -m venv "$WORK/venv"
 V="$WORK/venv/bin/python"
