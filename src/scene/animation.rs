@@ -272,16 +272,17 @@ impl Animations {
             let moved = match d.skin {
                 Some(s) => {
                     at.objects[d.object] = DMat4::IDENTITY;
-                    let joints = &self.rigging.skins[s].joints;
-                    let placed: Vec<Option<DMat4>> = joints
+                    let skin = &self.rigging.skins[s];
+                    let placed: Vec<Option<DMat4>> = skin
+                        .joints
                         .iter()
                         .map(|&j| self.world_at(j, trs, &mut world))
                         .collect();
                     if keyed.is_none() && placed.iter().all(Option::is_none) {
                         continue;
                     }
-                    let mats = self.rigging.skins[s]
-                        .matrices(|j| self.world_at(j, trs, &mut world).unwrap_or(self.rest[j]));
+                    let worlds = skin.joints.iter().zip(&placed);
+                    let mats = skin.matrices(worlds.map(|(&j, w)| w.unwrap_or(self.rest[j])));
                     d.positions(w, &Place::Joints(&mats))
                 }
                 None => {

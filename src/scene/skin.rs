@@ -89,12 +89,13 @@ pub fn worlds(parents: &[Option<usize>], locals: &[DMat4]) -> Vec<DMat4> {
 }
 
 impl Skin {
-    /// Each joint's matrix `W(joint) · IBM` from the nodes' world transforms.
-    pub fn matrices(&self, mut world: impl FnMut(usize) -> DMat4) -> Vec<DMat4> {
-        self.joints
-            .iter()
+    /// Each joint's matrix `W(joint) · IBM`, from `worlds`, its joints' world transforms in
+    /// the order of `joints`.
+    pub fn matrices(&self, worlds: impl IntoIterator<Item = DMat4>) -> Vec<DMat4> {
+        worlds
+            .into_iter()
             .zip(&self.inverse_bind)
-            .map(|(&j, ibm)| world(j) * *ibm)
+            .map(|(w, ibm)| w * *ibm)
             .collect()
     }
 }

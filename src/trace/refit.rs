@@ -32,8 +32,8 @@ pub struct ObjectTrees {
     /// The objects' nodes grouped by their depth below their object's root, deepest last: a
     /// refit runs level by level from the deepest, each level's nodes in parallel.
     levels: Vec<Vec<u32>>,
-    /// The surface-area cost of the tree of the scene as loaded ([`Bvh8::sah`]), made on the
-    /// first deformation (poses do not need it).
+    /// The surface-area cost ([`Bvh8::sah`]) and surface areas ([`Bvh8::area_parts`]) of the
+    /// tree of the scene as loaded, made on the first deformation (poses do not need them).
     rest_cost: std::sync::OnceLock<(f64, [f64; 3])>,
 }
 

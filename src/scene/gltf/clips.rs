@@ -3,7 +3,7 @@
 
 use std::sync::Arc;
 
-use glam::{DMat4, DQuat, DVec3};
+use glam::{DQuat, DVec3};
 
 use super::checks::channel_problem;
 use super::Loader;
@@ -21,13 +21,10 @@ impl Loader<'_> {
         let nodes = doc
             .nodes()
             .map(|n| {
-                let t = n.transform();
-                let local =
-                    DMat4::from_cols_array_2d(&t.clone().matrix().map(|c| c.map(f64::from)));
-                let (tr, r, sc) = t.decomposed();
+                let (tr, r, sc) = n.transform().decomposed();
                 Node {
                     parent: self.parents[n.index()],
-                    local,
+                    local: super::local_of(&n),
                     trs: (
                         DVec3::from(tr.map(f64::from)),
                         DQuat::from_array(r.map(f64::from)).normalize(),

@@ -275,9 +275,10 @@ impl Loader<'_> {
     /// morphed by its default weights and skinned by its joints as loaded (or placed by its
     /// node and instance), and `d` joins the rigging.
     pub(super) fn place_deformable(&mut self, d: Deformable) {
-        let mats = d
-            .skin
-            .map(|s| self.rigging.skins[s].matrices(|j| self.rest[j]));
+        let mats = d.skin.map(|s| {
+            let skin = &self.rigging.skins[s];
+            skin.matrices(skin.joints.iter().map(|&j| self.rest[j]))
+        });
         let place = match &mats {
             Some(m) => Place::Joints(m),
             None => Place::Node(self.rest[d.node] * d.instance),
