@@ -86,6 +86,28 @@ def mutate(data: bytes, rng: np.random.Generator) -> bytes:
     return bytes(b)
 
 
+def posing_internal_errors(data: bytes, seed: int, cases: int, folder: Path) -> list[tuple]:
+    """`cases` seeded mutations of the animated glTF `data`, each loaded and posed by every
+    clip at 0.5 s and past its end: the (case, message) of those that reported the reader's
+    "internal error" (a panic caught) rather than a scene or a typed error."""
+    import scenesample as ss
+
+    case, found = folder / "case.gltf", []
+    for i in range(cases):
+        case.write_bytes(mutate(data, np.random.default_rng([seed, i])))
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", ss.SceneWarning)
+                scene = ss.Scene.load(case)
+                for k in range(len(scene.animations)):
+                    scene.at(0.5, k)
+                    scene.at(1e9, k)
+        except ss.ScenesampleError as e:
+            if "internal error" in str(e):
+                found.append((i, str(e)))
+    return found
+
+
 def run_case(seed: int, i: int, work: Path) -> str:
     """Case `i` of run `seed`: "ok", "error: <typed error>", or raises what was not typed."""
     import scenesample as ss
