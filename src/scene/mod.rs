@@ -11,6 +11,7 @@ pub mod obj;
 pub mod pose;
 pub mod shapes;
 pub mod skin;
+mod texture;
 
 use std::any::{Any, TypeId};
 use std::collections::HashMap;

@@ -345,8 +345,9 @@ impl Reader<'_> {
                 .map(|n| base.join(n))
                 .find(|p| p.is_file());
             let mean = match found {
-                Some(p) => image::open(&p)
-                    .map(|img| super::gltf::mean_linear_rgba(&img.to_rgba8()))
+                Some(p) => std::fs::read(&p)
+                    .map_err(|e| e.to_string())
+                    .and_then(|b| super::texture::mean_linear_rgba(&b))
                     .map_err(|e| format!("cannot decode {}: {e}", p.display())),
                 None => Err(format!("the texture {name:?} is missing")),
             };

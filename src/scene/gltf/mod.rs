@@ -292,9 +292,8 @@ impl Loader<'_> {
             }
             gltf::image::Source::Uri { uri, .. } => read_uri(uri, self.base),
         };
-        let decoded = bytes.and_then(|b| image::load_from_memory(&b).map_err(|e| e.to_string()));
-        let mean = match decoded {
-            Ok(img) => Some(mean_linear_rgba(&img.to_rgba8())),
+        let mean = match bytes.and_then(|b| super::texture::mean_linear_rgba(&b)) {
+            Ok(m) => Some(m),
             Err(e) => {
                 self.warn(format!(
                     "image {} of material {material} could not be read ({e}); its base colour uses the factor alone",
@@ -633,29 +632,6 @@ fn triangles(mode: Mode, idx: &[u32]) -> Vec<[u32; 3]> {
             .collect(),
         _ => Vec::new(),
     }
-}
-
-/// The mean of an sRGB image's texels, decoded to linear RGB (alpha as stored).
-pub(crate) fn mean_linear_rgba(img: &image::RgbaImage) -> [f32; 4] {
-    let lut: Vec<f64> = (0..256)
-        .map(|i| {
-            let c = i as f64 / 255.0;
-            if c <= 0.04045 {
-                c / 12.92
-            } else {
-                ((c + 0.055) / 1.055).powf(2.4)
-            }
-        })
-        .collect();
-    let mut sum = [0.0f64; 4];
-    for p in img.pixels() {
-        for k in 0..3 {
-            sum[k] += lut[p[k] as usize];
-        }
-        sum[3] += p[3] as f64 / 255.0;
-    }
-    let n = (img.width() as f64 * img.height() as f64).max(1.0);
-    sum.map(|s| (s / n) as f32)
 }
 
 #[cfg(test)]
