@@ -1,6 +1,6 @@
 //! Build script: one thing only. It hashes the engine's sources (`src/`, `shaders/`) into
 //! `SCENESAMPLE_SOURCE_HASH`, so that what depends on the engine's speed (the `auto` backend's
-//! calibration file, `discretize::backend::cache`) is measured again after any change to it,
+//! calibration file, `calibration::cache`) is measured again after any change to it,
 //! not only after a change of the package's version.
 
 use std::path::{Path, PathBuf};

@@ -2,7 +2,7 @@
 // rasterise every triangle once per camera and keep, per pixel, the index of the nearest
 // triangle at the pixel centre. Depth, world position, normal and colour are resolved from that
 // index on the CPU in f64 by intersecting the pixel-centre ray with the triangle
-// (src/discretize/conventional.rs): nothing is read back from the hardware depth buffer, and no
+// (src/image/conventional.rs): nothing is read back from the hardware depth buffer, and no
 // attribute is interpolated in f32.
 //
 // An indexed draw of the scene's faces: the rasteriser's primitive index is the face index, and

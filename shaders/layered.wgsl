@@ -215,7 +215,7 @@ fn fs_peel(v: Peel, @builtin(primitive_index) prim: u32) -> @location(0) i32 {
     // fragments beyond d (1 + m). Window depth is reversed and, for camera z d, b / d - a in
     // perspective and c - d / (far - near) in orthographic, so z(d (1 + m)) is linear in the
     // previous depth: k·previous + c, with k and c formed on the host. The host then checks
-    // the same rule on the exact f64 depths (`discretize::nonredundant`) and removes what
+    // the same rule on the exact f64 depths (`nonredundant::render`) and removes what
     // float32 depth misjudged.
     if !(v.position.z < v.kc.x * previous + v.kc.y) {
         discard;

@@ -3,25 +3,29 @@
 //! The algorithms live in plain Rust modules (testable with `cargo test`); the Python module
 //! `scenesample._core` is declared in `py/` and compiled only with the `python` feature.
 
+// One room per paper: `nonredundant`, `epr`, `visibility_field`, `impostors`.
+pub mod epr;
+pub mod impostors;
+pub mod nonredundant;
+pub mod visibility_field;
+
+// The floors below them, which no paper owns.
+pub mod calibration;
 pub mod camera;
 pub mod counters;
-pub mod discretize;
-pub mod effects;
 pub mod error;
-pub mod evaluate;
 pub mod gpu;
+pub mod image;
 pub mod io;
 pub mod limits;
 pub mod process;
-pub mod reconstruct;
+pub mod random;
 pub mod scene;
 pub mod sets;
 pub mod shading;
-pub mod shadows;
-pub mod splat;
+pub mod shadow_rays;
 pub mod trace;
 pub mod types;
-pub mod visibility_field;
 
 #[cfg(feature = "python")]
 mod py;

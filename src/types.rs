@@ -1,7 +1,7 @@
 //! The types every room exchanges: depth images, point sets, per-stage timings, per-call stats,
-//! and the depth tolerance that makes two hits one surface. They sit below the rooms
-//! (`discretize`, `reconstruct`, `splat`, `shadows`, `effects`, `evaluate`, `io`, `gpu`,
-//! `trace`), so that none of those has to reach into another for them.
+//! and the depth tolerance that makes two hits one surface. They sit below the paper rooms
+//! (`nonredundant`, `epr`, `visibility_field`, `impostors`) and the floors they stand on
+//! (`image`, `calibration`, `gpu`, `trace`, `io`), so that none has to reach into another.
 
 use std::time::Instant;
 

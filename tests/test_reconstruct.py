@@ -150,7 +150,7 @@ def occluder_shadows(gpu):
     light = ss.AreaLight((0, 0, 3), (1, 0, 0), (0, 1, 0))
     return {
         d: ss.soft_shadows(scene, cam, light, samples=(6, 6), discretization=d, resolution=192)
-        for d in ss._shadows.DISCRETIZATIONS
+        for d in ss.nonredundant.shadows.DISCRETIZATIONS
     }
 
 
@@ -207,7 +207,7 @@ def test_an_unoccluded_scene_is_fully_lit(gpu):
     )
     cam = ss.Camera.look_at((0, -2, 2), (0, 0, 0), (0, 0, 1), yfov=0.8, width=40, height=40)
     light = ss.AreaLight((0, 0, 2), (1, 0, 0), (0, 1, 0))
-    for d in ss._shadows.DISCRETIZATIONS:
+    for d in ss.nonredundant.shadows.DISCRETIZATIONS:
         r = ss.soft_shadows(scene, cam, light, samples=(3, 3), discretization=d, resolution=64)
         assert r.mask.any() and (r.visibility == 1).all(), d
 
@@ -278,7 +278,7 @@ def test_a_surface_facing_away_from_the_light_is_dark(gpu):
     )
     cam = ss.Camera.look_at((0, -3, 0), (0, 0, 0), (0, 0, 1), yfov=0.5, width=24, height=24)
     light = ss.AreaLight((0, 2, 0), (0.5, 0, 0), (0, 0, 0.5))
-    for d in ss._shadows.DISCRETIZATIONS:
+    for d in ss.nonredundant.shadows.DISCRETIZATIONS:
         r = ss.soft_shadows(scene, cam, light, samples=(2, 2), discretization=d, resolution=32)
         assert r.mask.any() and (r.visibility[r.mask] == 0).all(), d
 

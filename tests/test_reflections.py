@@ -26,7 +26,7 @@ def results(room):
 
 def test_default_reflectors_are_the_mirror_spheres(room):
     scene, _ = room
-    refl = ss._epr.reflectors_of(scene)
+    refl = ss.epr.reflectors_of(scene)
     assert [r.name for r in refl] == [f"sphere {k}" for k in range(4)]
     for r in refl:
         pts = scene.vertices[scene.faces[r.triangles].reshape(-1)]
@@ -100,7 +100,7 @@ def test_results_are_deterministic(room):
 
 def test_adaptive_resolution_follows_the_reflector_and_moves_in_steps():
     scene = ss.scenes.reflective_room(spheres=1)
-    refl = ss._epr.reflectors_of(scene)[0]
+    refl = ss.epr.reflectors_of(scene)[0]
     near = ss.scenes.reflective_room_eye(512, distance=2.0)
     far = ss.scenes.reflective_room_eye(512, distance=6.0)
     a, b = ss.cube_resolution(near, refl), ss.cube_resolution(far, refl)

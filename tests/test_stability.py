@@ -260,7 +260,7 @@ def test_eye_inside_a_shadow_volume_and_touching_a_reflector():
     and at most the iVIR count times 2 (the eye-resolution spacing is never finer than the
     finest cube map's texel); and a light sample on the floor leaves visibility finite."""
     room = ss.scenes.reflective_room(spheres=1, seed=3, detail=2)
-    refl = ss._epr.reflectors_of(room)[0]
+    refl = ss.epr.reflectors_of(room)[0]
     c, r = np.asarray(refl.center), refl.radius
     eye = ss.Camera.look_at(tuple(c + [0, -r * 1.0001, 0]), tuple(c + [0, -5, 0]), (0, 0, 1),
                             yfov=1.0, width=64, height=64)  # fmt: skip

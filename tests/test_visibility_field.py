@@ -135,13 +135,13 @@ def test_more_ids_and_interpolation_never_miss_more(turtles):
     for cam in turtle_path(scene):
         missed = {}
         for n, f in ((1, f1), (5, f5)):
-            for interp in ss._field.INTERPOLATIONS:
+            for interp in ss.visibility_field.INTERPOLATIONS:
                 view = paper_view(f, cam, interpolate=interp)
                 missed[n, interp] = ss.evaluate(view, scene, "cells")["missed_cells"]
         for n in (1, 5):
             assert missed[n, "uv"] <= missed[n, "none"] and missed[n, "st"] <= missed[n, "none"]
             assert missed[n, "uv+st"] <= min(missed[n, "uv"], missed[n, "st"])
-        for interp in ss._field.INTERPOLATIONS:
+        for interp in ss.visibility_field.INTERPOLATIONS:
             assert missed[5, interp] <= missed[1, interp], missed
 
 
@@ -177,10 +177,7 @@ def test_how_many_visible_cells_each_setting_misses_on_turtles(turtles):
 def test_rendering_every_cell_is_rendering_the_scene(turtles):
     scene, field = turtles
     cam = turtle_path(scene)[0]
-    offsets, order = field.cell_triangles
-    d, drawn = ss._core.render_cells(
-        field._sorted, order, offsets, np.ones(len(field.cells), dtype=bool), cam
-    )
+    d, drawn = ss._core.render_cells(field._handle, np.ones(len(field.cells), dtype=bool), cam)
     full = ss.discretize(scene, cam, backend="gpu")
     assert drawn == scene.triangle_count
     np.testing.assert_array_equal(d["triangle"], full.triangle)
@@ -391,12 +388,12 @@ def test_quality_moves_along_the_tradeoff():
     scene = ss.scenes.turtles(count=4)
     settings = {
         q: ss.discretize(scene, method="visibility_field", quality=q, uv=(4, 4), st=(4, 4)).settings
-        for q in ss._field.QUALITIES
+        for q in ss.visibility_field.QUALITIES
     }
     assert settings["fast"]["supersample"] < settings["exact"]["supersample"]
     assert settings["fast"]["trust"] is None and settings["exact"]["trust"] == 1
     assert all("overridden: uv, st" in s["rule"] for s in settings.values())
-    rule = ss._field.default_settings(scene, ss.Slab.six(scene), "exact")
+    rule = ss.visibility_field.default_settings(scene, ss.Slab.six(scene), "exact")
     assert rule["uv"] == (24, 24) and rule["cell_size"] > 0
 
 
@@ -420,23 +417,71 @@ def test_warnings_for_slabs_that_miss_the_bounds_and_cameras_inside():
     assert m["hole_pixels"] == 0 and view.covered < 1
 
 
+def with_ids(field: ss.VisibilityField, ids: np.ndarray) -> ss.VisibilityField:
+    """The field restored as unpickling restores it, with other ids."""
+    reduce, (state,) = field.__reduce__()
+    state["arrays"] = (ids, *state["arrays"][1:])
+    return reduce(state)
+
+
 def test_a_field_naming_a_cell_that_does_not_exist_is_refused(turtles):
     """A view reads the field's arrays in place and checks the ids it reads: a corrupted id
-    raises instead of writing out of bounds, and a non-contiguous copy reads the same."""
-    import copy
-
+    (here in a field restored as a tampered pickle would be) raises instead of writing out of
+    bounds, and a field restored from a non-contiguous copy reads the same."""
     scene, field = turtles
     cam = turtle_path(scene, 1)[0]
     good = ss.reconstruct(field, cam, fallback=False)
-    bad = copy.copy(field)
-    bad.ids = np.full_like(field.ids, len(field.cell_of) + 10**6)
+    bad = with_ids(field, np.full_like(field.ids, len(field.cell_of) + 10**6))
     with pytest.raises(ss.InputError, match="names cell"):
         ss.reconstruct(bad, cam, fallback=False)
-    strided = copy.copy(field)
-    strided.ids = np.asfortranarray(field.ids)
+    strided = with_ids(field, np.asfortranarray(field.ids))
     again = ss.reconstruct(strided, cam, fallback=False)
     assert np.array_equal(again.marked, good.marked)
     assert good.marked.any()
+
+
+def test_an_unpickled_field_views_the_same_bytes(turtles):
+    """The field is a Rust object: Python sees read-only views of its arrays, a pickle carries
+    them byte for byte (pickling the unpickled field gives the same bytes), and a view from
+    the unpickled field, on either backend, is the original's, bit for bit."""
+    import pickle
+
+    scene, field = turtles
+    for name in ("ids", "cells_hit", "cell_of", "cell_bounds", "cells"):
+        a = getattr(field, name)
+        assert not a.flags.writeable, name
+        with pytest.raises(ValueError):
+            a.flags.writeable = True
+    data = pickle.dumps(field)
+    back = pickle.loads(data)
+    assert pickle.dumps(back) == data
+    for name in ("ids", "cells_hit", "cell_of", "cell_bounds", "cells"):
+        assert getattr(back, name).tobytes() == getattr(field, name).tobytes(), name
+    assert back.settings == field.settings and back.stats == field.stats
+    cam = turtle_path(scene, 1)[0]
+    for backend in ("gpu", "cpu"):
+        a, b = (ss.reconstruct(f, cam, backend=backend) for f in (field, back))
+        assert a.marked.tobytes() == b.marked.tobytes()
+        assert a.image.depth.tobytes() == b.image.depth.tobytes()
+        assert a.image.triangle.tobytes() == b.image.triangle.tobytes()
+        assert a.stats == b.stats
+    assert a.marked.any()
+    # A tampered state is refused with a typed error, naming what is wrong.
+    reduce, (state,) = field.__reduce__()
+    ids, hits, order, offsets, *rest = state["arrays"]
+    twice = order.copy()
+    twice[1] = twice[0]
+    short = offsets.copy()
+    short[-1] -= 1
+    for arrays, match in (
+        ((ids[..., 0], hits, order, offsets), "ids must be"),
+        ((ids, hits[..., :1], order, offsets), "cells_hit must be"),
+        ((ids, hits, order[:-1], offsets), "triangles must be"),
+        ((ids, hits, twice, offsets), "permutation"),
+        ((ids, hits, order, short), "offsets"),
+    ):
+        with pytest.raises(ss.InputError, match=match):
+            reduce({**state, "arrays": (*arrays, *rest)})
 
 
 @pytest.mark.parametrize("offset", [(0.0, 0.0), (0.37, -0.21), (-0.45, 0.3)])

@@ -16,18 +16,15 @@ from . import _env, errors, methods, plot, references, scenes  # noqa: F401
 from ._api import device_info, discretize, reconstruct
 from ._core import Camera
 from ._core import __version__ as __version__
-from ._epr import Points, Reflector, SplatBuffers, cube_resolution, splat
 from ._evaluate import evaluate, intermediate_cameras
-from ._field import FieldView, Slab, VisibilityField
-from ._impostors import Impostors, ImpostorView
-from ._omni import OmniShadowResult, omni_shadows
 from ._plan import Effect, Frame, plan, render
 from ._points import closest_points, occupancy, signed_distance, winding_number
 from ._rays import all_hits, bvh_stats, cast_rays, count_hits, occluded
-from ._reflections import ReflectionResult, reflection_reference, reflections
 from ._scene import Scene
-from ._shadows import AreaLight, ShadowResult, soft_shadows
 from ._tradeoff import tradeoff
+from .epr.omni import OmniShadowResult, omni_shadows
+from .epr.points import Points, Reflector, SplatBuffers, cube_resolution, splat
+from .epr.reflections import ReflectionResult, reflection_reference, reflections
 from .errors import (
     ExrError,
     GpuError,
@@ -40,7 +37,10 @@ from .errors import (
     ScenesampleError,
     SceneWarning,
 )
+from .impostors.cells import Impostors, ImpostorView
+from .nonredundant.shadows import AreaLight, ShadowResult, soft_shadows
 from .results import AllHits, ClosestPoints, DepthImages, Mesh, RayHits
+from .visibility_field import FieldView, Slab, VisibilityField
 
 __all__ = [
     "AllHits",

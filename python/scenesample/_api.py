@@ -8,14 +8,15 @@ from collections.abc import Sequence
 from typing import Any, Literal, Optional, Union, overload
 
 from . import _core
-from ._depth import camera_list, offset_images
-from ._epr import Points
-from ._field import FieldView, VisibilityField
-from ._impostors import Impostors, ImpostorView
+from ._conventional import camera_list
 from ._scene import Scene
+from .epr.points import Points
 from .errors import GpuUnavailableError, InputError
+from .impostors.cells import Impostors, ImpostorView
 from .methods import DISCRETIZE, RECONSTRUCT, check_options, field_view, impostor_view
+from .nonredundant.images import offset_images
 from .results import DepthImages, Mesh
+from .visibility_field import FieldView, VisibilityField
 
 __all__ = ["discretize", "reconstruct", "device_info", "offset_images"]
 

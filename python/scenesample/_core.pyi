@@ -21,6 +21,7 @@ _R = TypeVar("_R", covariant=True)
 
 __all__ = [
     "Camera",
+    "Field",
     "Impostors",
     "Scene",
     "__version__",
@@ -331,17 +332,9 @@ class _ReflectionsDict(TypedDict):
     ops: _Ops
 
 class _FieldDict(TypedDict):
-    cell_of: np.ndarray
-    cells: np.ndarray
-    cell_bounds: np.ndarray
-    offsets: np.ndarray
-    triangles: np.ndarray
     groups: int
-    sorted_scene: Scene
     cell_seconds: float
     bvh_seconds: float
-    ids: np.ndarray
-    cells_hit: np.ndarray
     rays: int
     timings: dict[str, float]
 
@@ -538,6 +531,38 @@ def reflections(
 ) -> _ReflectionsDict: ...
 def default_slab(scene: Scene, axis: Optional[int], margin: float, widen: float) -> np.ndarray: ...
 def six_slabs(scene: Scene, margin: float) -> np.ndarray: ...
+
+@final
+class Field:
+    @staticmethod
+    def restore(
+        scene: Scene,
+        slabs: Sequence[ArrayLike],
+        ids: np.ndarray,
+        cells_hit: np.ndarray,
+        triangles: np.ndarray,
+        offsets: np.ndarray,
+        cells: np.ndarray,
+        cell_bounds: np.ndarray,
+        cell_of: np.ndarray,
+    ) -> Field: ...
+    @property
+    def ids(self) -> np.ndarray: ...
+    @property
+    def cells_hit(self) -> np.ndarray: ...
+    @property
+    def triangles(self) -> np.ndarray: ...
+    @property
+    def offsets(self) -> np.ndarray: ...
+    @property
+    def cells(self) -> np.ndarray: ...
+    @property
+    def cell_bounds(self) -> np.ndarray: ...
+    @property
+    def cell_of(self) -> np.ndarray: ...
+    @property
+    def slabs(self) -> np.ndarray: ...
+
 def visibility_field(
     scene: Scene,
     slabs: Sequence[ArrayLike],
@@ -550,14 +575,9 @@ def visibility_field(
     supersample: int,
     jitter: Optional[int],
     progress: Optional[Callable[[int, int], object]] = None,
-) -> _FieldDict: ...
+) -> tuple[Field, _FieldDict]: ...
 def field_view(
-    sorted_scene: Scene,
-    triangles: np.ndarray,
-    offsets: np.ndarray,
-    slabs: Sequence[ArrayLike],
-    ids: np.ndarray,
-    cells_hit: np.ndarray,
+    field: Field,
     camera: Camera,
     interpolate: _Interpolation,
     subsample: int,
@@ -567,9 +587,7 @@ def field_view(
     reference: bool = False,
 ) -> _FieldViewDict: ...
 def render_cells(
-    sorted_scene: Scene,
-    triangles: np.ndarray,
-    offsets: np.ndarray,
+    field: Field,
     marked: np.ndarray,
     camera: Camera,
 ) -> tuple[_ImagesDict, int]: ...

@@ -9,17 +9,17 @@ from typing import Any, Literal, Optional
 import numpy as np
 
 from . import _core
-from ._depth import conventional
-from ._field import FieldView, cells_metric
+from ._conventional import conventional
 from ._images import display, image_metrics, impostor_metrics, reflection_metrics
-from ._impostors import ImpostorView
-from ._omni import OmniShadowResult
-from ._reflections import ReflectionResult
 from ._scene import Scene
-from ._shadows import ShadowResult
 from ._surface import surface_metrics
+from .epr.omni import OmniShadowResult
+from .epr.reflections import ReflectionResult
 from .errors import InputError
+from .impostors.cells import ImpostorView
+from .nonredundant.shadows import ShadowResult
 from .results import DepthImages, Mesh
+from .visibility_field import FieldView, cells_metric
 
 __all__ = ["evaluate", "intermediate_cameras"]
 

@@ -12,14 +12,14 @@ from typing import Any, Optional, Union
 import numpy as np
 
 from . import _core
-from ._depth import conventional
-from ._epr import reflectors_of
-from ._omni import omni_shadows
-from ._reflections import reflections
+from ._conventional import conventional
 from ._scene import Scene
-from ._shadows import AreaLight, soft_shadows
+from .epr.omni import omni_shadows
+from .epr.points import reflectors_of
+from .epr.reflections import reflections
 from .errors import GpuError, InputError
 from .imageio import auto_exposure, linear_to_srgb
+from .nonredundant.shadows import AreaLight, soft_shadows
 
 __all__ = ["Effect", "Frame", "plan", "render", "rates", "QUALITY", "THROUGHPUT"]
 
@@ -326,7 +326,7 @@ def plan(
       position, the lighting restricted to its cone); a directional light lights the frame
       unshadowed;
     - reflective materials (metallic >= 0.9 and roughness <= 0.1; see
-      :func:`scenesample._epr.reflectors_of`) call for cube-mapped reflections (§4), one
+      :func:`scenesample.epr.reflectors_of`) call for cube-mapped reflections (§4), one
       reflector per reflective object.
 
     ``camera`` (default: a 512² view) and ``quality`` ("fast", "balanced", "high") set what

@@ -14,15 +14,15 @@ import numpy as np
 from . import _core
 from ._api import discretize, reconstruct
 from ._evaluate import evaluate
-from ._field import Slab
-from ._impostors import ImpostorView
-from ._omni import omni_shadows
 from ._plan import emissive_lights
 from ._progress import Bar, Progress
-from ._reflections import reflection_reference, reflections
 from ._scene import Scene
-from ._shadows import AreaLight, soft_shadows
+from .epr.omni import omni_shadows
+from .epr.reflections import reflection_reference, reflections
 from .errors import InputError
+from .impostors.cells import ImpostorView
+from .nonredundant.shadows import AreaLight, soft_shadows
+from .visibility_field import Slab
 
 __all__ = ["tradeoff", "KNOBS", "default_camera"]
 

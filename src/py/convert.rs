@@ -218,8 +218,8 @@ pub fn rows_owned<'py, T: numpy::Element, const K: usize>(
 }
 
 /// A redundancy definition by name ("pixel" or "visibility").
-pub fn redundancy(py: Python<'_>, name: &str) -> PyResult<crate::discretize::Redundancy> {
-    crate::discretize::Redundancy::parse(name).ok_or_else(|| {
+pub fn redundancy(py: Python<'_>, name: &str) -> PyResult<crate::nonredundant::Redundancy> {
+    crate::nonredundant::Redundancy::parse(name).ok_or_else(|| {
         input(
             py,
             format!("redundancy must be 'pixel' or 'visibility', got {name:?}"),

@@ -7,8 +7,8 @@ use super::camera::PyCamera;
 use super::convert::{array, flat_i32, rows_f64, rows_owned, stats};
 use super::errors::input;
 use super::scene::PyScene;
-use crate::discretize::epr::Reflector;
-use crate::effects::reflections::{Method, ReflectionOptions};
+use crate::epr::points::Reflector;
+use crate::epr::reflections::{Method, ReflectionOptions};
 
 /// Reflectors from parallel lists: centres (R, 3), radii, triangle ids per reflector.
 pub fn reflectors(
@@ -84,7 +84,7 @@ pub fn reflections<'py>(
     let s = scene.inner.clone();
     let cam = eye.inner.clone();
     let (r, ops) = super::run_counted(py, || {
-        crate::effects::reflections::reflections(&s, &cam, &refl, &opts)
+        crate::epr::reflections::reflections(&s, &cam, &refl, &opts)
     })?;
     let (h, w) = (r.height as usize, r.width as usize);
     let d = PyDict::new(py);

@@ -63,7 +63,7 @@ pub fn sampling_metrics<'py>(
     let frames: Vec<_> = frames.into_iter().map(|c| c.inner).collect();
     let s = scene.inner.clone();
     let m = super::run(py, || {
-        crate::evaluate::sampling_metrics(&s, &img, &reference, &frames, mode, cull_backfaces)
+        crate::nonredundant::sampling_metrics(&s, &img, &reference, &frames, mode, cull_backfaces)
     })?;
     let n = m.samples.len();
     let d = PyDict::new(py);

@@ -1,6 +1,11 @@
-//! The visibility field (visibility-field.txt §3-4) from Python arguments.
+//! The visibility field (visibility-field.txt §3-4) from Python arguments. A built field stays
+//! on the Rust side ([`PyField`]): Python reads its arrays as read-only numpy views, and a view
+//! sends only the camera and its options across.
 
-use numpy::{PyReadonlyArray1, PyReadonlyArrayDyn, PyUntypedArrayMethods};
+use std::sync::Arc;
+
+use numpy::ndarray::{Array, ArrayD, IxDyn};
+use numpy::{PyArray, PyReadonlyArray1, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -64,7 +69,226 @@ pub fn six_slabs<'py>(
     array(py, rows, &[slabs.len(), 2, 3, 3])
 }
 
-/// Cells and one sampled field per slab.
+/// A built visibility field (visibility-field.txt §3), owned here: the cell-sorted scene its
+/// views draw and trace, its slabs, the sampled ids and counts, and the cells. Python holds
+/// this handle and read-only numpy views of its arrays (nothing can change them, so what a view
+/// reads is what was built); `field_view` and `render_cells` take it whole. Every array is in
+/// C order (made by [`owned`] or [`taken`]), so each reads as one flat slice.
+#[pyclass(name = "Field", module = "scenesample._core", frozen)]
+pub struct PyField {
+    /// The scene with its faces in cell order: sorted face `i` is the scene's `order[i]`.
+    sorted: Arc<crate::scene::Scene>,
+    slabs: Vec<Slab>,
+    /// (K, U, V, S, T, n) cell ids, -1 where fewer cells were hit.
+    ids: ArrayD<i32>,
+    /// (K, U, V, S, T): how many distinct cells each sample's rays hit.
+    hits: ArrayD<u16>,
+    order: ArrayD<u32>,
+    /// (C + 1,): cell c holds sorted faces `offsets[c]..offsets[c + 1]`.
+    offsets: ArrayD<u32>,
+    /// (C, 4): group, x, y, z.
+    cells: ArrayD<i32>,
+    /// (C, 2, 3): each cell's grid box.
+    cell_bounds: ArrayD<f32>,
+    /// (F,): each triangle's cell.
+    cell_of: ArrayD<u32>,
+}
+
+fn owned<T: Clone>(v: Vec<T>, shape: &[usize]) -> PyResult<ArrayD<T>> {
+    Array::from_shape_vec(IxDyn(shape), v)
+        .map_err(|e| pyo3::exceptions::PyValueError::new_err(e.to_string()))
+}
+
+/// A read-only numpy view of an array the handle owns; the view keeps the handle alive.
+fn view<'py, T: numpy::Element>(
+    this: &Bound<'py, PyField>,
+    array: &ArrayD<T>,
+) -> PyResult<Bound<'py, PyAny>> {
+    // SAFETY: the handle is frozen and never changes or moves its arrays' buffers, and the view
+    // holds a reference to the handle (its numpy base), so the memory outlives the view.
+    let a = unsafe { PyArray::borrow_from_array(array, this.clone().into_any()) };
+    a.getattr("flags")?.setattr("writeable", false)?;
+    Ok(a.into_any())
+}
+
+/// A (..) array argument's values and shape, checked against `expect` (`None`: any length).
+fn taken<T: numpy::Element + Clone>(
+    py: Python<'_>,
+    a: &PyReadonlyArrayDyn<'_, T>,
+    name: &str,
+    expect: &[Option<usize>],
+) -> PyResult<ArrayD<T>> {
+    let shape = a.shape();
+    let fits = shape.len() == expect.len()
+        && shape
+            .iter()
+            .zip(expect)
+            .all(|(&s, e)| e.is_none_or(|e| e == s));
+    if !fits {
+        let want: Vec<String> = expect
+            .iter()
+            .map(|e| e.map_or("_".into(), |e| e.to_string()))
+            .collect();
+        return Err(input(
+            py,
+            format!("field {name} must be ({}), got {shape:?}", want.join(", ")),
+        ));
+    }
+    // In C order whatever the argument's strides: the views and `samples` read it flat.
+    Ok(a.as_array().as_standard_layout().into_owned())
+}
+
+impl PyField {
+    /// The fields, one per slab, read in place.
+    fn samples(&self) -> Vec<(Slab, vf::Samples<'_>)> {
+        let shape = self.ids.shape();
+        let per = shape[1..5].iter().product::<usize>();
+        let n = shape[5];
+        let (ids, hits) = (self.ids.as_slice(), self.hits.as_slice());
+        let (ids, hits) = (ids.unwrap_or(&[]), hits.unwrap_or(&[]));
+        (self.slabs.iter().enumerate())
+            .map(|(k, s)| {
+                let f = vf::Samples {
+                    dims: [shape[1], shape[2], shape[3], shape[4]].map(|d| d as u32),
+                    n: n as u32,
+                    ids: &ids[k * per * n..(k + 1) * per * n],
+                    hits: &hits[k * per..(k + 1) * per],
+                };
+                (*s, f)
+            })
+            .collect()
+    }
+
+    fn sorted(&self) -> crate::error::Result<vf::SortedScene<'_>> {
+        let order = self.order.as_slice().unwrap_or(&[]);
+        let offsets = self.offsets.as_slice().unwrap_or(&[]);
+        vf::SortedScene::new(&self.sorted, order, offsets)
+    }
+}
+
+#[pymethods]
+impl PyField {
+    /// A field from its arrays (what `VisibilityField` pickles): the scene it was built for,
+    /// then what the getters below return. Every shape is checked, the face order must be a
+    /// permutation and the offsets must rise from 0 to the face count; the cell-sorted scene,
+    /// its BVH and its edge neighbours are rebuilt, as the build made them.
+    #[staticmethod]
+    #[pyo3(signature = (scene, slabs, ids, cells_hit, triangles, offsets, cells, cell_bounds, cell_of))]
+    #[allow(clippy::too_many_arguments)]
+    fn restore(
+        py: Python<'_>,
+        scene: &PyScene,
+        slabs: Vec<Bound<'_, PyAny>>,
+        ids: PyReadonlyArrayDyn<'_, i32>,
+        cells_hit: PyReadonlyArrayDyn<'_, u16>,
+        triangles: PyReadonlyArrayDyn<'_, u32>,
+        offsets: PyReadonlyArrayDyn<'_, u32>,
+        cells: PyReadonlyArrayDyn<'_, i32>,
+        cell_bounds: PyReadonlyArrayDyn<'_, f32>,
+        cell_of: PyReadonlyArrayDyn<'_, u32>,
+    ) -> PyResult<Self> {
+        let slabs = slabs
+            .iter()
+            .map(|s| slab(py, s))
+            .collect::<PyResult<Vec<_>>>()?;
+        let faces = scene.inner.triangle_count();
+        let k = Some(slabs.len());
+        let ids = taken(py, &ids, "ids", &[k, None, None, None, None, None])?;
+        let dims: Vec<Option<usize>> = ids.shape()[..5].iter().map(|&d| Some(d)).collect();
+        let hits = taken(py, &cells_hit, "cells_hit", &dims)?;
+        let order = taken(py, &triangles, "triangles", &[Some(faces)])?;
+        let offsets = taken(py, &offsets, "offsets", &[None])?;
+        let c = Some(offsets.len().saturating_sub(1));
+        let cells = taken(py, &cells, "cells", &[c, Some(4)])?;
+        let cell_bounds = taken(py, &cell_bounds, "cell_bounds", &[c, Some(2), Some(3)])?;
+        let cell_of = taken(py, &cell_of, "cell_of", &[Some(faces)])?;
+        let s = scene.inner.clone();
+        let order_v = order.as_slice().unwrap_or(&[]);
+        let sorted = super::run(py, || {
+            let sorted = s.permuted(order_v)?;
+            vf::SortedScene::new(&sorted, order_v, offsets.as_slice().unwrap_or(&[]))?;
+            let frame = crate::image::pixels::TraceFrame::of(&sorted)?;
+            crate::trace::Bvh::of(frame.scene(&sorted));
+            crate::scene::adjacency::EdgeNeighbours::of(&sorted);
+            Ok(sorted)
+        })?;
+        Ok(PyField {
+            sorted: Arc::new(sorted),
+            slabs,
+            ids,
+            hits,
+            order,
+            offsets,
+            cells,
+            cell_bounds,
+            cell_of,
+        })
+    }
+
+    /// (K, U, V, S, T, n) int32, read-only.
+    #[getter]
+    fn ids<'py>(this: &Bound<'py, Self>) -> PyResult<Bound<'py, PyAny>> {
+        view(this, &this.get().ids)
+    }
+
+    /// (K, U, V, S, T) uint16, read-only.
+    #[getter]
+    fn cells_hit<'py>(this: &Bound<'py, Self>) -> PyResult<Bound<'py, PyAny>> {
+        view(this, &this.get().hits)
+    }
+
+    /// (F,) uint32, read-only: the triangles in cell order.
+    #[getter]
+    fn triangles<'py>(this: &Bound<'py, Self>) -> PyResult<Bound<'py, PyAny>> {
+        view(this, &this.get().order)
+    }
+
+    /// (C + 1,) uint32, read-only.
+    #[getter]
+    fn offsets<'py>(this: &Bound<'py, Self>) -> PyResult<Bound<'py, PyAny>> {
+        view(this, &this.get().offsets)
+    }
+
+    /// (C, 4) int32, read-only: group, x, y, z.
+    #[getter]
+    fn cells<'py>(this: &Bound<'py, Self>) -> PyResult<Bound<'py, PyAny>> {
+        view(this, &this.get().cells)
+    }
+
+    /// (C, 2, 3) float32, read-only.
+    #[getter]
+    fn cell_bounds<'py>(this: &Bound<'py, Self>) -> PyResult<Bound<'py, PyAny>> {
+        view(this, &this.get().cell_bounds)
+    }
+
+    /// (F,) uint32, read-only.
+    #[getter]
+    fn cell_of<'py>(this: &Bound<'py, Self>) -> PyResult<Bound<'py, PyAny>> {
+        view(this, &this.get().cell_of)
+    }
+
+    /// (K, 2, 3, 3) float64, a fresh array: each slab's uv then st (origin, u edge, v edge).
+    #[getter]
+    fn slabs<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let rows: Vec<f64> = (self.slabs.iter())
+            .flat_map(|s| [s.uv.origin, s.uv.u, s.uv.v, s.st.origin, s.st.u, s.st.v])
+            .flat_map(|p| p.to_array())
+            .collect();
+        array(py, rows, &[self.slabs.len(), 2, 3, 3])
+    }
+
+    fn __repr__(&self) -> String {
+        let s = self.ids.shape();
+        format!(
+            "Field({} slabs, {:?} samples, {} cells)",
+            s[0],
+            &s[1..],
+            self.cells.shape()[0]
+        )
+    }
+}
+
+/// Cells and one sampled field per slab: the handle and what the build measured.
 #[pyfunction]
 #[pyo3(signature = (scene, slabs, uv, st, grid, cell_size, grouping, ids_per_sample, supersample, jitter, progress=None))]
 #[allow(clippy::too_many_arguments)]
@@ -81,7 +305,7 @@ pub fn visibility_field<'py>(
     supersample: u32,
     jitter: Option<u64>,
     progress: Option<Py<PyAny>>,
-) -> PyResult<Bound<'py, PyDict>> {
+) -> PyResult<(PyField, Bound<'py, PyDict>)> {
     let supersample = vf::Supersample {
         per_axis: supersample,
         jitter,
@@ -130,56 +354,55 @@ pub fn visibility_field<'py>(
         bvh_seconds,
     } = built;
     let d = PyDict::new(py);
-    let c = cells.table.len();
-    d.set_item("cell_of", array(py, cells.cell_of, &[s.triangle_count()])?)?;
-    d.set_item("cells", array(py, cells.table.into_flattened(), &[c, 4])?)?;
-    let bounds: Vec<f32> = cells.bounds.iter().flatten().flatten().copied().collect();
-    d.set_item("cell_bounds", array(py, bounds, &[c, 2, 3])?)?;
-    d.set_item("offsets", array(py, cells.offsets, &[c + 1])?)?;
-    let nt = cells.triangles.len();
-    d.set_item("triangles", array(py, cells.triangles, &[nt])?)?;
     d.set_item("groups", cells.groups)?;
-    d.set_item(
-        "sorted_scene",
-        PyScene {
-            inner: std::sync::Arc::new(sorted),
-        },
-    )?;
     d.set_item("cell_seconds", cell_seconds)?;
     d.set_item("bvh_seconds", bvh_seconds)?;
-    // All slabs share their dimensions: one (K, U, V, S, T, n) array of ids, one (K, U, V, S,
-    // T) of the cells each sample's rays hit.
-    let k = fields.len();
-    let dims = [uv[0], uv[1], st[0], st[1]].map(|x| x as usize);
     let rays: u64 = fields.iter().map(|f| f.rays).sum();
     let mut timings = crate::types::Timings::new();
     for f in &fields {
         timings.merge(&f.timings);
     }
-    let (ids, hits): (Vec<Vec<i32>>, Vec<Vec<u16>>) =
-        fields.into_iter().map(|f| (f.ids, f.hits)).unzip();
-    let n = ids_per_sample as usize;
-    let shape = [k, dims[0], dims[1], dims[2], dims[3], n];
-    d.set_item("ids", array(py, ids.concat(), &shape)?)?;
-    d.set_item("cells_hit", array(py, hits.concat(), &shape[..5])?)?;
     d.set_item("rays", rays)?;
     d.set_item("timings", super::convert::timings(py, &timings)?)?;
-    Ok(d)
+    // All slabs share their dimensions: one (K, U, V, S, T, n) array of ids, one (K, U, V, S,
+    // T) of the cells each sample's rays hit.
+    let k = fields.len();
+    let dims = [uv[0], uv[1], st[0], st[1]].map(|x| x as usize);
+    let (ids, hits): (Vec<Vec<i32>>, Vec<Vec<u16>>) =
+        fields.into_iter().map(|f| (f.ids, f.hits)).unzip();
+    let shape = [
+        k,
+        dims[0],
+        dims[1],
+        dims[2],
+        dims[3],
+        ids_per_sample as usize,
+    ];
+    let c = cells.table.len();
+    let bounds: Vec<f32> = cells.bounds.iter().flatten().flatten().copied().collect();
+    let nt = cells.triangles.len();
+    let field = PyField {
+        sorted: Arc::new(sorted),
+        slabs,
+        ids: owned(ids.concat(), &shape)?,
+        hits: owned(hits.concat(), &shape[..5])?,
+        order: owned(cells.triangles, &[nt])?,
+        offsets: owned(cells.offsets, &[c + 1])?,
+        cells: owned(cells.table.into_flattened(), &[c, 4])?,
+        cell_bounds: owned(bounds, &[c, 2, 3])?,
+        cell_of: owned(cells.cell_of, &[s.triangle_count()])?,
+    };
+    Ok((field, d))
 }
 
-/// Resample the fields from a camera, trace the pixels they cannot answer (with `fallback`),
-/// and render the marked cells.
+/// Resample the field from a camera, trace the pixels it cannot answer (with `fallback`), and
+/// render the marked cells.
 #[pyfunction]
-#[pyo3(signature = (sorted_scene, triangles, offsets, slabs, ids, cells_hit, camera, interpolate, subsample, fallback, trust, backend, reference=false))]
+#[pyo3(signature = (field, camera, interpolate, subsample, fallback, trust, backend, reference=false))]
 #[allow(clippy::too_many_arguments)]
 pub fn field_view<'py>(
     py: Python<'py>,
-    sorted_scene: &PyScene,
-    triangles: PyReadonlyArray1<'py, u32>,
-    offsets: PyReadonlyArray1<'py, u32>,
-    slabs: Vec<Bound<'py, PyAny>>,
-    ids: PyReadonlyArrayDyn<'py, i32>,
-    cells_hit: PyReadonlyArrayDyn<'py, u16>,
+    field: &PyField,
     camera: &PyCamera,
     interpolate: &str,
     subsample: u32,
@@ -204,8 +427,6 @@ pub fn field_view<'py>(
             format!("interpolate must be 'none', 'uv', 'st' or 'uv+st', got {interpolate:?}"),
         ));
     };
-    let fields = fields(py, &slabs, &ids, &cells_hit)?;
-    let (order, offsets) = (triangles.as_array().to_vec(), offsets.as_array().to_vec());
     let how = vf::ViewOptions {
         interpolate: interp,
         subsample,
@@ -214,11 +435,8 @@ pub fn field_view<'py>(
         cpu: traced,
         reference,
     };
-    let (scene, cam) = (&sorted_scene.inner, &camera.inner);
-    let v = super::run(py, || {
-        let sorted = vf::SortedScene::new(scene, &order, &offsets)?;
-        vf::view(&sorted, &fields, cam, &how)
-    })?;
+    let (fields, cam) = (field.samples(), &camera.inner);
+    let v = super::run(py, || vf::view(&field.sorted()?, &fields, cam, &how))?;
     let d = PyDict::new(py);
     let cells = v.marks.marked.len();
     d.set_item("marked", array(py, v.marks.marked, &[cells])?)?;
@@ -235,67 +453,18 @@ pub fn field_view<'py>(
     Ok(d)
 }
 
-/// The fields of a (K, U, V, S, T, n) id array and its (K, U, V, S, T) counts of cells hit,
-/// one per slab, read in place (both C-contiguous).
-fn fields<'a>(
-    py: Python<'_>,
-    slabs: &[Bound<'_, PyAny>],
-    ids: &'a PyReadonlyArrayDyn<'_, i32>,
-    hits: &'a PyReadonlyArrayDyn<'_, u16>,
-) -> PyResult<Vec<(Slab, vf::Samples<'a>)>> {
-    let shape = ids.shape().to_vec();
-    if shape.len() != 6 || shape[0] != slabs.len() || hits.shape() != &shape[..5] {
-        return Err(input(
-            py,
-            format!(
-                "field ids must be (K, U, V, S, T, n) and cells_hit (K, U, V, S, T) for K = {} \
-                 slabs, got {shape:?} and {:?}",
-                slabs.len(),
-                hits.shape()
-            ),
-        ));
-    }
-    let (Ok(all_ids), Ok(all_hits)) = (ids.as_slice(), hits.as_slice()) else {
-        return Err(input(
-            py,
-            "field ids and cells_hit must be C-contiguous".into(),
-        ));
-    };
-    let per = shape[1..5].iter().product::<usize>();
-    let mut out = Vec::with_capacity(slabs.len());
-    for (k, s) in slabs.iter().enumerate() {
-        let f = vf::Samples {
-            dims: [shape[1], shape[2], shape[3], shape[4]].map(|d| d as u32),
-            n: shape[5] as u32,
-            ids: &all_ids[k * per * shape[5]..(k + 1) * per * shape[5]],
-            hits: &all_hits[k * per..(k + 1) * per],
-        };
-        out.push((slab(py, s)?, f));
-    }
-    Ok(out)
-}
-
-/// Render only the marked cells (of the cell-sorted scene) from a camera: the depth image's
-/// dict, triangle ids of the original scene, and the triangles drawn.
+/// Render only the marked cells of a field's cell-sorted scene from a camera: the depth
+/// image's dict (triangle ids of the original scene) and the triangles drawn.
 #[pyfunction]
-#[pyo3(signature = (sorted_scene, triangles, offsets, marked, camera))]
+#[pyo3(signature = (field, marked, camera))]
 pub fn render_cells<'py>(
     py: Python<'py>,
-    sorted_scene: &PyScene,
-    triangles: PyReadonlyArray1<'py, u32>,
-    offsets: PyReadonlyArray1<'py, u32>,
+    field: &PyField,
     marked: PyReadonlyArray1<'py, bool>,
     camera: &PyCamera,
 ) -> PyResult<(Bound<'py, PyDict>, usize)> {
-    let (order, offsets) = (triangles.as_array().to_vec(), offsets.as_array().to_vec());
     let marked = marked.as_array().to_vec();
-    let (scene, cam) = (&sorted_scene.inner, &camera.inner);
-    let (img, drawn) = super::run(py, || {
-        vf::render_marked(
-            &vf::SortedScene::new(scene, &order, &offsets)?,
-            &marked,
-            cam,
-        )
-    })?;
+    let cam = &camera.inner;
+    let (img, drawn) = super::run(py, || vf::render_marked(&field.sorted()?, &marked, cam))?;
     Ok((super::render::images_dict(py, img)?, drawn))
 }

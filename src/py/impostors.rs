@@ -9,8 +9,8 @@ use super::camera::PyCamera;
 use super::convert::{array, stats};
 use super::errors::input;
 use super::scene::PyScene;
-use crate::discretize::impostors::{self as di, ImpostorOptions, ImpostorProjection, Impostors};
-use crate::reconstruct::impostors as ri;
+use crate::impostors::build::{self as di, ImpostorOptions, ImpostorProjection, Impostors};
+use crate::impostors::view as ri;
 
 /// The built impostors, kept on the Rust side for `impostor_view`.
 #[pyclass(name = "Impostors", module = "scenesample._core", frozen)]

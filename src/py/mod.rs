@@ -188,6 +188,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(field::field_view, m)?)?;
     m.add_function(wrap_pyfunction!(field::render_cells, m)?)?;
     m.add_class::<impostors::PyImpostors>()?;
+    m.add_class::<field::PyField>()?;
     m.add_function(wrap_pyfunction!(impostors::impostors, m)?)?;
     m.add_function(wrap_pyfunction!(impostors::impostor_view, m)?)?;
     m.add_function(wrap_pyfunction!(impostors::render_lit, m)?)?;

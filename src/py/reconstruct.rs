@@ -6,7 +6,9 @@ use pyo3::types::PyDict;
 use super::camera::PyCamera;
 use super::convert::{array, flat_i32, rows_f32, rows_owned};
 use super::errors::input;
-use crate::reconstruct::{reconstruct_hybrid, reconstruct_mesh, reconstruct_points, Mesh};
+use crate::nonredundant::reconstruct::{
+    reconstruct_hybrid, reconstruct_mesh, reconstruct_points, Mesh,
+};
 use crate::types::DepthImages;
 
 /// A `DepthImages` (any object with its fields) as the Rust struct, checked for size.

@@ -10,7 +10,7 @@ use super::camera::PyCamera;
 use super::convert::{array, flat_i32, rows_f32, rows_owned};
 use super::errors::input;
 use super::scene::PyScene;
-use crate::discretize::backend::{BackendChoice, CostModel, Workload};
+use crate::calibration::{BackendChoice, CostModel, Workload};
 use crate::types::DepthImages;
 
 pub(super) fn images_dict<'py>(py: Python<'py>, img: DepthImages) -> PyResult<Bound<'py, PyDict>> {
@@ -43,7 +43,7 @@ pub fn discretize_conventional<'py>(
     let cams: Vec<_> = cameras.into_iter().map(|c| c.inner).collect();
     let s = scene.inner.clone();
     let (img, decision) = super::run(py, || {
-        crate::discretize::backend::discretize_with(&s, &cams, cull_backfaces, choice)
+        crate::calibration::discretize_with(&s, &cams, cull_backfaces, choice)
     })?;
     let d = images_dict(py, img)?;
     d.set_item("backend", decision.backend.name())?;
@@ -52,7 +52,7 @@ pub fn discretize_conventional<'py>(
 }
 
 /// What `backend="auto"` would choose for a request of this size (see
-/// `discretize::backend`; `auto` itself weighs every request prepared, as the defaults do),
+/// `calibration`; `auto` itself weighs every request prepared, as the defaults do),
 /// where `box_fraction` of the pixels see the scene's bounding box (0.75 by default: an
 /// orbiting view of an object); calibrates the cost model on first use.
 #[pyfunction]
@@ -129,11 +129,11 @@ pub fn discretize_nonredundant<'py>(
     let cams: Vec<_> = cameras.into_iter().map(|c| c.inner).collect();
     let s = scene.inner.clone();
     let (img, decision) = super::run(py, || {
-        crate::discretize::discretize_nonredundant(&s, &cams, r, cull_backfaces, choice)
+        crate::nonredundant::discretize_nonredundant(&s, &cams, r, cull_backfaces, choice)
     })?;
     let rest = match r {
-        crate::discretize::Redundancy::Pixel => "rendered on the gpu",
-        crate::discretize::Redundancy::Visibility => "traced on the cpu",
+        crate::nonredundant::Redundancy::Pixel => "rendered on the gpu",
+        crate::nonredundant::Redundancy::Visibility => "traced on the cpu",
     };
     let d = images_dict(py, img)?;
     d.set_item("backend", decision.backend.name())?;
@@ -163,13 +163,7 @@ pub fn discretize_peeling<'py>(
         .map_err(|e| super::errors::to_pyerr(py, e))?;
     let s = scene.inner.clone();
     let (img, decision) = super::run(py, || {
-        crate::discretize::nonredundant::peeling_with(
-            &s,
-            &camera.inner,
-            layers,
-            cull_backfaces,
-            choice,
-        )
+        crate::nonredundant::render::peeling_with(&s, &camera.inner, layers, cull_backfaces, choice)
     })?;
     let d = images_dict(py, img)?;
     d.set_item("backend", decision.backend.name())?;

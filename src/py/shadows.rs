@@ -8,8 +8,10 @@ use super::camera::PyCamera;
 use super::convert::{array, stats, vec3};
 use super::errors::{input, IntoPy};
 use super::scene::PyScene;
-use crate::effects::omni_shadows::{OmniMethod, OmniOptions};
-use crate::shadows::{self, AreaLight, Discretization, Reconstruction, ShadowOptions};
+use crate::epr::omni_shadows::{OmniMethod, OmniOptions};
+use crate::nonredundant::shadows::{
+    self, AreaLight, Discretization, Reconstruction, ShadowOptions,
+};
 
 #[pyfunction]
 #[pyo3(signature = (scene, camera, center, u, v, samples, discretization, resolution, corners, reconstruction, shadow_resolution, layers))]
@@ -109,7 +111,7 @@ pub fn omni_shadows<'py>(
     let s = scene.inner.clone();
     let cam = eye.inner.clone();
     let (r, ops) = super::run_counted(py, || {
-        crate::effects::omni_shadows::omni_shadows(&s, &cam, center, radius, &opts)
+        crate::epr::omni_shadows::omni_shadows(&s, &cam, center, radius, &opts)
     })?;
     let (h, w) = (r.height as usize, r.width as usize);
     let count = r.samples.len();

@@ -8,8 +8,8 @@ use super::camera::PyCamera;
 use super::convert::{array, flat_i32, rows_f32, rows_owned, stats, vec3};
 use super::errors::{input, IntoPy};
 use super::scene::PyScene;
-use crate::discretize::epr::{self, Density};
-use crate::effects::omni_shadows::{eye_resolution, light_samples, NEAR};
+use crate::epr::omni_shadows::{eye_resolution, light_samples, NEAR};
+use crate::epr::points::{self as epr, Density};
 use crate::types::Points;
 
 /// Points for the cube maps of the reflectors (centres (R, 3), radii, triangle ids per
@@ -166,7 +166,7 @@ pub fn splat<'py>(
     let cams: Vec<_> = cameras.into_iter().map(|c| c.inner).collect();
     let s = scene.inner.clone();
     let (b, ops) = super::run_counted(py, || {
-        crate::splat::splat(&s, &points, &cams, clip_to_triangle)
+        crate::epr::splat::splat(&s, &points, &cams, clip_to_triangle)
     })?;
     let shape = [b.views, b.height as usize, b.width as usize];
     let d = PyDict::new(py);

@@ -90,7 +90,7 @@ fn jpeg_mean(encoded: &[u8]) -> Result<[f32; 4], String> {
         ColorSpace::RGBA => (ColorSpace::RGBA, 4),
         _ => (ColorSpace::RGB, 3),
     };
-    let texels = width.checked_mul(height).unwrap_or(usize::MAX);
+    let texels = width.saturating_mul(height);
     if texels.saturating_mul(channels) > MAX_DECODED_BYTES {
         return Err("JPEG: the image is too large to decode".into());
     }

@@ -464,6 +464,38 @@ fn closest_on_edges(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> (DVec3, f64, f64)
         .expect("three edges")
 }
 
+/// Distance from `q` to the segment a-b.
+fn point_segment_distance(q: DVec3, a: DVec3, b: DVec3) -> f64 {
+    let ab = b - a;
+    let t = if ab.length_squared() > 0.0 {
+        ((q - a).dot(ab) / ab.length_squared()).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (q - (a + ab * t)).length()
+}
+
+/// Distance from `q` to the triangle `p` (its closed surface): to the plane where `q` projects
+/// inside the triangle, otherwise to the nearest edge.
+pub fn point_triangle_distance(q: DVec3, p: &[DVec3; 3]) -> f64 {
+    let edges = (0..3).map(|k| point_segment_distance(q, p[k], p[(k + 1) % 3]));
+    let nearest_edge = edges.fold(f64::INFINITY, f64::min);
+    let n = (p[1] - p[0]).cross(p[2] - p[0]);
+    let len = n.length();
+    if len.is_nan() || len <= 0.0 {
+        return nearest_edge;
+    }
+    let n = n / len;
+    let h = n.dot(q - p[0]);
+    let r = q - n * h;
+    let inside = (0..3).all(|k| (p[(k + 1) % 3] - p[k]).cross(r - p[k]).dot(n) >= 0.0);
+    if inside {
+        h.abs()
+    } else {
+        nearest_edge
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -77,7 +77,7 @@ pub fn build(
     let cell_seconds = start.elapsed().as_secs_f64();
     let fields = sample(scene, slabs, uv, st, &cells, n, supersample)?;
     let start = Instant::now();
-    let frame = crate::discretize::pixels::TraceFrame::of(&sorted)?;
+    let frame = crate::image::pixels::TraceFrame::of(&sorted)?;
     crate::trace::Bvh::of(frame.scene(&sorted));
     crate::scene::adjacency::EdgeNeighbours::of(&sorted);
     Ok(Built {
@@ -257,9 +257,8 @@ fn sample_slab(
     let offset = |at: u64, j: usize| -> f64 {
         let r = match jitter {
             Some(seed) => {
-                let h = crate::discretize::epr::mix64(
-                    seed ^ crate::discretize::epr::mix64(at * ss as u64 + j as u64),
-                );
+                let h =
+                    crate::random::mix64(seed ^ crate::random::mix64(at * ss as u64 + j as u64));
                 (h >> 11) as f64 / (1u64 << 53) as f64
             }
             None => 0.5,
@@ -397,7 +396,7 @@ mod tests {
         let [lo, hi] = scene.bounds_f64();
         let mut seed = 1u64;
         let mut rand = || {
-            seed = crate::discretize::epr::mix64(seed);
+            seed = crate::random::mix64(seed);
             (seed >> 11) as f64 / (1u64 << 53) as f64
         };
         for _ in 0..2000 {

@@ -8,10 +8,10 @@ use std::time::Instant;
 
 use super::build::SortedScene;
 use crate::camera::Camera;
-use crate::discretize::pixels::{resolve_ids, ViewRays};
-use crate::discretize::raster_rule::settle_edges;
-use crate::discretize::{discretize_ranges, push_range};
 use crate::error::Result;
+use crate::image::pixels::{resolve_ids, ViewRays};
+use crate::image::raster_rule::settle_edges;
+use crate::image::{discretize_ranges, push_range};
 use crate::types::DepthImages;
 
 /// The face ranges `[a, b)` of the marked cells, consecutive cells merged; `offsets` is the

@@ -8,8 +8,8 @@ use rayon::prelude::*;
 
 use super::build::SortedScene;
 use crate::camera::{Camera, Projector};
-use crate::discretize::pixels::ViewRays;
 use crate::error::Result;
+use crate::image::pixels::ViewRays;
 use crate::input_err;
 use crate::scene::adjacency::{EdgeNeighbours, NONE};
 use crate::scene::Scene;

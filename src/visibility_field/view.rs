@@ -12,8 +12,8 @@ use super::draw::{remap, render_sorted, trace_sorted};
 use super::fallback::{look_across_borders, trace_fallback};
 use super::resample::{resample, scene_box, Interpolate, Marks, Resampling, Samples};
 use crate::camera::Camera;
-use crate::discretize::pixels::ViewRays;
 use crate::error::Result;
+use crate::image::pixels::ViewRays;
 use crate::types::DepthImages;
 
 /// How a view is made.

@@ -188,7 +188,7 @@ def bench_nonredundant(scene: ss.Scene, cams: list[ss.Camera], rounds: int) -> d
 
 def bench_epr(scene: ss.Scene, eye: ss.Camera, rounds: int) -> Optional[dict[str, Any]]:
     try:
-        ss._epr.reflectors_of(scene)
+        ss.epr.reflectors_of(scene)
     except ss.InputError:
         return None  # no mirror material: nothing to reflect
     best = _rounds(

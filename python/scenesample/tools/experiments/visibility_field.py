@@ -403,7 +403,10 @@ def main(argv: Optional[list[str]] = None) -> None:
     p.add_argument("--frames", type=int, default=8)
     p.add_argument("--size", type=int, default=128)
     p.add_argument(
-        "--qualities", nargs="*", default=["fast", "balanced", "exact"], choices=ss._field.QUALITIES
+        "--qualities",
+        nargs="*",
+        default=["fast", "balanced", "exact"],
+        choices=ss.visibility_field.QUALITIES,
     )
     p.add_argument("--out", default="out/experiments/visibility_field")
     args = p.parse_args(argv)
