@@ -83,6 +83,7 @@ pub struct PyField {
     ids: ArrayD<i32>,
     /// (K, U, V, S, T): how many distinct cells each sample's rays hit.
     hits: ArrayD<u16>,
+    /// (F,): the scene's faces in cell order (sorted face `i` is the scene's `order[i]`).
     order: ArrayD<u32>,
     /// (C + 1,): cell c holds sorted faces `offsets[c]..offsets[c + 1]`.
     offsets: ArrayD<u32>,
