@@ -25,13 +25,14 @@ from typing import Any, Callable, Union
 import numpy as np
 
 from . import _core
+from ._conventional import conventional
 from ._progress import Progress
 from ._scene import Scene
 from .epr.omni import shadow_points
 from .epr.points import Points, epr_points
 from .errors import InputError
 from .impostors.cells import impostor_view, impostors
-from .nonredundant.images import conventional, hybrid, mesh, nonredundant, peeling, points
+from .nonredundant.images import hybrid, mesh, nonredundant, peeling, points
 from .visibility_field import field_view, visibility_field
 
 Camera = _core.Camera

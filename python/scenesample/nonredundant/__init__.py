@@ -3,7 +3,8 @@ depth-peeled images, the surfaces rebuilt from them (§4, Algorithm 4) and soft 
 them (§5, Algorithm 5). The Rust side is ``src/nonredundant/``; the sampling metrics (§6.1.2)
 are ``evaluate(images, scene, "sampling")``."""
 
-from .images import conventional, hybrid, mesh, nonredundant, peeling, points
+from .._conventional import conventional
+from .images import hybrid, mesh, nonredundant, peeling, points
 from .shadows import AreaLight, ShadowResult, soft_shadows
 
 __all__ = [

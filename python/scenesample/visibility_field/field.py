@@ -110,6 +110,11 @@ class Slab:
 class VisibilityField:
     """The cell ids first hit along the lines of one or more slabs (visibility-field.txt §3).
 
+    The field is held on the Rust side (``_core.Field``); the arrays below are read-only numpy
+    views of it, and a view (:func:`field_view`) sends it only the camera and the options. A
+    pickle carries the scene, the slabs and the arrays byte for byte and rebuilds the
+    cell-sorted scene where it is loaded, so the views there are the same bytes.
+
     Attributes
     ----------
     ids : (K, U, V, S, T, n) int32
