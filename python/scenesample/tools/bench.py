@@ -496,19 +496,28 @@ def main(argv: Optional[list[str]] = None) -> None:
         return
     info = ss.device_info()
     device = f"{info['name']} ({info['backend']})"
-    if a.which == "epr":
-        r = bench_epr(128 if a.quick else 512, 10 if a.quick else a.spheres, a.repeats)
-        print(report_epr(r, device))
+    # The benchmarks that print one report: what each measures, and its report.
+    single: dict[str, tuple[Callable[[], Any], Callable[[Any, str], str]]] = {
+        "epr": (
+            lambda: bench_epr(128 if a.quick else 512, 10 if a.quick else a.spheres, a.repeats),
+            report_epr,
+        ),
+        "field": (lambda: bench_field(128 if a.quick else 256, a.repeats), report_field),
+        "nonredundant": (lambda: bench_nonredundant(size, a.repeats), report_nonredundant),
+        # `peers`: depth images against pyrender; its raw figures are filed as "depth".
+        "peers": (
+            lambda: bench_depth(bench_scene(a.quick), size, 2 if a.quick else 8, a.repeats),
+            report,
+        ),
+    }
+    if a.which in single:
+        measure, write = single[a.which]
+        r = measure()
+        print(write(r, device))
         if a.json:
             with open(a.json, "w") as f:
-                json.dump({"epr": r, "device": info}, f, indent=2)
-        return
-    if a.which == "field":
-        r = bench_field(128 if a.quick else 256, a.repeats)
-        print(report_field(r, device))
-        if a.json:
-            with open(a.json, "w") as f:
-                json.dump({"field": r, "device": info}, f, indent=2)
+                name = "depth" if a.which == "peers" else a.which
+                json.dump({name: r, "device": info}, f, indent=2)
         return
     if a.which == "all":
         results: dict[str, Any] = {"device": info}
@@ -527,18 +536,6 @@ def main(argv: Optional[list[str]] = None) -> None:
         print(_bench_methods.report(results["methods"], device), flush=True)
         _emit(summary(results, device), a.out or "out/bench/all.md", results, a.json)
         return
-    if a.which == "nonredundant":
-        r = bench_nonredundant(size, a.repeats)
-        print(report_nonredundant(r, device))
-        if a.json:
-            with open(a.json, "w") as f:
-                json.dump({"nonredundant": r, "device": info}, f, indent=2)
-        return
-    depth = bench_depth(bench_scene(a.quick), size, 2 if a.quick else 8, a.repeats)
-    print(report(depth, device))
-    if a.json:
-        with open(a.json, "w") as f:
-            json.dump({"depth": depth, "device": info}, f, indent=2)
 
 
 def _emit(md: str, path: str, raw: Any, json_path: Optional[str]) -> None:
