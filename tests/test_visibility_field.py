@@ -479,6 +479,7 @@ def test_an_unpickled_field_views_the_same_bytes(turtles):
         ((ids, hits, order[:-1], offsets), "triangles must be"),
         ((ids, hits, twice, offsets), "permutation"),
         ((ids, hits, order, short), "offsets"),
+        ((ids.astype(np.int64), hits, order, offsets), "ids must be int32, got int64"),
     ):
         with pytest.raises(ss.InputError, match=match):
             reduce({**state, "arrays": (*arrays, *rest)})

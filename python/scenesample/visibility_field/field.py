@@ -193,14 +193,30 @@ class VisibilityField:
         return (_field_from_state, (state,))
 
 
+#: What a pickled field's arrays hold, in the order ``__reduce__`` writes them.
+_STATE_ARRAYS = (
+    ("ids", np.int32),
+    ("cells_hit", np.uint16),
+    ("triangles", np.uint32),
+    ("offsets", np.uint32),
+    ("cells", np.int32),
+    ("cell_bounds", np.float32),
+    ("cell_of", np.uint32),
+)
+
+
 def _field_from_state(state: dict[str, Any]) -> VisibilityField:
+    """A pickled field (:meth:`VisibilityField.__reduce__`): dtypes checked here, shapes and
+    the face order by ``_core.Field.restore``."""
+    if not isinstance(state.get("scene"), Scene):
+        raise InputError("a pickled field must hold the scenesample.Scene it was built for")
     scene, slabs = state["scene"], [Slab.from_array(a) for a in state["slabs"]]
-    handle = _core.Field.restore(
-        scene._core,
-        [s.as_array().reshape(-1, 3) for s in slabs],
-        *state["arrays"],
-        state["cell_of"],
-    )
+    arrays = (*state["arrays"], state["cell_of"])
+    for a, (name, dtype) in zip(arrays, _STATE_ARRAYS):
+        if not isinstance(a, np.ndarray) or a.dtype != dtype:
+            got = a.dtype if isinstance(a, np.ndarray) else type(a).__name__
+            raise InputError(f"a pickled field's {name} must be {np.dtype(dtype)}, got {got}")
+    handle = _core.Field.restore(scene._core, [s.as_array().reshape(-1, 3) for s in slabs], *arrays)
     return _field_of(handle, scene, slabs, state["settings"], state["stats"], state["timings"])
 
 
