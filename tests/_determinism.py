@@ -8,6 +8,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import pickle
 import sys
 import threading
 import warnings
@@ -94,6 +95,8 @@ def calls(name: str) -> list[tuple[str, Callable[[], Any]]]:
         return field.as_dict() | {
             "view": ss.reconstruct(field, eye),
             "cpu view": ss.reconstruct(field, eye, backend="cpu"),
+            # The field restored from its pickle (its sorted scene and BVH rebuilt).
+            "unpickled view": ss.reconstruct(pickle.loads(pickle.dumps(field)), eye),
         }
 
     def impostor_view():

@@ -30,3 +30,12 @@ def use_everything() -> dict[str, np.ndarray]:
         "image_triangle": images.triangle,
         "splat_depth": splat.depth,
     }
+
+
+def unpickled_scene(data: bytes) -> tuple[int, bool]:
+    """Unpickle a scene (``Scene.from_arrays`` underneath): its triangles, and whether it is
+    closed (a parallel weld and edge sort)."""
+    import pickle
+
+    scene = pickle.loads(data)
+    return scene.triangle_count, scene.closed

@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import multiprocessing
 import os
+import pickle
 import subprocess
 import sys
 import textwrap
@@ -44,6 +45,18 @@ def test_children_work_after_the_parent_used_rays_images_and_splats(gpu, method)
         assert there.keys() == here.keys()
         for k in here:
             np.testing.assert_array_equal(there[k], here[k], err_msg=k)
+
+
+def test_a_child_forked_after_the_parent_made_scenes_makes_them_too():
+    """Scene.from_arrays (and so unpickling) and Scene.closed run on the package's pool, never
+    on rayon's global one, whose threads a fork does not copy: a large scene made, or asked
+    whether it is closed, in the parent and then in a forked child hung the child once its
+    faces took several parallel chunks."""
+    big = ss.scenes.icosphere(6)  # 81,920 faces: more than one chunk of the bounds pass
+    data = pickle.dumps(big)
+    here = _workers.unpickled_scene(data)
+    assert here == (big.triangle_count, True)
+    assert run_in_children("fork", _workers.unpickled_scene, data) == [here] * 2
 
 
 def test_a_tradeoff_on_a_fork_pool_after_use(gpu):

@@ -82,7 +82,12 @@ impl PyScene {
         if let Some(ls) = lights {
             parts.lights = ls.iter().map(|d| light(py, d)).collect::<PyResult<_>>()?;
         }
-        let scene = Scene::new(parts).py_err(py)?;
+        // Validated on the package's pool (its bounds pass is parallel), never on rayon's
+        // global pool, whose threads a forked child would not have.
+        let scene = py
+            .detach(|| crate::process::install(None, move || Scene::new(parts)))
+            .py_err(py)?
+            .py_err(py)?;
         Ok(Self {
             inner: Arc::new(scene),
         })
@@ -253,9 +258,14 @@ impl PyScene {
         self.inner.degenerate_count()
     }
     #[getter]
-    fn closed(&self, py: Python<'_>) -> bool {
+    fn closed(&self, py: Python<'_>) -> PyResult<bool> {
         let scene = &self.inner;
-        py.detach(|| crate::scene::adjacency::Closure::of(scene).closed)
+        // On the package's pool (the weld and the edge sort are parallel), not rayon's global
+        // one, which a forked child would not have.
+        let closure = py.detach(|| {
+            crate::process::install(None, || crate::scene::adjacency::Closure::of(scene))
+        });
+        Ok(closure.py_err(py)?.closed)
     }
     #[getter]
     fn bounds<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
