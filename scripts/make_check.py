@@ -36,6 +36,7 @@ ROOMS: dict[str, tuple[str, ...]] = {
     "src/image/": ("test_depth_images.py", "test_backends.py"),
     "_conventional.py": ("test_depth_images.py", "test_backends.py"),
     "src/calibration/": ("test_backends.py", "test_plan.py"),
+    "src/random.rs": ("test_visibility_field.py", "test_reflections.py", "test_splat.py"),
     "src/gpu/": ("test_depth_images.py", "test_backends.py", "test_nonredundant.py"),
     "nonredundant/images.py": (
         "test_depth_images.py",
