@@ -30,12 +30,13 @@ fn slab(py: Python<'_>, obj: &Bound<'_, PyAny>) -> PyResult<Slab> {
     Ok(Slab { uv, st })
 }
 
-fn slab_array<'py>(py: Python<'py>, s: &Slab) -> PyResult<Bound<'py, PyAny>> {
-    let rows: Vec<f64> = [s.uv.origin, s.uv.u, s.uv.v, s.st.origin, s.st.u, s.st.v]
-        .iter()
+/// Slabs as a (K, 2, 3, 3) array: each one's uv then st, each (origin, u edge, v edge).
+fn slab_arrays<'py>(py: Python<'py>, slabs: &[Slab]) -> PyResult<Bound<'py, PyAny>> {
+    let rows: Vec<f64> = (slabs.iter())
+        .flat_map(|s| [s.uv.origin, s.uv.u, s.uv.v, s.st.origin, s.st.u, s.st.v])
         .flat_map(|p| p.to_array())
         .collect();
-    array(py, rows, &[2, 3, 3])
+    array(py, rows, &[slabs.len(), 2, 3, 3])
 }
 
 /// The paper's single slab around a scene (`Slab::around`), as a (2, 3, 3) array.
@@ -49,7 +50,7 @@ pub fn default_slab<'py>(
     widen: f64,
 ) -> PyResult<Bound<'py, PyAny>> {
     let s = Slab::around(&scene.inner, axis, margin, widen).py_err(py)?;
-    slab_array(py, &s)
+    slab_arrays(py, &[s])?.call_method1("reshape", ((2, 3, 3),))
 }
 
 /// The six slabs around a scene (both directions along each axis), as a (6, 2, 3, 3) array.
@@ -61,12 +62,7 @@ pub fn six_slabs<'py>(
     margin: f64,
 ) -> PyResult<Bound<'py, PyAny>> {
     let slabs = Slab::six(&scene.inner, margin).py_err(py)?;
-    let rows: Vec<f64> = slabs
-        .iter()
-        .flat_map(|s| [s.uv.origin, s.uv.u, s.uv.v, s.st.origin, s.st.u, s.st.v])
-        .flat_map(|p| p.to_array())
-        .collect();
-    array(py, rows, &[slabs.len(), 2, 3, 3])
+    slab_arrays(py, &slabs)
 }
 
 /// A built visibility field (visibility-field.txt §3), owned here: the cell-sorted scene its
@@ -208,9 +204,7 @@ impl PyField {
         let sorted = super::run(py, || {
             let sorted = s.permuted(order_v)?;
             vf::SortedScene::new(&sorted, order_v, offsets.as_slice().unwrap_or(&[]))?;
-            let frame = crate::image::pixels::TraceFrame::of(&sorted)?;
-            crate::trace::Bvh::of(frame.scene(&sorted));
-            crate::scene::adjacency::EdgeNeighbours::of(&sorted);
+            vf::prepare_views(&sorted)?;
             Ok(sorted)
         })?;
         Ok(PyField {
@@ -271,11 +265,7 @@ impl PyField {
     /// (K, 2, 3, 3) float64, a fresh array: each slab's uv then st (origin, u edge, v edge).
     #[getter]
     fn slabs<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        let rows: Vec<f64> = (self.slabs.iter())
-            .flat_map(|s| [s.uv.origin, s.uv.u, s.uv.v, s.st.origin, s.st.u, s.st.v])
-            .flat_map(|p| p.to_array())
-            .collect();
-        array(py, rows, &[self.slabs.len(), 2, 3, 3])
+        slab_arrays(py, &self.slabs)
     }
 
     fn __repr__(&self) -> String {

@@ -83,7 +83,8 @@ impl PyScene {
             parts.lights = ls.iter().map(|d| light(py, d)).collect::<PyResult<_>>()?;
         }
         // Validated on the package's pool (its bounds pass is parallel), never on rayon's
-        // global pool, whose threads a forked child would not have.
+        // global pool, whose threads a forked child would not have. Not through `run`, which
+        // may run its work twice: `parts` is moved into the scene, not copied.
         let scene = py
             .detach(|| crate::process::install(None, move || Scene::new(parts)))
             .py_err(py)?
@@ -259,13 +260,10 @@ impl PyScene {
     }
     #[getter]
     fn closed(&self, py: Python<'_>) -> PyResult<bool> {
+        // Through `run`, as every parallel call: the weld and the edge sort run on the
+        // package's pool, not rayon's global one, which a forked child would not have.
         let scene = &self.inner;
-        // On the package's pool (the weld and the edge sort are parallel), not rayon's global
-        // one, which a forked child would not have.
-        let closure = py.detach(|| {
-            crate::process::install(None, || crate::scene::adjacency::Closure::of(scene))
-        });
-        Ok(closure.py_err(py)?.closed)
+        Ok(super::run(py, || Ok(crate::scene::adjacency::Closure::of(scene)))?.closed)
     }
     #[getter]
     fn bounds<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {

@@ -77,9 +77,7 @@ pub fn build(
     let cell_seconds = start.elapsed().as_secs_f64();
     let fields = sample(scene, slabs, uv, st, &cells, n, supersample)?;
     let start = Instant::now();
-    let frame = crate::image::pixels::TraceFrame::of(&sorted)?;
-    crate::trace::Bvh::of(frame.scene(&sorted));
-    crate::scene::adjacency::EdgeNeighbours::of(&sorted);
+    prepare_views(&sorted)?;
     Ok(Built {
         cells,
         sorted,
@@ -87,6 +85,16 @@ pub fn build(
         cell_seconds,
         bvh_seconds: start.elapsed().as_secs_f64(),
     })
+}
+
+/// Build what every view's fallback uses on the cell-sorted scene (its trace frame, BVH and
+/// edge neighbours, each cached on the scene), so that the first view does not pay for them:
+/// after a build, and after a field is restored from its arrays.
+pub fn prepare_views(sorted: &Scene) -> Result<()> {
+    let frame = crate::image::pixels::TraceFrame::of(sorted)?;
+    crate::trace::Bvh::of(frame.scene(sorted));
+    crate::scene::adjacency::EdgeNeighbours::of(sorted);
+    Ok(())
 }
 
 /// How a sample's rays are placed in its uv and st cells.

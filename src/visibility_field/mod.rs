@@ -20,7 +20,8 @@ pub mod slab;
 pub mod view;
 
 pub use build::{
-    build, cells, sample, Built, Cells, Field, Grid, Grouping, Rect, Slab, SortedScene, Supersample,
+    build, cells, prepare_views, sample, Built, Cells, Field, Grid, Grouping, Rect, Slab,
+    SortedScene, Supersample,
 };
 pub use draw::render_marked;
 pub use resample::{Interpolate, Marks, Resampling, Samples};

@@ -184,8 +184,7 @@ class VisibilityField:
         state = {
             "scene": self._scene,
             "slabs": [s.as_array() for s in self.slabs],
-            "arrays": (h.ids, h.cells_hit, h.triangles, h.offsets, h.cells, h.cell_bounds),
-            "cell_of": h.cell_of,
+            "arrays": tuple(getattr(h, name) for name, _ in _STATE_ARRAYS),
             "settings": self.settings,
             "stats": self.stats,
             "timings": self.timings,
@@ -211,7 +210,9 @@ def _field_from_state(state: dict[str, Any]) -> VisibilityField:
     if not isinstance(state.get("scene"), Scene):
         raise InputError("a pickled field must hold the scenesample.Scene it was built for")
     scene, slabs = state["scene"], [Slab.from_array(a) for a in state["slabs"]]
-    arrays = (*state["arrays"], state["cell_of"])
+    arrays = state["arrays"]
+    if not isinstance(arrays, tuple) or len(arrays) != len(_STATE_ARRAYS):
+        raise InputError(f"a pickled field holds {len(_STATE_ARRAYS)} arrays")
     for a, (name, dtype) in zip(arrays, _STATE_ARRAYS):
         if not isinstance(a, np.ndarray) or a.dtype != dtype:
             got = a.dtype if isinstance(a, np.ndarray) else type(a).__name__
