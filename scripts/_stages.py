@@ -78,7 +78,7 @@ def run(stages: list[Stage]) -> int:
     names = {s.name for s in stages}
     pending = {s.name: s for s in stages}
     running: dict[str, tuple[subprocess.Popen, float, Stage]] = {}
-    done: dict[str, tuple[float, float, str]] = {}
+    done: dict[str, tuple[float, float, str, float]] = {}
     t0 = time.monotonic()
     # Every stage is a session of its own, out of reach of the terminal's Ctrl-C: stopping
     # the runner (Ctrl-C, or SIGTERM from a CI timeout) stops every stage it started.
@@ -97,10 +97,11 @@ def run(stages: list[Stage]) -> int:
         for p, _, _ in running.values():
             p.wait()
     total = time.monotonic() - t0
-    print(f"\n{'stage':<12} {'start s':>8} {'seconds':>8}  status")
-    for name, (start, secs, status) in sorted(done.items(), key=lambda kv: kv[1][0]):
-        print(f"{name:<12} {start:>8.0f} {secs:>8.0f}  {status}")
-    print(f"{'total':<12} {'':>8} {total:>8.0f}  wall clock")
+    cpu = sum(d[3] for d in done.values())
+    print(f"\n{'stage':<12} {'start s':>8} {'seconds':>8} {'CPU s':>8}  status")
+    for name, (start, secs, status, used) in sorted(done.items(), key=lambda kv: kv[1][0]):
+        print(f"{name:<12} {start:>8.0f} {secs:>8.0f} {used:>8.0f}  {status}")
+    print(f"{'total':<12} {'':>8} {total:>8.0f} {cpu:>8.0f}  wall clock; CPU-seconds")
     if failed:
         tail = (LOGS / f"{failed}.log").read_text(errors="replace").splitlines()[-80:]
         print(f"\n{failed} failed; the end of target/test-logs/{failed}.log:\n" + "\n".join(tail))
@@ -112,11 +113,22 @@ def _interrupt(signum: int, frame: object) -> None:
     raise KeyboardInterrupt
 
 
+def _reap(p: subprocess.Popen) -> Optional[float]:
+    """The CPU-seconds (user and system) of a stage whose shell has exited, with every process
+    it waited for; None while it runs. The stage's shell is reaped here, with its rusage, and
+    its exit status given to `p`."""
+    pid, status, usage = os.wait4(p.pid, os.WNOHANG)
+    if pid == 0:
+        return None
+    p.returncode = os.waitstatus_to_exitcode(status)
+    return usage.ru_utime + usage.ru_stime
+
+
 def _loop(
     names: set[str],
     pending: dict[str, Stage],
     running: dict[str, tuple[subprocess.Popen, float, Stage]],
-    done: dict[str, tuple[float, float, str]],
+    done: dict[str, tuple[float, float, str, float]],
     t0: float,
 ) -> Optional[str]:
     """Start each stage once its `after` have passed, until all are done or one fails (the
@@ -141,16 +153,17 @@ def _loop(
                 print(f"[{time.monotonic() - t0:5.0f} s] {name}: {s.what}", flush=True)
         time.sleep(0.2)
         for name, (p, start, s) in list(running.items()):
-            rc = p.poll()
-            if rc is None:
+            used = _reap(p)
+            if used is None:
                 continue
+            rc = p.returncode
             del running[name]
             if rc == 0 and s.junit is not None and skipped(s.junit):
                 rc = 1
                 with open(LOGS / f"{name}.log", "a") as log:
                     log.write("\nno test may be skipped here:\n" + "\n".join(skipped(s.junit)))
             now = time.monotonic()
-            done[name] = (start - t0, now - start, "ok" if rc == 0 else f"FAILED ({rc})")
+            done[name] = (start - t0, now - start, "ok" if rc == 0 else f"FAILED ({rc})", used)
             print(f"[{now - t0:5.0f} s] {name}: {done[name][2]} in {now - start:.0f} s", flush=True)
             if rc != 0 and failed is None:
                 failed = name
@@ -159,7 +172,7 @@ def _loop(
                 os.killpg(p.pid, signal.SIGTERM)
             for name, (p, start, _) in running.items():
                 p.wait()
-                done[name] = (start - t0, time.monotonic() - start, "stopped")
+                done[name] = (start - t0, time.monotonic() - start, "stopped", 0.0)
             running.clear()
             pending.clear()
     return failed
