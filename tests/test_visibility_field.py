@@ -9,6 +9,7 @@ directions on real scenes, and switching the fallback off brings the holes back.
 
 from __future__ import annotations
 
+import functools
 import warnings
 
 import numpy as np
@@ -42,14 +43,24 @@ def front_camera(at=(-4.0, 0.3, 0.2), size: int = 96) -> ss.Camera:
     return ss.Camera.look_at(at, (0, 0, 0), (0, 0, 1), yfov=0.7, width=size, height=size)
 
 
+@functools.cache
 def shared_scene(name: str) -> ss.Scene:
-    """A scene of ../shared/scenes (the test skips without it), its loader warnings hushed."""
+    """A scene of ../shared/scenes (the test skips without it), its loader warnings hushed;
+    loaded once per worker."""
     path = ss.scenes.shared_scene_files().get(name)
     if path is None:
         pytest.skip("../shared/scenes is not here")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ss.SceneWarning)
         return ss.Scene.load(path)
+
+
+@functools.cache
+def default_field(name: str) -> ss.VisibilityField:
+    """The default field (six slabs, balanced) of a shared scene, built once per worker: three
+    tests read the bunny's, the cornell box's and the instancing scene's (3-7 CPU-seconds each).
+    Sharing it is safe: a field cannot change (its arrays are read-only, its handle frozen)."""
+    return ss.discretize(shared_scene(name), method="visibility_field", progress=False)
 
 
 @pytest.fixture(scope="module")
@@ -364,7 +375,7 @@ def test_the_default_field_leaves_no_holes_from_six_directions(name):
     that see the scene are holes from each of six directions outside the bounds, on a scanned
     model and on foliage (the worst shared scene: leaves smaller than a sample's beam)."""
     scene = shared_scene(name)
-    field = ss.discretize(scene, method="visibility_field")
+    field = default_field(name)
     assert len(field.slabs) == 6 and field.settings["quality"] == "balanced"
     for cam in six_directions(scene, 128):
         view = ss.reconstruct(field, cam)
@@ -553,7 +564,7 @@ def test_the_default_view_draws_every_visible_cell_and_little_more(name):
     from scenesample.tools._bench_methods import views
 
     scene = shared_scene(name)
-    field = ss.discretize(scene, method="visibility_field", progress=False)
+    field = default_field(name)
     for cam in views(scene, 1024):
         view = ss.reconstruct(field, cam)
         m = ss.evaluate(view, scene, "cells")
@@ -597,7 +608,7 @@ def test_block_resampling_marks_what_the_plain_resampler_marks(name):
     and without interpolation, trust 1, the paper's rule and subsampling. (Before the test, the
     fast one lost the lines of a far view that a slab held between block corners it did not.)"""
     scene = shared_scene(name)
-    field = ss.discretize(scene, method="visibility_field", progress=False)
+    field = default_field(name)
     cams = six_directions(scene, 80) + inside_and_grazing_cameras(scene, 80)
     settings = [
         {},
