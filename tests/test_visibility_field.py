@@ -57,9 +57,9 @@ def shared_scene(name: str) -> ss.Scene:
 
 @functools.cache
 def default_field(name: str) -> ss.VisibilityField:
-    """The default field (six slabs, balanced) of a shared scene, built once per worker: three
-    tests read the bunny's, the cornell box's and the instancing scene's (3-7 CPU-seconds each).
-    Sharing it is safe: a field cannot change (its arrays are read-only, its handle frozen)."""
+    """The default field (six slabs, balanced) of a shared scene, built once per worker: two
+    tests each read the bunny's, the cornell box's and the instancing scene's (4-7 CPU-seconds a
+    build). Sharing it is safe: a field cannot change (read-only arrays, a frozen handle)."""
     return ss.discretize(shared_scene(name), method="visibility_field", progress=False)
 
 
