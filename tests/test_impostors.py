@@ -10,6 +10,8 @@ flattening and view-direction error, not how many pixels the object covers."""
 
 from __future__ import annotations
 
+import zlib
+
 import numpy as np
 import pytest
 import scenesample as ss
@@ -156,6 +158,19 @@ def test_storage_figures_match_the_arrays(sphere):
     w, h = imp.crops[..., 2], imp.crops[..., 3]
     assert imp.stats["bytes_raw"] == int((w.astype(np.int64) * h).sum()) * 8
     assert 0 < imp.stats["bytes_compressed"] < imp.stats["bytes_raw"]
+    # Each cell's cropped images deflated as one stream, summed over the cells (computed here
+    # one cell after another; the package deflates the cells on every core).
+    per_cell = [
+        b"".join(
+            imp.color[i, k, :hk, :wk].tobytes() + imp.depth[i, k, :hk, :wk].tobytes()
+            for k, (wk, hk) in enumerate(zip(w[i].tolist(), h[i].tolist()))
+            if wk
+        )
+        for i in range(c)
+    ]
+    assert c > 1 and imp.stats["bytes_compressed"] == sum(
+        len(zlib.compress(b, 6)) for b in per_cell
+    )
     assert (imp.crops[..., 0] + w <= 32).all() and (imp.crops[..., 1] + h <= 32).all()
     assert imp.color.shape[2] == h.max() and imp.color.shape[3] == w.max()
     # Nothing covered lies outside an image's crop; the crop is tight.

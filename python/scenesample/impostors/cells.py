@@ -5,7 +5,9 @@ triangle budget."""
 from __future__ import annotations
 
 import math
+import os
 import zlib
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, fields
 from typing import Any, Optional
 
@@ -64,7 +66,7 @@ class Impostors:
     stats : dict
         ``cells``, ``views`` (D), ``rays``, ``bytes_raw`` (the cropped texels: 4 bytes of
         colour and 4 of depth each) and ``bytes_compressed`` (those bytes deflated, zlib level
-        6; the paper reports ~18%).
+        6, one stream per cell; the paper reports ~18%).
     timings : dict of str to float
         Seconds: ``cells`` (octree), ``render`` (ray casting the images), ``crop``,
         ``compress``, ``total``.
@@ -266,20 +268,25 @@ def impostors(
 
 def _storage(color: np.ndarray, depth: np.ndarray, crops: np.ndarray) -> tuple[int, int]:
     """Bytes of the cropped images (colour then depth, image after image) and their deflated
-    size."""
-    z = zlib.compressobj(6)
-    raw = packed = 0
-    c, d = crops.shape[:2]
-    for i in range(c):
-        for k in range(d):
-            w, h = int(crops[i, k, 2]), int(crops[i, k, 3])
-            if not w:
-                continue
-            block = color[i, k, :h, :w].tobytes() + depth[i, k, :h, :w].tobytes()
-            raw += len(block)
-            packed += len(z.compress(block))
-    packed += len(z.flush())
-    return raw, packed
+    size: each cell's images deflated together as one zlib stream (level 6), as the paper
+    stores and compresses a cell's images (§5), the cells on every core (zlib lets go of the
+    GIL while it deflates). The sizes add up in cell order, so the answer does not depend on
+    how the threads ran."""
+    crops = np.ascontiguousarray(crops)
+
+    def cell(i: int) -> tuple[int, int]:
+        data = b"".join(
+            color[i, k, :h, :w].tobytes() + depth[i, k, :h, :w].tobytes()
+            for k, (w, h) in enumerate(crops[i, :, 2:4].tolist())
+            if w
+        )
+        return len(data), len(zlib.compress(data, 6))
+
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    workers = max(1, min(len(crops), cores or 1))
+    with ThreadPoolExecutor(workers) as pool:
+        sizes = list(pool.map(cell, range(len(crops))))
+    return sum(r for r, _ in sizes), sum(z for _, z in sizes)
 
 
 def impostor_view(

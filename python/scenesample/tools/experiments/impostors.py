@@ -235,7 +235,7 @@ def markdown(rows: list[dict], storage: list[dict], args: Any) -> str:
     lines += [
         "",
         "Storage of the cropped images (4 bytes of colour + 4 of depth per texel) and deflate "
-        "(zlib level 6).",
+        "(zlib level 6, one stream per cell).",
         "",
         "| scene | octree depth | cells | views | build s | raw bytes | deflated | ratio |",
         "|---|---:|---:|---:|---:|---:|---:|---:|",
