@@ -284,8 +284,12 @@ def _storage(color: np.ndarray, depth: np.ndarray, crops: np.ndarray) -> tuple[i
 
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     workers = max(1, min(len(crops), cores or 1))
-    with ThreadPoolExecutor(workers) as pool:
+    pool = ThreadPoolExecutor(workers)
+    try:
         sizes = list(pool.map(cell, range(len(crops))))
+    finally:
+        # On Ctrl-C, the cells not started are dropped rather than deflated first.
+        pool.shutdown(wait=True, cancel_futures=True)
     return sum(r for r, _ in sizes), sum(z for _, z in sizes)
 
 
