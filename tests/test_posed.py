@@ -440,3 +440,21 @@ def test_bad_deformations_are_refused(scenes, vertices, match):
         base.deformed(v)
     with pytest.raises(ss.InputError, match="normals must have shape"):
         base.deformed(base.vertices, normals=np.zeros((2, 3)))
+
+
+def test_deformed_refuses_complex_numbers_and_zero_normals():
+    """A complex array lost its imaginary part silently, and a zero normal (no direction to
+    shade with) was accepted."""
+    scene = ss.Scene.from_arrays([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
+    v = scene.vertices
+    with pytest.raises(ss.InputError, match="vertices must be real numbers"):
+        scene.deformed(v + 1j)
+    with pytest.raises(ss.InputError, match="normals must be real numbers"):
+        scene.deformed(v, normals=np.ones((3, 3)) * (1 + 1j))
+    normals = np.tile([0.0, 0.0, 1.0], (3, 1))
+    normals[1] = 0
+    with pytest.raises(ss.InputError, match="deformed normal 1 is zero"):
+        scene.deformed(v, normals=normals)
+    with pytest.raises(ss.InputError, match="the transform of 0 must be real numbers"):
+        scene.posed({0: np.eye(4) * 1j})
+    assert scene.deformed(v + 1, normals=np.tile([0.0, 0.0, 1.0], (3, 1))).normals is not None

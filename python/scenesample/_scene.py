@@ -395,13 +395,17 @@ class Scene:
         real = (int, float, np.integer, np.floating)
         if isinstance(t, (bool, np.bool_)) or not isinstance(t, real):
             raise InputError(f"t must be a finite number of seconds, got {t!r}")
+        try:
+            seconds = float(t)
+        except OverflowError:
+            raise InputError(f"t must be a finite number of seconds, got {t!r}") from None
         clips = list(animation) if isinstance(animation, (list, tuple)) else [animation]
         if not clips:
             raise InputError("animation must name at least one clip")
-        return Scene(self._core.at(float(t), [self._clip(c) for c in clips]))
+        return Scene(self._core.at(seconds, [self._clip(c) for c in clips]))
 
-    def _clip(self, animation: Any) -> str:
-        """A clip's index or name, checked, as the core takes it (text)."""
+    def _clip(self, animation: Any) -> int | str:
+        """A clip's index (an int) or name (a str, never read as a number), checked."""
         if isinstance(animation, (bool, np.bool_)) or not isinstance(
             animation, (int, np.integer, str)
         ):
@@ -411,7 +415,8 @@ class Scene:
         if not isinstance(animation, str):
             if not 0 <= animation < len(self.animations):
                 raise InputError(f"no animation {animation}: the scene has {len(self.animations)}")
-        return str(animation)
+            return int(animation)
+        return animation
 
     @property
     def transforms(self) -> Optional[np.ndarray]:
@@ -556,10 +561,16 @@ def _from_posed_state(state: dict[str, Any]) -> Scene:
 
 def _float_array(value: Any, what: str, dtype: Any = np.float64) -> np.ndarray:
     """``value`` as an array of ``dtype``, or an InputError naming ``what`` when it is not
-    numbers in a regular shape (text, None, ragged lists)."""
+    real numbers in a regular shape (text, None, ragged lists, complex numbers, whose imaginary
+    part a conversion would silently drop)."""
     try:
-        out = np.asarray(value, dtype=dtype)
+        out = np.asarray(value)
+        if np.iscomplexobj(out):
+            raise InputError(f"{what} must be real numbers, got complex ones ({out.dtype})")
+        out = np.asarray(out, dtype=dtype)
     except (TypeError, ValueError) as e:
+        if isinstance(e, InputError):
+            raise
         raise InputError(f"{what} must be numbers in a regular array: {e}") from None
     return out
 

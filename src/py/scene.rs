@@ -10,7 +10,24 @@ use pyo3::types::{PyDict, PyList};
 use super::camera::PyCamera;
 use super::convert::{array, faces, flat_i32, rows_array, rows_f32, rows_f64};
 use super::errors::{input, IntoPy};
+use crate::scene::animation::ClipKey;
 use crate::scene::{Light, LightKind, Material, Scene, SceneParts};
+
+/// A clip as Python names it: an int is its index, a str its name (never parsed as a number).
+#[derive(FromPyObject)]
+pub enum Clip {
+    Index(usize),
+    Name(String),
+}
+
+impl Clip {
+    fn key(&self) -> ClipKey<'_> {
+        match self {
+            Clip::Index(k) => ClipKey::Index(*k),
+            Clip::Name(n) => ClipKey::Name(n),
+        }
+    }
+}
 
 #[pyclass(name = "Scene", module = "scenesample._core", frozen)]
 pub struct PyScene {
@@ -183,17 +200,17 @@ impl PyScene {
         self.inner.animations()
     }
 
-    /// Every key time of animation `clip` (an index or a name, as text), ascending, each once.
-    fn key_times<'py>(&self, py: Python<'py>, clip: String) -> PyResult<Bound<'py, PyAny>> {
-        let times = super::run(py, || self.inner.key_times(&clip))?;
+    /// Every key time of animation `clip` (an int index or a str name), ascending, each once.
+    fn key_times<'py>(&self, py: Python<'py>, clip: Clip) -> PyResult<Bound<'py, PyAny>> {
+        let times = super::run(py, || self.inner.key_times(clip.key()))?;
         Ok(numpy::PyArray1::from_vec(py, times).into_any())
     }
 
-    /// The scene posed at `t` seconds into animation clips `clips` (indices or names, as text),
+    /// The scene posed at `t` seconds into animation clips `clips` (int indices or str names),
     /// played together.
-    fn at(&self, py: Python<'_>, t: f64, clips: Vec<String>) -> PyResult<Self> {
-        let names: Vec<&str> = clips.iter().map(String::as_str).collect();
-        let scene = super::run(py, || self.inner.at(t, &names))?;
+    fn at(&self, py: Python<'_>, t: f64, clips: Vec<Clip>) -> PyResult<Self> {
+        let keys: Vec<ClipKey> = clips.iter().map(Clip::key).collect();
+        let scene = super::run(py, || self.inner.at(t, &keys))?;
         Ok(Self {
             inner: Arc::new(scene),
         })

@@ -12,7 +12,7 @@ use crate::error::Result;
 use crate::input_err;
 
 /// A node's place in the hierarchy and its transform as loaded.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Node {
     pub parent: Option<usize>,
     /// The local transform as loaded (the node's matrix, or its TRS composed).
@@ -23,14 +23,14 @@ pub struct Node {
 
 /// Where an object of the scene comes from: its node, the instance transform under it
 /// (`EXT_mesh_gpu_instancing`; identity otherwise), and the world transform it was loaded with.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Placed {
     pub node: usize,
     pub instance: DMat4,
     pub loaded: DMat4,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Property {
     Translation,
     Rotation,
@@ -39,7 +39,7 @@ pub enum Property {
     Weights,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Interpolation {
     Step,
     Linear,
@@ -49,7 +49,7 @@ pub enum Interpolation {
 /// One animated property of one node: key times (seconds, non-decreasing) and per key `width`
 /// values (xyz, a quaternion's xyzw, or one weight per morph target); CUBICSPLINE keys hold
 /// in-tangent, value and out-tangent, in that order.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Channel {
     pub node: usize,
     pub property: Property,
@@ -59,7 +59,7 @@ pub struct Channel {
     pub values: Vec<f32>,
 }
 
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Clip {
     pub name: String,
     /// The last key time over its channels, in seconds (weights channels included).
@@ -68,7 +68,7 @@ pub struct Clip {
 }
 
 /// A scene's node hierarchy, where its objects hang in it, and its clips.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
 pub struct Animations {
     pub nodes: Vec<Node>,
     /// Each node's world transform as loaded.
@@ -97,6 +97,16 @@ pub struct At {
     pub cameras: Vec<Option<DMat4>>,
 }
 
+/// `m` with its last row set to 0, 0, 0, 1: what a transform composed of affine ones is, up to
+/// the rounding that a product or an inverse leaves in that row.
+pub fn affine(mut m: DMat4) -> DMat4 {
+    m.x_axis.w = 0.0;
+    m.y_axis.w = 0.0;
+    m.z_axis.w = 0.0;
+    m.w_axis.w = 1.0;
+    m
+}
+
 /// The map from an object's vertices as loaded back to its mesh's space: the inverse of `loaded`,
 /// or where a zero scale made it singular (an object loaded hidden or flattened), its
 /// pseudo-inverse, which recovers what the load kept (the directions the scale did not zero)
@@ -105,14 +115,18 @@ pub struct At {
 pub fn undo(loaded: &DMat4) -> DMat4 {
     let l = glam::DMat3::from_mat4(*loaded);
     let size = l.x_axis.length_squared() + l.y_axis.length_squared() + l.z_axis.length_squared();
-    if l.determinant().abs() > 1e-12 * size.powf(1.5) {
-        return loaded.inverse();
-    }
-    // (LᵀL + εI)⁻¹Lᵀ: the pseudo-inverse where L's singular values are 0 or well above ε.
-    let gram = l.transpose() * l;
-    let eps = 1e-12 * size.max(f64::MIN_POSITIVE);
-    let p = (gram + glam::DMat3::from_diagonal(DVec3::splat(eps))).inverse() * l.transpose();
+    let p = if l.determinant().abs() > 1e-12 * size.powf(1.5) {
+        l.inverse()
+    } else {
+        // (LᵀL + εI)⁻¹Lᵀ: the pseudo-inverse where L's singular values are 0 or well above ε.
+        let gram = l.transpose() * l;
+        let eps = 1e-12 * size.max(f64::MIN_POSITIVE);
+        (gram + glam::DMat3::from_diagonal(DVec3::splat(eps))).inverse() * l.transpose()
+    };
     let p = if p.is_finite() { p } else { glam::DMat3::ZERO };
+    // Inverted as an affine map (linear part, then translation), so that its last row is
+    // 0, 0, 0, 1 exactly: a general 4×4 inverse rounds it to 0.9999999999999999 for some
+    // rotations, which no later product would repair.
     let t = -(p * loaded.w_axis.truncate());
     DMat4::from_cols(
         p.x_axis.extend(0.0),
@@ -171,18 +185,28 @@ impl Channel {
     }
 }
 
+/// How a caller names a clip: by its index among the scene's clips, or by its name (a name is
+/// always a name, even one that reads as a number: clips named "1" and "0" exist).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ClipKey<'a> {
+    Index(usize),
+    Name(&'a str),
+}
+
 impl Animations {
-    /// The clip named or numbered `clip`.
-    pub fn clip(&self, clip: &str) -> Result<usize> {
-        if let Ok(k) = clip.parse::<usize>() {
-            if k < self.clips.len() {
-                return Ok(k);
+    /// The index of the clip `clip` names.
+    pub fn clip(&self, clip: ClipKey) -> Result<usize> {
+        let name = match clip {
+            ClipKey::Index(k) if k < self.clips.len() => return Ok(k),
+            ClipKey::Index(k) => {
+                return input_err!("no animation {k}: the scene has {}", self.clips.len())
             }
-        }
-        match self.clips.iter().position(|c| c.name == clip) {
+            ClipKey::Name(name) => name,
+        };
+        match self.clips.iter().position(|c| c.name == name) {
             Some(k) => Ok(k),
             None => input_err!(
-                "no animation {clip:?}: the scene has {} ({:?})",
+                "no animation named {name:?}: the scene has {} ({:?})",
                 self.clips.len(),
                 self.clips
                     .iter()
@@ -311,7 +335,11 @@ impl Animations {
         let objects = worlds(&self.objects)
             .into_iter()
             .zip(&self.objects)
-            .map(|(w, p)| w.map_or(DMat4::IDENTITY, |w| w * p.instance * undo(&p.loaded)))
+            .map(|(w, p)| {
+                w.map_or(DMat4::IDENTITY, |w| {
+                    affine(w * p.instance * undo(&p.loaded))
+                })
+            })
             .collect();
         Ok(At {
             objects,

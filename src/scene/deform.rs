@@ -43,6 +43,10 @@ impl Scene {
             if let Some(i) = ns.iter().position(|v| v.iter().any(|x| !x.is_finite())) {
                 return input_err!("deformed normal {i} is not finite: {:?}", ns[i]);
             }
+            // A zero normal has no direction to shade with.
+            if let Some(i) = ns.iter().position(|v| *v == [0.0; 3]) {
+                return input_err!("deformed normal {i} is zero; normals need a direction");
+            }
         }
         let parts = SceneParts {
             vertices,

@@ -12,6 +12,7 @@ use std::sync::Arc;
 use glam::{DMat3, DMat4, DVec3};
 use rayon::prelude::*;
 
+use super::animation::ClipKey;
 use super::{Scene, SceneParts, Shared};
 use crate::error::Result;
 use crate::input_err;
@@ -181,7 +182,7 @@ impl Scene {
     /// later one in `clips` wins). On a scene a user posed, the clips move each object first
     /// and the pose after (object `o` at `T[o] · A_t[o]`); a clip's pose of such a scene keeps
     /// the user's pose for its next `at`.
-    pub fn at(self: &Arc<Self>, t: f64, clips: &[&str]) -> Result<Scene> {
+    pub fn at(self: &Arc<Self>, t: f64, clips: &[ClipKey]) -> Result<Scene> {
         let Some(a) = &self.parts.animations else {
             return input_err!("the scene has no animations");
         };
@@ -190,7 +191,7 @@ impl Scene {
         }
         let indices = clips
             .iter()
-            .map(|c| a.clip(c))
+            .map(|&c| a.clip(c))
             .collect::<Result<Vec<_>>>()?;
         let mut at = a.at_clips(&indices, t)?;
         let after = match &self.pose {
@@ -226,8 +227,8 @@ impl Scene {
         )
     }
 
-    /// Every key time of animation `clip` (its index or name), ascending, each once.
-    pub fn key_times(&self, clip: &str) -> Result<Vec<f64>> {
+    /// Every key time of animation `clip`, ascending, each once.
+    pub fn key_times(&self, clip: ClipKey) -> Result<Vec<f64>> {
         let Some(a) = &self.parts.animations else {
             return input_err!("the scene has no animations");
         };

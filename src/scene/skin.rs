@@ -10,14 +10,14 @@ use rayon::prelude::*;
 
 /// A skin: its joints (node indices) and each joint's inverse bind matrix (the identity when
 /// the file gives none).
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Skin {
     pub joints: Vec<usize>,
     pub inverse_bind: Vec<DMat4>,
 }
 
 /// An object whose vertices morph targets or a skin move.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Deformable {
     /// The object, and its node.
     pub object: usize,
@@ -51,7 +51,7 @@ pub enum Place<'a> {
 }
 
 /// The skins and deformable objects of a scene.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
 pub struct Rigging {
     pub skins: Vec<Skin>,
     pub deformables: Vec<Deformable>,

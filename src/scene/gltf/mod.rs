@@ -20,12 +20,14 @@ use crate::error::{Error, Result};
 
 mod checks;
 mod clips;
+mod pointer;
 mod skins;
 
 use checks::{prevalidate, refuse_version_one, version_one};
 
 /// Extensions whose content we read.
 const HANDLED: &[&str] = &[
+    "KHR_animation_pointer",
     "KHR_lights_punctual",
     "EXT_mesh_gpu_instancing",
     "KHR_materials_emissive_strength",
@@ -75,19 +77,28 @@ fn scene_err(path: &Path, message: impl std::fmt::Display) -> Error {
 fn load_parts(path: &Path) -> Result<SceneParts> {
     let bytes =
         std::fs::read(path).map_err(|e| file_err(path, format!("cannot read the file: {e}")))?;
-    let gltf::Gltf { document, blob } =
-        gltf::Gltf::from_slice_without_validation(&bytes).map_err(|e| {
-            let why = match version_one(&bytes) {
-                Some(v) => refuse_version_one(&v),
-                None => format!("not a readable glTF/GLB file (truncated or corrupt?): {e}"),
-            };
-            file_err(path, why)
-        })?;
-    let mut root = document.into_json();
+    let unreadable = |e: &dyn std::fmt::Display| {
+        let why = match version_one(&bytes) {
+            Some(v) => refuse_version_one(&v),
+            None => format!("not a readable glTF/GLB file (truncated or corrupt?): {e}"),
+        };
+        file_err(path, why)
+    };
+    let (json, blob) = if bytes.starts_with(b"glTF") {
+        let glb = gltf::Glb::from_slice(&bytes).map_err(|e| unreadable(&e))?;
+        (glb.json.into_owned(), glb.bin.map(|b| b.into_owned()))
+    } else {
+        (bytes.clone(), None)
+    };
+    let mut value: serde_json::Value = serde_json::from_slice(&json).map_err(|e| unreadable(&e))?;
+    let mut warnings: Vec<String> = pointer::resolve_extension_channels(&mut value)
+        .into_iter()
+        .map(|m| format!("{}: {m}", path.display()))
+        .collect();
+    let mut root: gltf::json::Root = serde_json::from_value(value).map_err(|e| unreadable(&e))?;
     if root.asset.version.trim().starts_with('1') {
         return Err(file_err(path, refuse_version_one(&root.asset.version)));
     }
-    let mut warnings = Vec::new();
     for ext in &root.extensions_required {
         if !honourable(ext) {
             return Err(scene_err(
