@@ -14,6 +14,7 @@ use glam::DVec3;
 use crate::camera::Camera;
 use crate::error::Result;
 use crate::input_err;
+use crate::scene::surface::{Footprint, Surfaces};
 use crate::scene::{LightKind, Scene};
 use crate::types::DepthImages;
 
@@ -285,7 +286,12 @@ pub fn frame(
 ) -> Result<(Vec<[f32; 3]>, bool)> {
     use rayon::prelude::*;
     let pixels = camera.width as usize * camera.height as usize;
-    if gbuffer.n != 1 || gbuffer.triangle.len() != pixels {
+    let sizes = [
+        gbuffer.triangle.len(),
+        gbuffer.position.len(),
+        gbuffer.color.len(),
+    ];
+    if gbuffer.n != 1 || sizes.iter().any(|&n| n != pixels) {
         return input_err!(
             "a frame shades one {}x{} image; got {} image(s) of {} pixels",
             camera.width,
@@ -308,6 +314,7 @@ pub fn frame(
         );
     }
     let eye = camera.eye();
+    let surfaces = scene.surfaces();
     let shaded = |lights: &[ShadeLight], visibility: &[Option<Vec<f32>>]| {
         (0..pixels)
             .into_par_iter()
@@ -317,7 +324,7 @@ pub fn frame(
                     return ([0.0; 3], false);
                 }
                 let p = DVec3::from_array(gbuffer.position[px].map(f64::from));
-                let s = surface(scene, t as usize, p);
+                let s = pixel_surface(&surfaces, t as usize, p, gbuffer.color[px]);
                 let seen = |i: usize| visibility[i].as_ref().map_or(1.0, |v| v[px] as f64);
                 let c = shade_visible(&s, eye, lights, seen);
                 let a = luminance(ambient(&s));
@@ -346,38 +353,29 @@ pub fn frame(
     ))
 }
 
-/// The surface of triangle `t` at `p`: interpolated vertex normal (geometric when the scene has
-/// none) and colour, and the material's metallic and roughness (0 and 1 without a material).
-pub fn surface(scene: &Scene, t: usize, p: DVec3) -> Surface {
-    let f = scene.faces()[t];
-    let v = f.map(|i| DVec3::from_array(scene.vertices()[i as usize].map(f64::from)));
+/// The surface of triangle `t` at `p` (`scene::surface`): its colour sampled for `footprint`
+/// (the material's texture filtered over it), its shading normal turned to the geometric
+/// normal's side, and the material's metallic and roughness (0 and 1 without a material).
+pub fn surface(surfaces: &Surfaces, t: usize, p: DVec3, footprint: Footprint) -> Surface {
+    let b = surfaces.barycentrics(t, p);
+    let albedo = surfaces.color(t, b, footprint);
+    surface_with(surfaces, t, p, b, albedo)
+}
+
+/// [`surface`] at a point whose colour `albedo` was resolved already (an image's pixel, its
+/// texture filtered over the pixel's footprint).
+pub fn pixel_surface(surfaces: &Surfaces, t: usize, p: DVec3, albedo: [f32; 3]) -> Surface {
+    let b = surfaces.barycentrics(t, p);
+    surface_with(surfaces, t, p, b, albedo)
+}
+
+fn surface_with(surfaces: &Surfaces, t: usize, p: DVec3, b: [f64; 2], albedo: [f32; 3]) -> Surface {
+    let scene = surfaces.scene();
     let geometric = scene.face_normal(t);
-    let w = barycentric(&v, p);
-    let colors = scene.colors();
-    let albedo = f
-        .iter()
-        .zip(w)
-        .map(|(&i, wi)| DVec3::from_array(colors[i as usize].map(f64::from)) * wi)
-        .sum::<DVec3>();
-    let normal = match scene.normals() {
-        Some(ns) => {
-            let n = f
-                .iter()
-                .zip(w)
-                .map(|(&i, wi)| DVec3::from_array(ns[i as usize].map(f64::from)) * wi)
-                .sum::<DVec3>();
-            let n = n.normalize_or_zero();
-            // Keep the interpolated normal on the geometric side of the face.
-            if n == DVec3::ZERO {
-                geometric
-            } else if n.dot(geometric) < 0.0 {
-                -n
-            } else {
-                n
-            }
-        }
-        None => geometric,
-    };
+    let n = DVec3::from_array(surfaces.shading_normal(t, b).map(f64::from));
+    // Keep the interpolated normal on the geometric side of the face: the side a ray or an
+    // eye meets is the one lit (a file whose normals disagree with its winding shades alike).
+    let normal = if n.dot(geometric) < 0.0 { -n } else { n };
     let (metallic, roughness) = usize::try_from(scene.material_ids()[t])
         .ok()
         .and_then(|m| scene.materials().get(m))
@@ -386,27 +384,10 @@ pub fn surface(scene: &Scene, t: usize, p: DVec3) -> Surface {
     Surface {
         position: p,
         normal,
-        albedo,
+        albedo: DVec3::from_array(albedo.map(f64::from)),
         metallic,
         roughness,
     }
-}
-
-/// Barycentric weights of `p` (projected onto the triangle's plane), clamped into the triangle
-/// so that points just outside it (splat centres) interpolate its edge values.
-fn barycentric(v: &[DVec3; 3], p: DVec3) -> [f64; 3] {
-    let e0 = v[1] - v[0];
-    let e1 = v[2] - v[0];
-    let d = p - v[0];
-    let (a, b, c) = (e0.dot(e0), e0.dot(e1), e1.dot(e1));
-    let (pd0, pd1) = (d.dot(e0), d.dot(e1));
-    let den = a * c - b * b;
-    if den.abs() <= f64::MIN_POSITIVE {
-        return [1.0 / 3.0; 3];
-    }
-    let w1 = ((c * pd0 - b * pd1) / den).clamp(0.0, 1.0);
-    let w2 = ((a * pd1 - b * pd0) / den).clamp(0.0, 1.0 - w1);
-    [1.0 - w1 - w2, w1, w2]
 }
 
 #[cfg(test)]
@@ -498,15 +479,5 @@ mod tests {
             |_| 1.0,
         );
         assert!(area.x > 0.5 * 0.9, "{area}");
-    }
-
-    #[test]
-    fn barycentric_weights_sum_to_one_and_clamp() {
-        let v = [DVec3::ZERO, DVec3::X, DVec3::Y];
-        let w = barycentric(&v, DVec3::new(0.25, 0.25, 3.0));
-        assert!((w[0] - 0.5).abs() < 1e-12 && (w[1] - 0.25).abs() < 1e-12);
-        let w = barycentric(&v, DVec3::new(2.0, 2.0, 0.0));
-        assert!(w.iter().all(|x| (0.0..=1.0).contains(x)));
-        assert!((w.iter().sum::<f64>() - 1.0).abs() < 1e-12);
     }
 }

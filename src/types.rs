@@ -152,14 +152,52 @@ pub struct DepthImages {
     /// Unit world geometric normal from the triangle's winding (not flipped toward the camera);
     /// zero where no surface or the triangle is degenerate.
     pub normal: Vec<[f32; 3]>,
+    /// Unit world shading normal: the vertices' normals interpolated at the sample (the file's
+    /// NORMAL as posed, else area-weighted; `scene::surface`), not flipped toward the camera;
+    /// zero where no surface.
+    pub shading_normal: Vec<[f32; 3]>,
     /// World position of the surface point; NaN where no surface.
     pub position: Vec<[f32; 3]>,
-    /// Linear base colour interpolated from the vertices; zero where no surface.
+    /// Linear base colour: the vertices' colours interpolated times the material's texture
+    /// sampled for the pixel's footprint (`scene::surface`); zero where no surface.
     pub color: Vec<[f32; 3]>,
     pub cameras: Vec<Camera>,
     /// How the images were made: "conventional", "nonredundant" or "peeling".
     pub method: String,
     pub timings: Timings,
+}
+
+impl DepthImages {
+    /// Give pixel `to` every field of pixel `from` of `other` (images of the same cameras).
+    pub fn copy_pixel(&mut self, to: usize, other: &DepthImages, from: usize) {
+        self.depth[to] = other.depth[from];
+        self.triangle[to] = other.triangle[from];
+        self.normal[to] = other.normal[from];
+        self.shading_normal[to] = other.shading_normal[from];
+        self.position[to] = other.position[from];
+        self.color[to] = other.color[from];
+    }
+
+    /// Give pixel `to` every field of pixel `from` of the same images.
+    pub fn move_pixel(&mut self, to: usize, from: usize) {
+        self.depth[to] = self.depth[from];
+        self.triangle[to] = self.triangle[from];
+        self.normal[to] = self.normal[from];
+        self.shading_normal[to] = self.shading_normal[from];
+        self.position[to] = self.position[from];
+        self.color[to] = self.color[from];
+    }
+
+    /// Make pixel `i` see nothing: depth +inf, triangle −1, zero normals and colour, NaN
+    /// position.
+    pub fn clear_pixel(&mut self, i: usize) {
+        self.depth[i] = f32::INFINITY;
+        self.triangle[i] = -1;
+        self.normal[i] = [0.0; 3];
+        self.shading_normal[i] = [0.0; 3];
+        self.position[i] = [f32::NAN; 3];
+        self.color[i] = [0.0; 3];
+    }
 }
 
 /// A point set, as `discretize(method="epr")` makes it or a caller builds it.
@@ -169,7 +207,13 @@ pub struct Points {
     /// Side of the point's square, world units.
     pub length: Vec<f32>,
     pub triangle: Vec<i32>,
+    /// Unit geometric normal of the point's triangle.
     pub normal: Vec<[f32; 3]>,
+    /// Unit shading normal at the point's centre (`scene::surface`).
+    pub shading_normal: Vec<[f32; 3]>,
+    /// Linear base colour over the point's square (`scene::surface`: its texture filtered
+    /// over the square's side).
+    pub color: Vec<[f32; 3]>,
     pub material: Vec<i32>,
     /// `words()` words per point: bit v % 64 of word v / 64 is set when view v may see the point.
     pub views: Vec<u64>,
@@ -196,11 +240,14 @@ impl Points {
     /// Check the arrays against each other and against `scene`.
     pub fn validate(&self, scene: &Scene) -> Result<()> {
         let n = self.len();
-        // Normals and materials are for shading, not splatting: they may be left empty.
+        // Normals, colours and materials are for shading, not splatting: they may be left
+        // empty.
         for (name, len, optional) in [
             ("length", self.length.len(), false),
             ("triangle", self.triangle.len(), false),
             ("normal", self.normal.len(), true),
+            ("shading_normal", self.shading_normal.len(), true),
+            ("color", self.color.len(), true),
             ("material", self.material.len(), true),
         ] {
             if len != n && !(optional && len == 0) {

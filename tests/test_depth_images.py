@@ -210,6 +210,7 @@ def test_timings_are_reported(gpu) -> None:
         "depth",
         "triangle",
         "normal",
+        "shading_normal",
         "position",
         "color",
         "cameras",
@@ -227,7 +228,7 @@ def test_exr_round_trip_is_bit_exact(gpu, tmp_path) -> None:
     img = ss.discretize(s, orbit_cameras(s, 3, 64, 48, seed=8))
     img.save_exr(tmp_path / "views.exr")
     back = ss.DepthImages.load_exr(tmp_path / "views.exr")
-    for name in ("depth", "triangle", "normal", "position", "color"):
+    for name in ("depth", "triangle", "normal", "shading_normal", "position", "color"):
         a, b = getattr(img, name), getattr(back, name)
         assert a.dtype == b.dtype and a.shape == b.shape
         np.testing.assert_array_equal(a.view(np.uint32), b.view(np.uint32), err_msg=name)

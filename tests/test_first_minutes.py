@@ -14,6 +14,8 @@ from conftest import SHARED, load_quiet, orbit_cameras
 from scenesample import _env
 from scenesample.imageio import KEY, auto_exposure, labelled_sheet
 
+#: The shading model's ambient radiance, as a fraction of the albedo (src/shading.rs).
+AMBIENT = 0.08
 #: Rec. 709 luminance weights.
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 
@@ -26,16 +28,18 @@ def srgb_luminance(rgb8: np.ndarray, mask: np.ndarray) -> float:
 @pytest.mark.parametrize("name", sorted(SHARED))
 def test_lit_frames_of_every_shared_scene_read(name, gpu):
     """A lit frame shows its shapes: as shaded, a fair share of its surface pixels are lit
-    above the ambient floor (the default light joins a scene's lights that leave the view
-    dark), and with auto exposure the mean display luminance is mid-tone: neither a dark shape
-    on black nor a white silhouette."""
+    well above the ambient floor of their own colour (the default light joins a scene's lights
+    that leave the view dark; a dark material lit is still lit: the toy car's body is dark
+    green where its texture's mean was a light grey), and with auto exposure the mean display
+    luminance is mid-tone: neither a dark shape on black nor a white silhouette."""
     scene = load_quiet(SHARED[name])
     cam = orbit_cameras(scene, 1, 96, 96, seed=1)[0]
     frame = ss.render(scene, cam, effects=[])
     mask = frame.mask
     assert mask.sum() > 50, f"{name}: the view sees almost nothing"
-    raw = frame.to_srgb8()
-    bright = (raw[mask].astype(np.float64) / 255 @ LUMA) > 0.15
+    albedo = ss.discretize(scene, [cam]).color[0][mask].astype(np.float64) @ LUMA
+    shaded = frame.image[mask].astype(np.float64) @ LUMA
+    bright = shaded > 4 * AMBIENT * albedo
     assert bright.mean() >= 0.1, f"{name}: {bright.mean():.1%} of the surface reads as lit"
     shown = srgb_luminance(frame.to_srgb8("auto"), mask)
     assert 0.2 <= shown <= 0.75, f"{name}: mean display luminance {shown:.3f} with auto exposure"

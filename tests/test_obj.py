@@ -97,9 +97,13 @@ def test_mtl_statements_spaces_windows_paths_and_warnings(tmp_path):
     assert any("absent.mtl" in s and "missing" in s for s in said)
     assert any("nowhere.png" in s for s in said)
     assert any("nonexistent" in s for s in said)
-    # The vertex colour of v5 multiplies its material's colour.
+    # The vertex colour of v5 multiplies its material's Kd, and the texture (all red) the
+    # two where the face is sampled; the face's vt and vn references name none that exist.
     f = scene.faces[2]
-    np.testing.assert_allclose(scene.colors[f[2]], [0.25, 0, 0], atol=1e-6)
+    np.testing.assert_allclose(scene.colors[f[2]], [0.25, 0.25, 0.25], atol=1e-6)
+    a = ss.surface_attributes(scene, triangle=[2], barycentric=[[0.0, 1.0]])
+    np.testing.assert_allclose(a.color, [[0.25, 0, 0]], atol=1e-6)
+    assert any("texture coordinate 1" in s and "does not exist" in s for s in said)
 
 
 def test_a_plan_of_an_obj_with_an_emissive_material_has_soft_shadows(tmp_path):

@@ -108,15 +108,24 @@ def test_materials_with_texture_average(tmp_path) -> None:
         }
     ]
     doc["extensionsUsed"] = ["KHR_materials_emissive_strength"]
-    doc["meshes"][0]["primitives"][0]["material"] = 0
+    prim = doc["meshes"][0]["primitives"][0]
+    prim["material"] = 0
+    uv = np.array([[0.25, 0.5], [0.75, 0.5], [0.25, 0.5]], np.float32)
+    prim["attributes"]["TEXCOORD_0"] = add_accessor(doc, uv, "VEC2")
     s = ss.Scene.load(write(doc, tmp_path / "m.gltf"))
     (m,) = s.materials
     assert m["base_color_textured"] and m["metallic"] == 0.25 and m["roughness"] == 0.75
-    # Mean of linear red (1,0,0) and blue (0,0,1), times the factor.
+    # The material's one colour: the mean of linear red (1,0,0) and blue (0,0,1), times the
+    # factor.
     np.testing.assert_allclose(m["base_color"], [0.5, 0.0, 0.5, 1.0], atol=1e-6)
     np.testing.assert_allclose(m["emissive"], [4, 2, 0])
     np.testing.assert_array_equal(s.material_ids, [0])
-    np.testing.assert_allclose(s.colors, [[0.5, 0.0, 0.5]] * 3, atol=1e-6)
+    # The vertices carry the factor; the texture multiplies it where each sample lies: red at
+    # the first texel's centre, blue at the second's.
+    np.testing.assert_allclose(s.colors, [[1, 0.5, 1]] * 3)
+    a = ss.surface_attributes(s, triangle=[0, 0], barycentric=[[0, 0], [1, 0]])
+    np.testing.assert_allclose(a.color, [[1, 0, 0], [0, 0, 1]], atol=1e-6)
+    np.testing.assert_allclose(a.texcoord, uv[:2])
 
 
 def test_missing_image_is_tolerated_with_a_warning(tmp_path) -> None:
@@ -243,7 +252,7 @@ def test_out_of_range_index_and_nan_vertex(tmp_path) -> None:
     bad = QUAD.copy()
     bad[2, 1] = np.nan
     with pytest.raises(
-        ss.SceneError, match=r"POSITION accessor 0 has a non-finite vertex at index 2"
+        ss.SceneError, match=r"POSITION accessor 0 has a non-finite value at index 2"
     ):
         ss.Scene.load(write(document(bad, [[0, 1, 2]]), tmp_path / "n.gltf"))
 

@@ -4,6 +4,8 @@ coverage and bounds in hard cases."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 import scenesample as ss
@@ -188,7 +190,9 @@ def test_bad_input_raises_typed_errors(gpu, tilted):
         ss.splat(pts, [cam, other])
     with pytest.raises(ss.InputError, match="visibility words"):
         ss.splat(pts, [cam] * 65)
-    bad = ss.Points.from_arrays(scene, [[0, 0, 0]], [0.3], [5], cameras=[cam])
+    with pytest.raises(ss.InputError, match=r"triangle\[0\] is 5: the scene has 1 triangles"):
+        ss.Points.from_arrays(scene, [[0, 0, 0]], [0.3], [5], cameras=[cam])
+    bad = dataclasses.replace(pts, triangle=np.array([5], np.int32))
     with pytest.raises(ss.InputError, match="triangle 5"):
         ss.splat(bad)
     nan = ss.Points.from_arrays(scene, [[np.nan, 0, 0]], [0.3], [0], cameras=[cam])

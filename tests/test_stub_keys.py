@@ -114,7 +114,7 @@ def test_every_returned_dict_matches_its_stub(recorded, gpu, tmp_path):
     ss.occluded(scene, o, d)
     ss.all_hits(scene, o, d)
     ss.count_hits(scene, o, d)
-    ss.closest_points(scene, o)
+    ss.surface_attributes(scene, ss.closest_points(scene, o))
     ss.render(scene, eye, effects=[])
     ss.bvh_stats(scene)
     ss.device_info(triangles=1000, pixels=64 * 64)

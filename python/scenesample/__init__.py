@@ -14,6 +14,7 @@ Conventions (shared by every function):
 # `_env` first: on a headless machine it quiets Mesa's device-selection layer (see its notes).
 from . import _env, errors, methods, plot, references, scenes  # noqa: F401
 from ._api import device_info, discretize, reconstruct
+from ._attributes import surface_attributes
 from ._core import Camera
 from ._core import __version__ as __version__
 from ._evaluate import evaluate, intermediate_cameras
@@ -39,7 +40,7 @@ from .errors import (
 )
 from .impostors.cells import Impostors, ImpostorView
 from .nonredundant.shadows import AreaLight, ShadowResult, soft_shadows
-from .results import AllHits, ClosestPoints, DepthImages, Mesh, RayHits
+from .results import AllHits, ClosestPoints, DepthImages, Mesh, RayHits, SurfaceSamples
 from .visibility_field import FieldView, Slab, VisibilityField
 
 __all__ = [
@@ -72,6 +73,7 @@ __all__ = [
     "Slab",
     "ShadowResult",
     "SplatBuffers",
+    "SurfaceSamples",
     "VisibilityField",
     "ScenesampleError",
     "all_hits",
@@ -100,6 +102,7 @@ __all__ = [
     "scenes",
     "signed_distance",
     "soft_shadows",
+    "surface_attributes",
     "tradeoff",
     "winding_number",
 ]

@@ -55,6 +55,7 @@ __all__ = [
     "six_slabs",
     "soft_shadows",
     "splat",
+    "surface_attributes",
     "visibility_field",
     "winding_numbers",
     "write_exr",
@@ -90,6 +91,10 @@ class Scene:
         object_ids: Optional[ArrayLike] = None,
         objects: Optional[Sequence[str]] = None,
         lights: Optional[Sequence[dict[str, Any]]] = None,
+        texcoords: Optional[ArrayLike] = None,
+        textures: Optional[Sequence[np.ndarray]] = None,
+        cameras: Optional[Sequence[Camera]] = None,
+        animations: Optional[str] = None,
     ) -> Scene: ...
     def posed(
         self,
@@ -97,6 +102,7 @@ class Scene:
         rewinds: bool = False,
         lights: Optional[list[dict[str, Any]]] = None,
         vertices: Optional[ArrayLike] = None,
+        normals: Optional[ArrayLike] = None,
     ) -> Scene: ...
     @property
     def base(self) -> Optional[Scene]: ...
@@ -106,6 +112,12 @@ class Scene:
     def deforms(self) -> bool: ...
     @property
     def animations(self) -> list[tuple[str, float]]: ...
+    @property
+    def animations_state(self) -> Optional[str]: ...
+    @property
+    def texcoords(self) -> Optional[np.ndarray]: ...
+    @property
+    def textures(self) -> list[np.ndarray]: ...
     def at(self, t: float, clips: list[int | str]) -> Scene: ...
     def key_times(self, clip: int | str) -> np.ndarray: ...
     def deformed(self, vertices: ArrayLike, normals: Optional[ArrayLike] = None) -> Scene: ...
@@ -260,6 +272,7 @@ class _ImagesDict(TypedDict):
     depth: np.ndarray
     triangle: np.ndarray
     normal: np.ndarray
+    shading_normal: np.ndarray
     position: np.ndarray
     color: np.ndarray
     cameras: list[Camera]
@@ -301,6 +314,8 @@ class _PointsDict(TypedDict):
     length: np.ndarray
     triangle: np.ndarray
     normal: np.ndarray
+    shading_normal: np.ndarray
+    color: np.ndarray
     material: np.ndarray
     views: np.ndarray
     cameras: list[Camera]
@@ -616,8 +631,7 @@ def render_lit(scene: Scene, camera: Camera) -> _LitDict: ...
 def shade_frame(
     scene: Scene,
     camera: Camera,
-    triangle: ArrayLike,
-    position: ArrayLike,
+    gbuffer: tuple[ArrayLike, ArrayLike, ArrayLike],
     light_visibility: Sequence[Optional[ArrayLike]],
     areas: Sequence[tuple[ArrayLike, Optional[ArrayLike]]],
 ) -> tuple[np.ndarray, bool]: ...
@@ -686,6 +700,20 @@ def choose_backend(
     uploaded: bool = True,
     box_fraction: float = 0.75,
 ) -> _BackendChoiceDict: ...
+
+class _AttributesDict(TypedDict):
+    texcoord: np.ndarray
+    color: np.ndarray
+    shading_normal: np.ndarray
+    normal: np.ndarray
+
+def surface_attributes(
+    scene: Scene,
+    triangle: ArrayLike,
+    barycentric: Optional[ArrayLike] = None,
+    points: Optional[ArrayLike] = None,
+    footprint: Optional[ArrayLike] = None,
+) -> _AttributesDict: ...
 def write_exr(
     path: _Path,
     width: int,
@@ -693,6 +721,7 @@ def write_exr(
     depth: ArrayLike,
     triangle: ArrayLike,
     normal: ArrayLike,
+    shading_normal: ArrayLike,
     position: ArrayLike,
     color: ArrayLike,
     cameras: list[Camera],

@@ -596,8 +596,7 @@ def _compose(
     image, rig = _core.shade_frame(
         scene._core,
         camera,
-        g.triangle[0],
-        g.position[0].reshape(-1, 3),
+        (g.triangle[0], g.position[0].reshape(-1, 3), g.color[0].reshape(-1, 3)),
         [point_vis.get(k) for k in range(len(scene.lights))],
         [(np.asarray(light.center, dtype=np.float64), area_vis.get(name)) for name, light in areas],
     )

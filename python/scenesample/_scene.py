@@ -108,6 +108,10 @@ class Scene:
         object_ids: Optional[Any] = None,
         objects: Optional[list[str]] = None,
         lights: Optional[list[dict[str, Any]]] = None,
+        texcoords: Optional[Any] = None,
+        textures: Optional[list[Any]] = None,
+        cameras: Optional[list[Any]] = None,
+        animations: Optional[str] = None,
     ) -> Scene:
         """A scene from plain arrays; face order is kept, so triangle ids are face indices.
 
@@ -118,14 +122,22 @@ class Scene:
         faces : (M, 3) array_like of int
             Vertex indices, any integer dtype; each in ``0..N``.
         normals : (N, 3) array_like of float, optional
-            Per-vertex normals, kept as given (depth images use geometric normals).
+            Per-vertex normals, kept as given: the images' ``shading_normal`` interpolates
+            them (a zero row: that vertex takes the area-weighted normal of its faces; without
+            any, every vertex does). ``normal`` stays geometric.
         colors : (N, 3) array_like of float, optional
-            Per-vertex linear RGB base colour; white when omitted.
+            Per-vertex linear RGB base colour; white when omitted. A textured material's
+            texture multiplies it at each sample.
         material_ids : (M,) array_like of int, optional
             Per-face index into ``materials``, -1 for none (the default for every face).
         materials : list of dict, optional
             Each with any of ``name``, ``base_color`` (RGB/RGBA), ``metallic``, ``roughness``,
-            ``emissive``, ``double_sided`` (glTF's defaults for the rest).
+            ``emissive``, ``double_sided`` (glTF's defaults for the rest), and a
+            ``base_color_texture`` as :attr:`materials` reports it (``texture``: an index into
+            ``textures``; ``wrap_s``, ``wrap_t``, ``mag_filter``, ``min_filter``: glTF's sampler
+            enums, default REPEAT and LINEAR(_MIPMAP_LINEAR); ``transform``: 2x3 rows mapping
+            texture coordinates, default identity) with its ``base_color_factor`` (default:
+            ``base_color``).
         object_ids : (M,) array_like of int, optional
             Per-face index into ``objects`` (default: one object, "mesh").
         objects : list of str, optional
@@ -134,6 +146,16 @@ class Scene:
             Punctual lights, with the keys :attr:`lights` reports: ``type`` ("point", "spot"
             or "directional"), ``position``, ``direction``, and optionally ``name``, ``color``,
             ``intensity``, ``range``, ``inner_cone_angle``, ``outer_cone_angle``.
+        texcoords : (N, 2) array_like of float, optional
+            Per-vertex texture coordinates (0..1 spans an image, v down), read by textured
+            materials.
+        textures : list of (H, W, 4) or (H, W, 3) uint8 arrays, optional
+            Base-colour textures, sRGB-encoded texels, row 0 at the top (as :attr:`textures`).
+        cameras : list of Camera, optional
+            Cameras that travel with the scene (as :attr:`cameras`).
+        animations : str, optional
+            A scene's animations as a pickle carries them (internal; checked against the
+            scene).
         """
 
         def plain(a: Any) -> Any:
@@ -151,6 +173,10 @@ class Scene:
                 plain(object_ids),
                 objects,
                 lights,
+                plain(texcoords),
+                None if textures is None else [np.ascontiguousarray(t) for t in textures],
+                cameras,
+                animations,
             )
         )
 
@@ -438,13 +464,34 @@ class Scene:
 
     @property
     def normals(self) -> Optional[np.ndarray]:
-        """(N, 3) float32 per-vertex normals given to :meth:`from_arrays`, else None."""
+        """(N, 3) float32 per-vertex normals: a glTF file's NORMAL (world space, posed with
+        the geometry: node transforms by their inverse transpose, skins by their blended joint
+        matrices, morph NORMAL targets weighted like positions), OBJ's ``vn``, or those given to
+        :meth:`from_arrays` or :meth:`deformed`; a zero row where a primitive or corner had
+        none. None when the scene has none at all. Wherever a vertex has none, shading uses
+        the area-weighted normal of the faces around it (``shading_normal`` of every sample)."""
         return self._core.normals
 
     @property
     def colors(self) -> np.ndarray:
-        """(N, 3) float32 per-vertex linear base colour (glTF: material base colour x COLOR_0)."""
+        """(N, 3) float32 per-vertex linear base colour (glTF: the material's base colour
+        factor x COLOR_0). A textured material's texture multiplies it at each sample (see
+        :func:`scenesample.surface_attributes`); the material's one colour, factor x mean texel,
+        is its ``base_color`` in :attr:`materials`."""
         return self._core.colors
+
+    @property
+    def texcoords(self) -> Optional[np.ndarray]:
+        """(N, 2) float32 per-vertex texture coordinates: the set each vertex's material's
+        base-colour texture reads (0..1 spans the image, v down; OBJ's ``vt`` as the file has
+        it, v up, its material's transform flipping it); None when no material is textured."""
+        return self._core.texcoords
+
+    @property
+    def textures(self) -> list[np.ndarray]:
+        """The base-colour textures the materials read: (H, W, 4) uint8 sRGB-encoded texels,
+        row 0 at the top."""
+        return self._core.textures
 
     @property
     def triangle_count(self) -> int:
@@ -489,8 +536,12 @@ class Scene:
     @property
     def materials(self) -> list[dict[str, Any]]:
         """Materials as dicts: ``name``, ``base_color`` (linear RGBA: factor x mean texel of the
-        base-colour texture, sRGB decoded, or the factor alone), ``base_color_factor``,
-        ``base_color_textured``, ``metallic``, ``roughness``, ``emissive``, ``double_sided``."""
+        base-colour texture, sRGB decoded, or the factor alone: the material's one colour),
+        ``base_color_factor``, ``base_color_textured``, ``base_color_texture`` (None, or how
+        samples read it: ``texture``, an index into :attr:`textures`; ``wrap_s``, ``wrap_t``,
+        ``mag_filter``, ``min_filter``, glTF's sampler enums; ``transform``, 2x3 rows from the
+        file's texture coordinates to the image's, ``KHR_texture_transform``), ``metallic``,
+        ``roughness``, ``emissive``, ``double_sided``."""
         return self._core.materials
 
     @property
@@ -515,21 +566,24 @@ class Scene:
         return repr(self._core)
 
     def __reduce__(self) -> tuple[Any, tuple[dict[str, Any]]]:
-        """Pickling (e.g. to the workers of a sweep): geometry, normals, colours, materials,
-        objects and lights travel; glTF cameras, animations and load warnings do not. A posed
-        scene travels as the scene it was posed from and its transforms, and is posed again
-        where it lands: its :attr:`transforms` and the meaning of a further :meth:`posed`
-        (which maps the objects as loaded) are the same in every process. A pose whose skins or
-        morph targets moved vertices carries its vertices too."""
+        """Pickling (e.g. to the workers that render an animation's frames): geometry,
+        normals, colours, texture coordinates and textures, materials, objects, lights,
+        cameras and animations travel (``copy.deepcopy`` goes the same way); load warnings do
+        not. A posed scene travels as the scene it was posed from and its transforms, and is
+        posed again where it lands: its :attr:`transforms` and the meaning of a further
+        :meth:`posed` (which maps the objects as loaded) are the same in every process. A pose
+        whose skins or morph targets moved vertices carries its vertices and normals too."""
         base = self._core.base
         if base is None:
             return (_from_state, (_state(self._core),))
+        deforms = self._core.deforms
         state = {
             "base": _state(base),
             "transforms": self.transforms,
             "rewinds": self._core.rewinds,
             "lights": self.lights,
-            "vertices": self.vertices if self._core.deforms else None,
+            "vertices": self.vertices if deforms else None,
+            "normals": self.normals if deforms else None,
         }
         return (_from_posed_state, (state,))
 
@@ -545,6 +599,10 @@ def _state(core: _core.Scene) -> dict[str, Any]:
         "object_ids": core.object_ids,
         "objects": core.objects,
         "lights": core.lights,
+        "texcoords": core.texcoords,
+        "textures": core.textures,
+        "cameras": core.cameras,
+        "animations": core.animations_state,
     }
 
 
@@ -555,8 +613,8 @@ def _from_state(state: dict[str, Any]) -> Scene:
 def _from_posed_state(state: dict[str, Any]) -> Scene:
     base = Scene.from_arrays(**state["base"])
     rows = np.ascontiguousarray(state["transforms"], dtype=np.float64).reshape(-1, 4)
-    vertices = state.get("vertices")
-    return Scene(base._core.posed(rows, state["rewinds"], state["lights"], vertices))
+    vertices, normals = state.get("vertices"), state.get("normals")
+    return Scene(base._core.posed(rows, state["rewinds"], state["lights"], vertices, normals))
 
 
 def _float_array(value: Any, what: str, dtype: Any = np.float64) -> np.ndarray:

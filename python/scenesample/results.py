@@ -12,7 +12,7 @@ from . import _core
 from ._scene import Scene
 from .errors import InputError
 
-__all__ = ["AllHits", "ClosestPoints", "DepthImages", "Mesh", "RayHits"]
+__all__ = ["AllHits", "ClosestPoints", "DepthImages", "Mesh", "RayHits", "SurfaceSamples"]
 
 
 @dataclass(eq=False, repr=False)
@@ -28,10 +28,19 @@ class DepthImages:
     normal : (n, H, W, 3) float32
         Unit world geometric normal of that triangle (from its winding, not flipped toward the
         camera); zero where no surface.
+    shading_normal : (n, H, W, 3) float32
+        Unit world shading normal: the vertices' normals (a glTF file's NORMAL, posed with the
+        geometry by node transforms, skins and morph targets; OBJ's ``vn``; where a file has
+        none, the area-weighted normals of the faces around each vertex) interpolated at the
+        sample, as viewers shade; not flipped toward the camera; zero where no surface.
     position : (n, H, W, 3) float32
         World position of the surface point; NaN where no surface.
     color : (n, H, W, 3) float32
-        Linear base colour interpolated from the vertices; zero where no surface.
+        Linear base colour, as viewers draw it unlit: the vertices' colours (material factor
+        times COLOR_0) interpolated, times the material's base-colour texture sampled at the
+        sample's texture coordinate (sRGB decoded; bilinear where magnified, trilinear between
+        mip levels where minified, the level from the pixel's footprint by ray differentials;
+        the sampler's wrap modes and ``KHR_texture_transform``); zero where no surface.
     cameras : list of Camera
         The camera of each image (for ``peeling``, the peeling camera, once per layer).
     method : str
@@ -64,6 +73,7 @@ class DepthImages:
     depth: np.ndarray
     triangle: np.ndarray
     normal: np.ndarray
+    shading_normal: np.ndarray
     position: np.ndarray
     color: np.ndarray
     cameras: list[Any]
@@ -107,7 +117,8 @@ class DepthImages:
         """Write all images to one multi-part EXR file, one part per image (``view0``, ...).
 
         Channels: ``Z`` (depth), ``triangle`` (uint32 holding the int32 bits: -1 is
-        0xFFFFFFFF), ``N.X N.Y N.Z``, ``P.X P.Y P.Z``, ``R G B``; each part carries its camera
+        0xFFFFFFFF), ``N.X N.Y N.Z`` (normal), ``S.X S.Y S.Z`` (shading normal), ``P.X P.Y
+        P.Z``, ``R G B``; each part carries its camera
         as JSON in the ``scenesample.camera`` attribute. ZIP compression, so
         :meth:`load_exr` returns every array bit for bit.
         """
@@ -115,6 +126,7 @@ class DepthImages:
         shapes = {
             "triangle": (n, h, w),
             "normal": (n, h, w, 3),
+            "shading_normal": (n, h, w, 3),
             "position": (n, h, w, 3),
             "color": (n, h, w, 3),
         }
@@ -130,6 +142,7 @@ class DepthImages:
             np.ascontiguousarray(self.depth, dtype=np.float32).reshape(-1, 1),
             np.ascontiguousarray(self.triangle, dtype=np.int32).reshape(-1),
             np.ascontiguousarray(self.normal, dtype=np.float32).reshape(-1, 3),
+            np.ascontiguousarray(self.shading_normal, dtype=np.float32).reshape(-1, 3),
             np.ascontiguousarray(self.position, dtype=np.float32).reshape(-1, 3),
             np.ascontiguousarray(self.color, dtype=np.float32).reshape(-1, 3),
             list(self.cameras),
@@ -256,6 +269,39 @@ class AllHits:
 
     def __repr__(self) -> str:
         return f"AllHits(shape={self.shape}, hits={len(self)})"
+
+
+@dataclass(eq=False, repr=False)
+class SurfaceSamples:
+    """What the surface is where samples meet it (see :func:`scenesample.surface_attributes`),
+    in the samples' shape ``...``.
+
+    Attributes
+    ----------
+    texcoord : (..., 2) float32
+        Texture coordinates as the file has them (the set the material's base-colour texture
+        reads; before its ``KHR_texture_transform``); NaN where the sample sees nothing or the
+        scene has no texture coordinates.
+    color : (..., 3) float32
+        Linear base colour: the vertices' colours interpolated times the material's texture
+        there (sRGB decoded, filtered over the footprint); zero where nothing.
+    shading_normal : (..., 3) float32
+        Unit shading normal (the vertices' normals interpolated, as viewers shade; not turned
+        toward the ray); zero where nothing.
+    normal : (..., 3) float32
+        Unit geometric normal of the triangle (from its winding); zero where nothing.
+    """
+
+    texcoord: np.ndarray
+    color: np.ndarray
+    shading_normal: np.ndarray
+    normal: np.ndarray
+
+    def as_dict(self) -> dict[str, Any]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    def __repr__(self) -> str:
+        return f"SurfaceSamples(shape={self.color.shape[:-1]})"
 
 
 @dataclass(eq=False, repr=False)

@@ -39,6 +39,7 @@ use rayon::prelude::*;
 use crate::camera::{Camera, Projection};
 use crate::error::Result;
 use crate::input_err;
+use crate::scene::surface::Footprint;
 use crate::scene::Scene;
 use crate::types::{Points, Stats, Timings};
 
@@ -359,6 +360,7 @@ fn sample_triangles(
     };
     let (mut invisible, mut culled, mut sampled) = (0usize, 0usize, 0usize);
     let materials = scene.material_ids();
+    let surfaces = scene.surfaces();
     let mut per_triangle: Vec<TrianglePoints> = Vec::with_capacity(BLOCK.min(faces.len()));
     for (k, block) in faces.chunks(BLOCK).enumerate() {
         crate::process::check()?;
@@ -387,7 +389,15 @@ fn sample_triangles(
                 if epr_area <= 0.1 && unit_hash(seed, t as u64) >= 10.0 * epr_area {
                     return TrianglePoints::Culled;
                 }
-                TrianglePoints::Points(bits.clone(), cover(&p, s))
+                let pts = cover(&p, s)
+                    .into_iter()
+                    .map(|(c, l)| {
+                        let b = surfaces.barycentrics(t, c);
+                        let color = surfaces.color(t, b, Footprint::World(l));
+                        (c, l, color, surfaces.shading_normal(t, b))
+                    })
+                    .collect();
+                TrianglePoints::Points(bits.clone(), pts)
             },
         );
         per_triangle.par_extend(work);
@@ -406,11 +416,13 @@ fn sample_triangles(
             };
             sampled += 1;
             let n = normal(scene, t);
-            for (c, l) in pts {
+            for (c, l, color, shading) in pts {
                 out.center.push(c.as_vec3().to_array());
                 out.length.push(l as f32);
                 out.triangle.push(t as i32);
                 out.normal.push(n);
+                out.shading_normal.push(shading);
+                out.color.push(color);
                 out.material.push(materials[t]);
                 out.views.extend_from_slice(&bits);
             }
@@ -427,10 +439,12 @@ fn sample_triangles(
     Ok(out)
 }
 
+/// What a triangle gives: nothing (outside every view, or culled), or its visibility bits and
+/// its points (centre, side, colour over the point's square, shading normal).
 enum TrianglePoints {
     Invisible,
     Culled,
-    Points(Vec<u64>, Vec<(DVec3, f64)>),
+    Points(Vec<u64>, Vec<(DVec3, f64, [f32; 3], [f32; 3])>),
 }
 
 fn normal(scene: &Scene, t: usize) -> [f32; 3] {

@@ -32,6 +32,7 @@ use crate::camera::Camera;
 use crate::error::Result;
 use crate::image::{discretize_conventional, discretize_sided};
 use crate::input_err;
+use crate::scene::surface::{Footprint, Surfaces};
 use crate::scene::Scene;
 use crate::shading::{self, ShadeLight};
 use crate::types::{DepthImages, Stats, Timings};
@@ -298,7 +299,7 @@ pub fn reflections(
 
     let lights = shading::lights(scene, eye);
     let ctx = Shader {
-        scene,
+        surfaces: scene.surfaces(),
         owner: &owner,
         cubes: &cubes,
         lights: &lights,
@@ -306,7 +307,7 @@ pub fn reflections(
         later_offsets: poisson(LATER_BOUNCE_SAMPLES),
     };
     let (w, h) = (eye.width as usize, eye.height as usize);
-    let pixels = eye_pixels(scene, eye, &gbuf, &owner);
+    let pixels = eye_pixels(&ctx.surfaces, eye, &gbuf, &owner);
     let (image, shading_ops) = match opts.method {
         Method::Epr => {
             let start = Instant::now();
@@ -351,12 +352,14 @@ struct EyePixel {
     triangle: i32,
     position: DVec3,
     normal: DVec3,
+    /// The eye image's colour there (its texture filtered over the pixel).
+    albedo: [f32; 3],
     /// Unit direction from the eye to the surface.
     view: DVec3,
     reflector: i32,
 }
 
-fn eye_pixels(scene: &Scene, eye: &Camera, g: &DepthImages, owner: &[i32]) -> Vec<EyePixel> {
+fn eye_pixels(surfaces: &Surfaces, eye: &Camera, g: &DepthImages, owner: &[i32]) -> Vec<EyePixel> {
     let e = eye.eye();
     (0..g.triangle.len())
         .into_par_iter()
@@ -367,23 +370,31 @@ fn eye_pixels(scene: &Scene, eye: &Camera, g: &DepthImages, owner: &[i32]) -> Ve
                     triangle: -1,
                     position: DVec3::ZERO,
                     normal: DVec3::ZERO,
+                    albedo: [0.0; 3],
                     view: DVec3::ZERO,
                     reflector: -1,
                 };
             }
             let p = DVec3::from_array(g.position[i].map(f64::from));
-            let s = shading::surface(scene, t as usize, p);
+            let s = shading::pixel_surface(surfaces, t as usize, p, g.color[i]);
             let view = (p - e).normalize_or_zero();
             let n = toward(s.normal, view);
             EyePixel {
                 triangle: t,
                 position: p,
                 normal: n,
+                albedo: g.color[i],
                 view,
                 reflector: owner[t as usize],
             }
         })
         .collect()
+}
+
+/// The footprint of cube `cube`'s texel at `p`: the side a texel (90° over `res` texels)
+/// spans at `p`'s distance from the cube's centre.
+fn texel_footprint(cube: &Cube, p: DVec3) -> Footprint {
+    Footprint::World((p - cube.center).length() * 2.0 / cube.res as f64)
 }
 
 fn reflect(d: DVec3, n: DVec3) -> DVec3 {
@@ -458,7 +469,7 @@ fn poisson(n: usize) -> Vec<DVec2> {
 }
 
 struct Shader<'a> {
-    scene: &'a Scene,
+    surfaces: Surfaces<'a>,
     owner: &'a [i32],
     cubes: &'a [Cube],
     lights: &'a [ShadeLight],
@@ -476,7 +487,7 @@ impl Shader<'_> {
             return DVec3::from_array(BACKGROUND);
         };
         let p = DVec3::from_array(cube.position[t].map(f64::from));
-        let s = shading::surface(self.scene, tri, p);
+        let s = shading::surface(&self.surfaces, tri, p, texel_footprint(cube, p));
         let k = self.owner[tri];
         if k >= 0 && depth < self.bounces {
             // A reflector seen in a reflector: follow its own cube map (§4.1.4).
@@ -580,7 +591,12 @@ impl Shader<'_> {
                 if p.triangle < 0 {
                     return DVec3::from_array(BACKGROUND);
                 }
-                let s = shading::surface(self.scene, p.triangle as usize, p.position);
+                let s = shading::pixel_surface(
+                    &self.surfaces,
+                    p.triangle as usize,
+                    p.position,
+                    p.albedo,
+                );
                 if p.reflector < 0 {
                     return shading::shade(&s, p.position - p.view, self.lights);
                 }
@@ -603,7 +619,8 @@ impl Shader<'_> {
                     .map(|t| match usize::try_from(cube.triangle[t]) {
                         Ok(tri) => {
                             let p = DVec3::from_array(cube.position[t].map(f64::from));
-                            let s = shading::surface(self.scene, tri, p);
+                            let s =
+                                shading::surface(&self.surfaces, tri, p, texel_footprint(cube, p));
                             shading::shade(&s, cube.center, self.lights)
                         }
                         Err(_) => DVec3::from_array(BACKGROUND),
@@ -628,7 +645,7 @@ impl Shader<'_> {
                             return None;
                         }
                         let p = DVec3::from_array(cube.position[t].map(f64::from));
-                        let s = shading::surface(self.scene, tri, p);
+                        let s = shading::surface(&self.surfaces, tri, p, texel_footprint(cube, p));
                         let next = &self.cubes[k as usize];
                         let r = next.texel(reflected(&s, cube.center));
                         Some((t, s.albedo * previous[k as usize][r]))

@@ -59,11 +59,7 @@ pub fn discretize_sided(scene: &Scene, cameras: &[Camera]) -> Result<DepthImages
     let other = discretize_ranges(scene, cameras, false, Some(&runs(true)))?;
     for i in 0..near.depth.len() {
         if other.depth[i] < near.depth[i] {
-            near.depth[i] = other.depth[i];
-            near.triangle[i] = other.triangle[i];
-            near.normal[i] = other.normal[i];
-            near.position[i] = other.position[i];
-            near.color[i] = other.color[i];
+            near.copy_pixel(i, &other, i);
         }
     }
     near.timings.merge(&other.timings);
@@ -293,6 +289,7 @@ pub(crate) fn resolve_streamed(
     gpu::raster::check_image_size(&ctx, first.width, first.height)?;
     let start = Instant::now();
     let planes = SurfacePlane::of(scene);
+    let surfaces = scene.surfaces();
     let prepare_seconds = start.elapsed().as_secs_f64();
     let mut img = DepthImages::allocate(cameras)?;
     let rays: Vec<PixelRays> = cameras.iter().map(PixelRays::new).collect();
@@ -300,7 +297,7 @@ pub(crate) fn resolve_streamed(
     let raw = raster(&ctx, &mut |at, ids| {
         let range = at * npx..at * npx + ids.len();
         img.triangle[range.clone()].copy_from_slice(ids);
-        resolve_into(&mut img, range, &rays, &planes);
+        resolve_into(&mut img, range, &rays, &planes, &surfaces);
     })?;
     img.timings = raster_timings(
         device_seconds,

@@ -9,6 +9,8 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use glam::{DVec3, Vec3};
+
+use crate::scene::surface::{Footprint, Surfaces};
 use rayon::prelude::*;
 
 use crate::camera::Camera;
@@ -167,7 +169,7 @@ pub(crate) fn resolve_ids(
     let rays: Vec<PixelRays> = cameras.iter().map(PixelRays::new).collect();
     let n = ids.len();
     img.triangle = ids;
-    resolve_into(&mut img, 0..n, &rays, &planes);
+    resolve_into(&mut img, 0..n, &rays, &planes, &scene.surfaces());
     Ok((img, start.elapsed().as_secs_f64()))
 }
 
@@ -237,7 +239,7 @@ impl DepthImages {
     pub(crate) fn allocate(cameras: &[Camera]) -> Result<Self> {
         let (w, h) = (cameras[0].width, cameras[0].height);
         let total = w as usize * h as usize * cameras.len();
-        let bytes = total as u128 * 44;
+        let bytes = total as u128 * 56;
         let too_big = || {
             Error::GpuLimit(format!(
                 "{} images of {w}x{h} need {bytes} bytes of host memory, which could not be \
@@ -259,6 +261,7 @@ impl DepthImages {
             depth: vec![0.0; total],
             triangle: vec![0; total],
             normal: vec![[0.0; 3]; total],
+            shading_normal: vec![[0.0; 3]; total],
             position: vec![[0.0; 3]; total],
             color: vec![[0.0; 3]; total],
             cameras: cameras.to_vec(),
@@ -268,12 +271,22 @@ impl DepthImages {
     }
 }
 
+/// One pixel's outputs, each a slot of its image's field.
+struct Pixel<'a> {
+    depth: &'a mut f32,
+    position: &'a mut [f32; 3],
+    normal: &'a mut [f32; 3],
+    shading_normal: &'a mut [f32; 3],
+    color: &'a mut [f32; 3],
+}
+
 /// Resolve the pixels `range` (whole rows) of `img` from their triangle ids, parallel over rows.
 pub(crate) fn resolve_into(
     img: &mut DepthImages,
     range: std::ops::Range<usize>,
     rays: &[PixelRays],
     planes: &[SurfacePlane],
+    surfaces: &Surfaces,
 ) {
     let (w, h) = (img.width as usize, img.height as usize);
     let first_row = range.start / w;
@@ -282,41 +295,58 @@ pub(crate) fn resolve_into(
         .par_chunks_mut(w)
         .zip(img.position[range.clone()].par_chunks_mut(w))
         .zip(img.normal[range.clone()].par_chunks_mut(w))
+        .zip(img.shading_normal[range.clone()].par_chunks_mut(w))
         .zip(img.color[range].par_chunks_mut(w))
         .enumerate()
-        .for_each(|(r, (((depth, pos), nrm), col))| {
+        .for_each(|(r, ((((depth, pos), nrm), shading), col))| {
             let row = first_row + r;
             let cam = &rays[row / h];
             for x in 0..w {
-                let px = (&mut depth[x], &mut pos[x], &mut nrm[x], &mut col[x]);
-                resolve_one(ids[r * w + x], cam, x, row % h, planes, px);
+                let px = Pixel {
+                    depth: &mut depth[x],
+                    position: &mut pos[x],
+                    normal: &mut nrm[x],
+                    shading_normal: &mut shading[x],
+                    color: &mut col[x],
+                };
+                resolve_one(ids[r * w + x], cam, (x, row % h), planes, surfaces, px);
             }
         });
 }
 
-/// Pixel (x, y) of one image, seeing triangle `id` (−1: nothing).
+/// Pixel (x, y) of one image, seeing triangle `id` (−1: nothing): the exact point where the
+/// pixel-centre ray meets the triangle's plane, and what the surface is there (its colour for
+/// the pixel's footprint, from the neighbouring pixels' rays on the same plane).
 #[inline(always)]
 fn resolve_one(
     id: i32,
     cam: &PixelRays,
-    x: usize,
-    y: usize,
+    (x, y): (usize, usize),
     planes: &[SurfacePlane],
-    (depth, pos, nrm, col): (&mut f32, &mut [f32; 3], &mut [f32; 3], &mut [f32; 3]),
+    surfaces: &Surfaces,
+    px: Pixel,
 ) {
     let Ok(t) = usize::try_from(id) else {
-        *depth = f32::INFINITY;
-        *pos = [f32::NAN; 3];
-        *nrm = [0.0; 3];
-        *col = [0.0; 3];
+        *px.depth = f32::INFINITY;
+        *px.position = [f32::NAN; 3];
+        *px.normal = [0.0; 3];
+        *px.shading_normal = [0.0; 3];
+        *px.color = [0.0; 3];
         return;
     };
+    let plane = &planes[t];
     let (o, d) = cam.ray(x, y);
-    let s = planes[t].intersect(o, d, cam.forward);
-    *depth = s.depth as f32;
-    *pos = s.point.as_vec3().to_array();
-    *nrm = planes[t].normal.as_vec3().to_array();
-    *col = s.color;
+    let s = plane.intersect(o, d, cam.forward);
+    *px.depth = s.depth as f32;
+    *px.position = s.point.as_vec3().to_array();
+    *px.normal = plane.normal.as_vec3().to_array();
+    *px.shading_normal = surfaces.shading_normal(t, s.b);
+    let footprint = if surfaces.textured(t) {
+        plane.footprint(cam, (x, y), s.unclamped)
+    } else {
+        Footprint::Point
+    };
+    *px.color = surfaces.color(t, s.b, footprint);
 }
 
 /// Give the pixels `changed` (flat indices over all images) of resolved images `img` the
@@ -331,25 +361,28 @@ pub(crate) fn resolve_pixels(
 ) -> f64 {
     let start = Instant::now();
     let planes = SurfacePlane::of(scene);
+    let surfaces = scene.surfaces();
     let rays: Vec<PixelRays> = cameras.iter().map(PixelRays::new).collect();
     let (w, h) = (img.width as usize, img.height as usize);
     for &p in changed {
         img.triangle[p] = ids[p];
         let (i, y, x) = (p / (w * h), p / w % h, p % w);
-        let px = (
-            &mut img.depth[p],
-            &mut img.position[p],
-            &mut img.normal[p],
-            &mut img.color[p],
-        );
-        resolve_one(ids[p], &rays[i], x, y, &planes, px);
+        let px = Pixel {
+            depth: &mut img.depth[p],
+            position: &mut img.position[p],
+            normal: &mut img.normal[p],
+            shading_normal: &mut img.shading_normal[p],
+            color: &mut img.color[p],
+        };
+        resolve_one(ids[p], &rays[i], (x, y), &planes, &surfaces, px);
     }
     start.elapsed().as_secs_f64()
 }
 
-/// Per-triangle data for resolving pixels, in f64: a corner, the unit normal, the gradients of
-/// the barycentrics over the plane, and the corner colours. Computed once per scene (cached on
-/// it), so a pixel costs a few dot products on one contiguous record.
+/// Per-triangle data for resolving pixels, in f64: a corner, the unit normal and the gradients
+/// of the barycentrics over the plane. Computed once per scene (cached on it), so a pixel costs
+/// a few dot products on one contiguous record; what the surface looks like there comes from
+/// the scene's [`Surfaces`].
 #[derive(Debug, Clone)]
 pub(crate) struct SurfacePlane {
     a: DVec3,
@@ -357,7 +390,6 @@ pub(crate) struct SurfacePlane {
     /// b1 = (p − a)·g1 and b2 = (p − a)·g2 for a point p on the plane.
     g1: DVec3,
     g2: DVec3,
-    colors: [Vec3; 3],
     /// Degenerate triangles have no plane: their centroid stands in.
     centroid: Option<DVec3>,
 }
@@ -368,7 +400,6 @@ impl SurfacePlane {
         let (e1, e2) = (b - a, c - a);
         let n = e1.cross(e2);
         let nn = n.length_squared();
-        let colors = scene.faces()[i].map(|k| Vec3::from(scene.colors()[k as usize]));
         let degenerate = scene.is_degenerate(i) || nn == 0.0 || !nn.is_finite();
         Self {
             a,
@@ -387,7 +418,6 @@ impl SurfacePlane {
             } else {
                 n.cross(e1) / nn
             },
-            colors,
             centroid: degenerate.then(|| (a + b + c) / 3.0),
         }
     }
@@ -427,15 +457,47 @@ impl SurfacePlane {
                 (c, (c - o).dot(forward), 0.0, 0.0)
             }
         };
-        // Clamped to the triangle: only colour interpolation uses them.
-        let (b1, b2) = (b1.clamp(0.0, 1.0) as f32, b2.clamp(0.0, 1.0) as f32);
-        let s = (b1 + b2).max(1.0);
-        let (b1, b2) = (b1 / s, b2 / s);
-        let [ca, cb, cc] = self.colors;
+        // Clamped to the triangle for the attributes (a pixel the raster rule gave to the
+        // triangle may lie a rounding outside it).
+        let (c1, c2) = (b1.clamp(0.0, 1.0), b2.clamp(0.0, 1.0));
+        let s = (c1 + c2).max(1.0);
         SurfacePoint {
             depth,
             point,
-            color: (ca * (1.0 - b1 - b2) + cb * b1 + cc * b2).to_array(),
+            b: [c1 / s, c2 / s],
+            unclamped: [b1, b2],
+        }
+    }
+
+    /// The barycentrics `(b1, b2)` where the ray `o + t·d` meets the plane, not clamped;
+    /// `None` for a degenerate or edge-on triangle.
+    fn barycentrics(&self, o: DVec3, d: DVec3) -> Option<[f64; 2]> {
+        if self.centroid.is_some() {
+            return None;
+        }
+        let t = self.ray_depth(o, d);
+        let r = o + d * t - self.a;
+        let b = [r.dot(self.g1), r.dot(self.g2)];
+        (t.is_finite() && b[0].is_finite() && b[1].is_finite()).then_some(b)
+    }
+
+    /// The footprint of pixel `(x, y)` (whose centre's ray meets the plane at barycentrics `b`)
+    /// on this triangle: the change of the barycentrics to the next pixel's centre along x and
+    /// along y, their rays met on the same plane (ray differentials, exact for a planar
+    /// triangle: what a GPU's screen-space derivatives give a 2×2 quad inside it). A
+    /// neighbour's ray that misses the plane (edge-on) gives no footprint: the finest level.
+    fn footprint(&self, cam: &PixelRays, (x, y): (usize, usize), b: [f64; 2]) -> Footprint {
+        let (cx, cy) = (x as f64 + 0.5, y as f64 + 0.5);
+        let at = |px: f64, py: f64| {
+            let (o, d) = cam.ray_at(px, py);
+            self.barycentrics(o, d)
+        };
+        match (at(cx + 1.0, cy), at(cx, cy + 1.0)) {
+            (Some(bx), Some(by)) => Footprint::Barycentric {
+                dx: [bx[0] - b[0], bx[1] - b[1]],
+                dy: [by[0] - b[0], by[1] - b[1]],
+            },
+            _ => Footprint::Point,
         }
     }
 }
@@ -443,5 +505,7 @@ impl SurfacePlane {
 struct SurfacePoint {
     depth: f64,
     point: DVec3,
-    color: [f32; 3],
+    /// Barycentrics `(b1, b2)` clamped into the triangle, and as met.
+    b: [f64; 2],
+    unclamped: [f64; 2],
 }

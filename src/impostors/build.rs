@@ -24,57 +24,11 @@ use rayon::prelude::*;
 use crate::camera::{Camera, Projection};
 use crate::error::Result;
 use crate::input_err;
+use crate::scene::surface::{Footprint, Surfaces};
 use crate::scene::Scene;
 use crate::shading::{self, Prelit};
 use crate::trace::cast_rays;
 use crate::types::Timings;
-
-/// Unit vertex normals for shading: the scene's own, or else the area-weighted mean of the
-/// faces around each vertex (so that a finely tessellated surface shades smoothly rather than
-/// flickering from facet to facet).
-pub fn vertex_normals(scene: &Scene) -> Vec<DVec3> {
-    if let Some(n) = scene.normals() {
-        return n
-            .iter()
-            .map(|v| DVec3::from_array(v.map(f64::from)).normalize_or_zero())
-            .collect();
-    }
-    let mut acc = vec![DVec3::ZERO; scene.vertices().len()];
-    for (t, f) in scene.faces().iter().enumerate() {
-        let p = scene.triangle(t);
-        let n = (p[1] - p[0]).cross(p[2] - p[0]);
-        for &i in f {
-            acc[i as usize] += n;
-        }
-    }
-    acc.into_iter().map(|n| n.normalize_or_zero()).collect()
-}
-
-/// The shading normal at point `p` of triangle `t`: the vertex normals interpolated at its
-/// barycentric coordinates; the face normal where they cancel.
-pub fn shading_normal(scene: &Scene, normals: &[DVec3], t: usize, p: DVec3) -> DVec3 {
-    let q = scene.triangle(t);
-    let (e1, e2, r) = (q[1] - q[0], q[2] - q[0], p - q[0]);
-    let (d11, d12, d22) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
-    let (r1, r2) = (r.dot(e1), r.dot(e2));
-    let det = d11 * d22 - d12 * d12;
-    let face = e1.cross(e2).normalize_or_zero();
-    if det.abs() <= f64::MIN_POSITIVE {
-        return face;
-    }
-    let u = (d22 * r1 - d12 * r2) / det;
-    let v = (d11 * r2 - d12 * r1) / det;
-    let f = scene.faces()[t];
-    let n = normals[f[0] as usize] * (1.0 - u - v)
-        + normals[f[1] as usize] * u
-        + normals[f[2] as usize] * v;
-    let n = n.normalize_or_zero();
-    if n == DVec3::ZERO {
-        face
-    } else {
-        n
-    }
-}
 
 /// The colour a surface point is drawn with, by impostor images and triangles alike: the
 /// package's shading model, view-independent (`shading::diffuse`: ambient plus two-sided
@@ -144,9 +98,9 @@ pub struct Impostors {
     /// CSR by centroid: the triangles that draw each cell as geometry.
     pub offsets: Vec<u32>,
     pub triangles: Vec<u32>,
-    /// The scene's shading normals per vertex (`vertex_normals`), shared by the images and by
-    /// the cells drawn as triangles at runtime (face order does not change them).
-    pub normals: Vec<DVec3>,
+    /// The scene's vertex count: a view checks that the scene it is given is the one the
+    /// impostors were made from.
+    pub vertices: usize,
     pub rays: u64,
     pub timings: Timings,
 }
@@ -517,12 +471,14 @@ pub fn build(scene: &Scene, opts: &ImpostorOptions) -> Result<Impostors> {
     let mut counts = Vec::with_capacity(cells.len());
     let mut rays = 0u64;
     let verts = scene.vertices();
-    let normals = vertex_normals(scene);
+    let surfaces = scene.surfaces();
     let lights = Prelit::of(scene);
     crate::process::add_total(cells.len() as u64);
     for (ci, cell) in cells.iter().enumerate() {
         crate::process::check()?;
         crate::process::advance(1);
+        // An image spans the cell's sphere: what one texel covers on the surface.
+        let texel_side = 2.0 * cell.radius() / res as f64;
         let set = if opts.grow {
             triangles_in_sphere(scene, cell)
         } else {
@@ -557,7 +513,8 @@ pub fn build(scene: &Scene, opts: &ImpostorOptions) -> Result<Impostors> {
                     }
                     let t = set[local] as usize;
                     let uv = hits.barycentric[i].map(f64::from);
-                    (col[k], dep[k]) = texel(scene, (&normals, &lights), t, uv, &cams[di]);
+                    let footprint = Footprint::World(texel_side);
+                    (col[k], dep[k]) = texel((&surfaces, &lights), t, uv, footprint, &cams[di]);
                 }
             });
     }
@@ -585,7 +542,7 @@ pub fn build(scene: &Scene, opts: &ImpostorOptions) -> Result<Impostors> {
         triangle_counts: counts,
         offsets,
         triangles: order,
-        normals,
+        vertices: scene.vertices().len(),
         rays,
         timings: Timings::from([
             ("cells", cell_seconds),
@@ -609,27 +566,21 @@ fn triangles_in_sphere(scene: &Scene, cell: &Cell) -> Vec<u32> {
         .collect()
 }
 
-/// One impostor texel: triangle `t` hit at barycentric `(u, v)`, its interpolated colour lit
-/// under the pre-lit environment (8-bit RGBA), and the hit's depth along `cam`.
+/// One impostor texel: triangle `t` hit at barycentric `(u, v)`, its colour (sampled over the
+/// texel's `footprint`) lit with its shading normal under the pre-lit environment (8-bit RGBA),
+/// and the hit's depth along `cam`.
 fn texel(
-    scene: &Scene,
-    (normals, lights): (&[DVec3], &Prelit),
+    (surfaces, lights): (&Surfaces, &Prelit),
     t: usize,
     [u, v]: [f64; 2],
+    footprint: Footprint,
     cam: &Camera,
 ) -> ([u8; 4], f32) {
-    let cs = scene.faces()[t].map(|j| scene.colors()[j as usize]);
-    let base = [0, 1, 2].map(|a| {
-        (cs[0][a] as f64 * (1.0 - u - v) + cs[1][a] as f64 * u + cs[2][a] as f64 * v) as f32
-    });
-    let p = scene.triangle(t);
+    let base = surfaces.color(t, [u, v], footprint);
+    let p = surfaces.scene().triangle(t);
     let p_hit = p[0] * (1.0 - u - v) + p[1] * u + p[2] * v;
-    let c = lit(
-        base,
-        shading_normal(scene, normals, t, p_hit),
-        p_hit,
-        lights,
-    );
+    let normal = DVec3::from_array(surfaces.shading_normal(t, [u, v]).map(f64::from));
+    let c = lit(base, normal, p_hit, lights);
     (
         [to8(c[0]), to8(c[1]), to8(c[2]), 255],
         cam.project(p_hit).1 as f32,

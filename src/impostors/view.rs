@@ -18,9 +18,7 @@ use rayon::prelude::*;
 use crate::camera::{Camera, Projection, Projector};
 use crate::error::Result;
 use crate::image::{discretize_ranges, push_range};
-use crate::impostors::build::{
-    impostor_camera, lit, shading_normal, vertex_normals, ImpostorProjection, Impostors,
-};
+use crate::impostors::build::{impostor_camera, lit, ImpostorProjection, Impostors};
 use crate::input_err;
 use crate::scene::Scene;
 use crate::types::{DepthImages, Stats, Timings};
@@ -43,19 +41,21 @@ pub struct ImpostorView {
     pub timings: Timings,
 }
 
-/// The lit colour and depth of a depth image of `scene` (black / +inf where empty).
-pub fn lit_image(scene: &Scene, normals: &[DVec3], img: &DepthImages) -> (Vec<[f32; 3]>, Vec<f32>) {
+/// The lit colour and depth of a depth image of `scene` (black / +inf where empty): each
+/// pixel's colour lit with its shading normal, as the impostors' texels are.
+pub fn lit_image(scene: &Scene, img: &DepthImages) -> (Vec<[f32; 3]>, Vec<f32>) {
     let lights = crate::shading::Prelit::of(scene);
     let color = img
         .triangle
         .par_iter()
         .zip(img.color.par_iter().zip(&img.position))
-        .map(|(&t, (&c, p))| {
+        .zip(&img.shading_normal)
+        .map(|((&t, (&c, p)), n)| {
             if t < 0 {
                 [0.0; 3]
             } else {
                 let p = DVec3::from_array(p.map(f64::from));
-                lit(c, shading_normal(scene, normals, t as usize, p), p, &lights)
+                lit(c, DVec3::from_array(n.map(f64::from)), p, &lights)
             }
         })
         .collect();
@@ -66,7 +66,7 @@ pub fn lit_image(scene: &Scene, normals: &[DVec3], img: &DepthImages) -> (Vec<[f
 pub fn render_lit(scene: &Scene, camera: &Camera) -> Result<(Vec<[f32; 3]>, Vec<f32>, f64)> {
     let start = Instant::now();
     let img = discretize_ranges(scene, std::slice::from_ref(camera), false, None)?;
-    let (c, d) = lit_image(scene, &vertex_normals(scene), &img);
+    let (c, d) = lit_image(scene, &img);
     Ok((c, d, start.elapsed().as_secs_f64()))
 }
 
@@ -104,7 +104,7 @@ pub fn reconstruct(
     let (mut color, mut depth) = match (sorted, ranges.is_empty()) {
         (Some(s), false) => {
             let img = discretize_ranges(s, std::slice::from_ref(camera), false, Some(&ranges))?;
-            lit_image(s, &imp.normals, &img)
+            lit_image(s, &img)
         }
         _ => (vec![[0.0; 3]; w * h], vec![f32::INFINITY; w * h]),
     };
@@ -174,7 +174,7 @@ fn check_inputs(
         return input_err!("a triangle budget needs the scene (scene=...)");
     }
     if let Some(s) = sorted {
-        if s.triangle_count() != imp.triangles.len() || s.vertices().len() != imp.normals.len() {
+        if s.triangle_count() != imp.triangles.len() || s.vertices().len() != imp.vertices {
             return input_err!("the scene is not the one the impostors were made from");
         }
     }

@@ -1,6 +1,8 @@
 //! `DepthImages` as OpenEXR: one multi-part file, one part per image, named `view0`, `view1`, …
 //! Channels: `Z` (depth, f32), `triangle` (u32 holding the i32 id's bits, so −1 is 0xFFFFFFFF),
-//! `N.X N.Y N.Z` (normal), `P.X P.Y P.Z` (position), `R G B` (base colour), all f32 but the id;
+//! `N.X N.Y N.Z` (normal), `S.X S.Y S.Z` (shading normal), `P.X P.Y P.Z` (position), `R G B`
+//! (base colour), all f32 but the id (a file without `S.*`, written before shading normals,
+//! reads with its geometric normals as its shading normals);
 //! each part's camera is a JSON text attribute `scenesample.camera`. ZIP compression is
 //! lossless and byte-preserving, so reading returns the arrays bit for bit (NaNs included).
 
@@ -44,6 +46,7 @@ pub fn write_depth_images(path: &Path, img: &DepthImages) -> CoreResult<()> {
         ));
         for (k, axis) in ["X", "Y", "Z"].iter().enumerate() {
             channels.push(f32s(&format!("N.{axis}"), comp(&img.normal, k)));
+            channels.push(f32s(&format!("S.{axis}"), comp(&img.shading_normal, k)));
             channels.push(f32s(&format!("P.{axis}"), comp(&img.position, k)));
         }
         for (k, c) in ["R", "G", "B"].iter().enumerate() {
@@ -150,7 +153,13 @@ pub fn read_depth_images(path: &Path) -> CoreResult<DepthImages> {
             let [a, b, c] = [f(names[0])?, f(names[1])?, f(names[2])?];
             Ok((0..npx).map(|k| [a[k], b[k], c[k]]).collect())
         };
-        out.normal.extend(vec3(["N.X", "N.Y", "N.Z"])?);
+        let normal = vec3(["N.X", "N.Y", "N.Z"])?;
+        let shading = match chan("S.X") {
+            Ok(_) => vec3(["S.X", "S.Y", "S.Z"])?,
+            Err(_) => normal.clone(),
+        };
+        out.normal.extend(normal);
+        out.shading_normal.extend(shading);
         out.position.extend(vec3(["P.X", "P.Y", "P.Z"])?);
         out.color.extend(vec3(["R", "G", "B"])?);
         let cam = match layer.attributes.other.get(&Text::from(CAMERA_ATTR)) {
@@ -297,6 +306,7 @@ mod tests {
                 .collect(),
             triangle: (0..12).map(|i| if i % 5 == 0 { -1 } else { i }).collect(),
             normal: (0..12).map(|i| [i as f32, -1.0, 0.5]).collect(),
+            shading_normal: (0..12).map(|i| [0.5, i as f32, -1.0]).collect(),
             position: (0..12)
                 .map(|i| {
                     if i % 5 == 0 {
@@ -325,6 +335,10 @@ mod tests {
         assert_eq!(
             bits(back.normal.as_flattened()),
             bits(img.normal.as_flattened())
+        );
+        assert_eq!(
+            bits(back.shading_normal.as_flattened()),
+            bits(img.shading_normal.as_flattened())
         );
         assert_eq!(
             bits(back.color.as_flattened()),

@@ -282,21 +282,12 @@ fn merge_same_surfaces(img: &mut DepthImages) {
             last = d;
             let to = kept * npx + p;
             if to != at {
-                img.depth[to] = d;
-                img.triangle[to] = img.triangle[at];
-                img.normal[to] = img.normal[at];
-                img.position[to] = img.position[at];
-                img.color[to] = img.color[at];
+                img.move_pixel(to, at);
             }
             kept += 1;
         }
         for i in kept..layers {
-            let at = i * npx + p;
-            img.depth[at] = f32::INFINITY;
-            img.triangle[at] = -1;
-            img.normal[at] = [0.0; 3];
-            img.position[at] = [f32::NAN; 3];
-            img.color[at] = [0.0; 3];
+            img.clear_pixel(i * npx + p);
         }
     }
     let seconds = start.elapsed().as_secs_f64();

@@ -173,6 +173,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(rays::all_hits, m)?)?;
     m.add_function(wrap_pyfunction!(rays::count_hits, m)?)?;
     m.add_function(wrap_pyfunction!(points::closest_points, m)?)?;
+    m.add_function(wrap_pyfunction!(scene::surface_attributes, m)?)?;
     m.add_function(wrap_pyfunction!(points::winding_numbers, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate::sampling_metrics, m)?)?;
     m.add_function(wrap_pyfunction!(reconstruct::reconstruct, m)?)?;

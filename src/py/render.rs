@@ -19,6 +19,10 @@ pub(super) fn images_dict<'py>(py: Python<'py>, img: DepthImages) -> PyResult<Bo
     d.set_item("depth", array(py, img.depth, &[n, h, w])?)?;
     d.set_item("triangle", array(py, img.triangle, &[n, h, w])?)?;
     d.set_item("normal", rows_owned(py, img.normal, &[n, h, w, 3])?)?;
+    d.set_item(
+        "shading_normal",
+        rows_owned(py, img.shading_normal, &[n, h, w, 3])?,
+    )?;
     d.set_item("position", rows_owned(py, img.position, &[n, h, w, 3])?)?;
     d.set_item("color", rows_owned(py, img.color, &[n, h, w, 3])?)?;
     let cams: Vec<PyCamera> = img.cameras.into_iter().map(PyCamera::from).collect();
@@ -199,6 +203,7 @@ pub fn write_exr(
     depth: &Bound<'_, PyAny>,
     triangle: &Bound<'_, PyAny>,
     normal: &Bound<'_, PyAny>,
+    shading_normal: &Bound<'_, PyAny>,
     position: &Bound<'_, PyAny>,
     color: &Bound<'_, PyAny>,
     cameras: Vec<PyCamera>,
@@ -217,6 +222,7 @@ pub fn write_exr(
         depth,
         triangle: flat_i32(triangle, "triangle")?,
         normal: rows_f32::<3>(normal, "normal")?,
+        shading_normal: rows_f32::<3>(shading_normal, "shading_normal")?,
         position: rows_f32::<3>(position, "position")?,
         color: rows_f32::<3>(color, "color")?,
         cameras: cameras.into_iter().map(|c| c.inner).collect(),
@@ -227,6 +233,7 @@ pub fn write_exr(
         ("depth", img.depth.len()),
         ("triangle", img.triangle.len()),
         ("normal", img.normal.len()),
+        ("shading_normal", img.shading_normal.len()),
         ("position", img.position.len()),
         ("color", img.color.len()),
     ] {
@@ -246,7 +253,8 @@ pub fn read_exr<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyDi
     images_dict(py, img)
 }
 
-/// A lit frame from a one-image G-buffer (`shading::frame`): the scene's punctual lights in
+/// A lit frame from a one-image G-buffer (`gbuffer`: its triangle ids (H, W), positions and base
+/// colours (H·W, 3); `shading::frame`): the scene's punctual lights in
 /// order, each scaled by its entry of `light_visibility` ((H, W) float32, or None for fully
 /// visible), then one area light per `(center, visibility or None)` of `areas`; the default
 /// light joins them when there are none, or when they leave the view dark. Returns (H, W, 3)
@@ -256,8 +264,7 @@ pub fn shade_frame<'py>(
     py: Python<'py>,
     scene: &PyScene,
     camera: &PyCamera,
-    triangle: &Bound<'py, PyAny>,
-    position: &Bound<'py, PyAny>,
+    gbuffer: (Bound<'py, PyAny>, Bound<'py, PyAny>, Bound<'py, PyAny>),
     light_visibility: Vec<Option<Bound<'py, PyAny>>>,
     areas: Vec<(Bound<'py, PyAny>, Option<Bound<'py, PyAny>>)>,
 ) -> PyResult<(Bound<'py, PyAny>, bool)> {
@@ -296,8 +303,9 @@ pub fn shade_frame<'py>(
         n: 1,
         width: cam.width,
         height: cam.height,
-        triangle: flat_i32(triangle, "triangle")?,
-        position: rows_f32(position, "position")?,
+        triangle: flat_i32(&gbuffer.0, "triangle")?,
+        position: rows_f32(&gbuffer.1, "position")?,
+        color: rows_f32(&gbuffer.2, "color")?,
         ..Default::default()
     };
     let (image, rig) = super::run(py, || {

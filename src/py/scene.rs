@@ -11,6 +11,9 @@ use super::camera::PyCamera;
 use super::convert::{array, faces, flat_i32, rows_array, rows_f32, rows_f64};
 use super::errors::{input, IntoPy};
 use crate::scene::animation::ClipKey;
+use crate::scene::texture::{
+    Mipmap, Rgba8, Sampler, Texture, TextureRef, Wrap, IDENTITY_TRANSFORM,
+};
 use crate::scene::{Light, LightKind, Material, Scene, SceneParts};
 
 /// A clip as Python names it: an int is its index, a str its name (never parsed as a number).
@@ -55,7 +58,7 @@ impl PyScene {
     }
 
     #[staticmethod]
-    #[pyo3(signature = (vertices, faces, normals=None, colors=None, material_ids=None, materials=None, object_ids=None, objects=None, lights=None))]
+    #[pyo3(signature = (vertices, faces, normals=None, colors=None, material_ids=None, materials=None, object_ids=None, objects=None, lights=None, texcoords=None, textures=None, cameras=None, animations=None))]
     #[allow(clippy::too_many_arguments)]
     fn from_arrays(
         py: Python<'_>,
@@ -68,17 +71,25 @@ impl PyScene {
         object_ids: Option<&Bound<'_, PyAny>>,
         objects: Option<Vec<String>>,
         lights: Option<Vec<Bound<'_, PyDict>>>,
+        texcoords: Option<&Bound<'_, PyAny>>,
+        textures: Option<Vec<Bound<'_, PyAny>>>,
+        cameras: Option<Vec<PyCamera>>,
+        animations: Option<String>,
     ) -> PyResult<Self> {
         let v = rows_f32::<3>(vertices, "vertices")?;
         let f = self::faces(faces, "faces", v.len())?;
         let n = normals.map(|n| rows_f32::<3>(n, "normals")).transpose()?;
         let c = colors.map(|c| rows_f32::<3>(c, "colors")).transpose()?;
+        let uv = texcoords
+            .map(|t| rows_f32::<2>(t, "texcoords"))
+            .transpose()?;
         let m = f.len();
         let mut parts = SceneParts {
             vertices: v,
             faces: f,
             normals: n,
             colors: c,
+            texcoords: uv,
             material_ids: vec![-1; m],
             object_ids: vec![0; m],
             objects: vec!["mesh".to_string()],
@@ -87,8 +98,28 @@ impl PyScene {
         if let Some(ids) = material_ids {
             parts.material_ids = flat_i32(ids, "material_ids")?;
         }
+        if let Some(ts) = textures {
+            parts.textures = ts
+                .iter()
+                .enumerate()
+                .map(|(k, t)| texture(py, k, t))
+                .collect::<PyResult<_>>()?;
+        }
         if let Some(ms) = materials {
-            parts.materials = ms.iter().map(material).collect::<PyResult<_>>()?;
+            parts.materials = ms
+                .iter()
+                .map(|d| material(py, d))
+                .collect::<PyResult<_>>()?;
+        }
+        // A textured material's one colour: its factor times its texture's mean texel.
+        for m in &mut parts.materials {
+            if let Some(t) = m
+                .base_color_texture
+                .and_then(|r| parts.textures.get(r.texture))
+            {
+                let mean = t.mean();
+                m.base_color = std::array::from_fn(|k| m.base_color_factor[k] * mean[k]);
+            }
         }
         if let Some(ids) = object_ids {
             parts.object_ids = flat_i32(ids, "object_ids")?;
@@ -98,6 +129,20 @@ impl PyScene {
         }
         if let Some(ls) = lights {
             parts.lights = ls.iter().map(|d| light(py, d)).collect::<PyResult<_>>()?;
+        }
+        if let Some(cams) = cameras {
+            parts.cameras = cams.into_iter().map(|c| c.inner).collect();
+        }
+        if let Some(text) = animations {
+            let a = crate::scene::animation::Animations::from_json(
+                &text,
+                parts.objects.len(),
+                parts.lights.len(),
+                parts.cameras.len(),
+                parts.vertices.len(),
+            )
+            .py_err(py)?;
+            parts.animations = Some(Arc::new(a));
         }
         // Validated on the package's pool (its bounds pass is parallel), never on rayon's
         // global pool, whose threads a forked child would not have. Not through `run`, which
@@ -115,7 +160,7 @@ impl PyScene {
     /// objects' 4×4 matrices stacked (row-major), each mapping its object as loaded. `rewinds`
     /// and `lights` remake a pose as it was (unpickling): mirrored objects wound the other way,
     /// as `at` does, and the lights as they were placed.
-    #[pyo3(signature = (transforms, rewinds=false, lights=None, vertices=None))]
+    #[pyo3(signature = (transforms, rewinds=false, lights=None, vertices=None, normals=None))]
     fn posed(
         &self,
         py: Python<'_>,
@@ -123,6 +168,7 @@ impl PyScene {
         rewinds: bool,
         lights: Option<Vec<Bound<'_, PyDict>>>,
         vertices: Option<&Bound<'_, PyAny>>,
+        normals: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
         let rows = rows_f64::<4>(transforms, "transforms")?;
         if rows.len() % 4 != 0 {
@@ -141,9 +187,15 @@ impl PyScene {
             None => None,
         };
         let vertices = vertices.map(|v| rows_f32::<3>(v, "vertices")).transpose()?;
+        let normals = normals.map(|v| rows_f32::<3>(v, "normals")).transpose()?;
         let scene = super::run(py, || {
-            self.inner
-                .posed_again(&ms, rewinds, lights.clone(), vertices.clone())
+            self.inner.posed_again(
+                &ms,
+                rewinds,
+                lights.clone(),
+                vertices.clone(),
+                normals.clone(),
+            )
         })?;
         Ok(Self {
             inner: Arc::new(scene),
@@ -198,6 +250,31 @@ impl PyScene {
     #[getter]
     fn animations(&self) -> Vec<(String, f64)> {
         self.inner.animations()
+    }
+
+    /// The animations as JSON text (what a pickle carries), or None without any.
+    #[getter]
+    fn animations_state(&self) -> Option<String> {
+        self.inner.animations_data().map(|a| a.to_json())
+    }
+
+    /// (N, 2) float32 texture coordinates, or None.
+    #[getter]
+    fn texcoords<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyAny>>> {
+        self.inner
+            .texcoords()
+            .map(|t| rows_array(py, t, &[t.len(), 2]))
+            .transpose()
+    }
+
+    /// The base-colour textures: (H, W, 4) uint8 sRGB-encoded texels each, row 0 at the top.
+    #[getter]
+    fn textures<'py>(&self, py: Python<'py>) -> PyResult<Vec<Bound<'py, PyAny>>> {
+        self.inner
+            .textures()
+            .iter()
+            .map(|t| rows_array(py, t.texels(), &[t.height(), t.width(), 4]))
+            .collect()
     }
 
     /// Every key time of animation `clip` (an int index or a str name), ascending, each once.
@@ -299,6 +376,12 @@ impl PyScene {
             d.set_item("base_color", m.base_color.to_vec())?;
             d.set_item("base_color_factor", m.base_color_factor.to_vec())?;
             d.set_item("base_color_textured", m.base_color_textured)?;
+            let texture = m
+                .base_color_texture
+                .as_ref()
+                .map(|r| texture_dict(py, r))
+                .transpose()?;
+            d.set_item("base_color_texture", texture)?;
             d.set_item("metallic", m.metallic)?;
             d.set_item("roughness", m.roughness)?;
             d.set_item("emissive", m.emissive.to_vec())?;
@@ -354,9 +437,123 @@ impl PyScene {
     }
 }
 
+/// Texture `k` from an (H, W, 4) or (H, W, 3) uint8 array of sRGB-encoded texels (row 0 at the
+/// top, as the file stores it).
+fn texture(py: Python<'_>, k: usize, a: &Bound<'_, PyAny>) -> PyResult<Arc<Texture>> {
+    let arr = a.cast::<numpy::PyArrayDyn<u8>>().map_err(|_| {
+        input(
+            py,
+            format!("textures[{k}] must be a uint8 array of (H, W, 4) or (H, W, 3) texels"),
+        )
+    })?;
+    let view = numpy::PyArrayMethods::readonly(arr);
+    let a = view.as_array();
+    let shape = a.shape().to_vec();
+    if shape.len() != 3 || !(shape[2] == 3 || shape[2] == 4) || shape[0] == 0 || shape[1] == 0 {
+        return Err(input(
+            py,
+            format!("textures[{k}] must have shape (H, W, 4) or (H, W, 3), got {shape:?}"),
+        ));
+    }
+    let texels = a
+        .outer_iter()
+        .flat_map(|row| {
+            row.outer_iter()
+                .map(|t| [t[0], t[1], t[2], if shape[2] == 4 { t[3] } else { 255 }])
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    let image = Rgba8 {
+        width: shape[1] as u32,
+        height: shape[0] as u32,
+        texels,
+    };
+    Texture::new(image)
+        .map(Arc::new)
+        .map_err(|e| input(py, format!("textures[{k}]: {e}")))
+}
+
+/// A material's base-colour texture as a dict: `texture` (index into the scene's textures),
+/// `wrap_s`, `wrap_t`, `mag_filter`, `min_filter` (glTF's sampler enums) and `transform`
+/// (2×3 rows: `u' = a·u + b·v + c`, `v' = d·u + e·v + f`).
+fn texture_dict<'py>(py: Python<'py>, r: &TextureRef) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    let s = &r.sampler;
+    let wrap = |w: Wrap| match w {
+        Wrap::Repeat => 10497,
+        Wrap::ClampToEdge => 33071,
+        Wrap::MirroredRepeat => 33648,
+    };
+    let min = match (s.min_nearest, s.mipmap) {
+        (true, Mipmap::None) => 9728,
+        (false, Mipmap::None) => 9729,
+        (true, Mipmap::Nearest) => 9984,
+        (false, Mipmap::Nearest) => 9985,
+        (true, Mipmap::Linear) => 9986,
+        (false, Mipmap::Linear) => 9987,
+    };
+    d.set_item("texture", r.texture)?;
+    d.set_item("wrap_s", wrap(s.wrap[0]))?;
+    d.set_item("wrap_t", wrap(s.wrap[1]))?;
+    d.set_item("mag_filter", if s.mag_nearest { 9728 } else { 9729 })?;
+    d.set_item("min_filter", min)?;
+    let t = r.transform;
+    d.set_item("transform", vec![t[..3].to_vec(), t[3..].to_vec()])?;
+    Ok(d)
+}
+
+/// A base-colour texture reference from a dict as [`texture_dict`] writes it (the sampler's
+/// enums and the transform may be left out: REPEAT, LINEAR, LINEAR_MIPMAP_LINEAR, identity).
+fn texture_ref(py: Python<'_>, d: &Bound<'_, PyDict>) -> PyResult<TextureRef> {
+    let get =
+        |k: &str| -> PyResult<Option<u32>> { d.get_item(k)?.map(|v| v.extract()).transpose() };
+    let Some(texture) = d.get_item("texture")? else {
+        return Err(input(
+            py,
+            "a base_color_texture needs its 'texture' index".into(),
+        ));
+    };
+    let wrap = |k: &str| -> PyResult<Wrap> {
+        match get(k)? {
+            None => Ok(Wrap::Repeat),
+            Some(v) => Wrap::from_gl(v).ok_or_else(|| {
+                input(
+                    py,
+                    format!("{k} must be 10497, 33071 or 33648 (glTF's wrap modes), got {v}"),
+                )
+            }),
+        }
+    };
+    let sampler = Sampler {
+        wrap: [wrap("wrap_s")?, wrap("wrap_t")?],
+        ..Sampler::default()
+    }
+    .with_filters(get("mag_filter")?, get("min_filter")?);
+    let transform = match d.get_item("transform")? {
+        None => IDENTITY_TRANSFORM,
+        Some(v) => {
+            let rows: Vec<Vec<f64>> = v.extract()?;
+            if rows.len() != 2 || rows.iter().any(|r| r.len() != 3) {
+                return Err(input(py, "a texture transform is 2x3 rows".into()));
+            }
+            [
+                rows[0][0], rows[0][1], rows[0][2], rows[1][0], rows[1][1], rows[1][2],
+            ]
+        }
+    };
+    Ok(TextureRef {
+        texture: texture.extract()?,
+        sampler,
+        transform,
+    })
+}
+
 /// A material from a dict: `base_color` (RGB or RGBA, linear), `metallic`, `roughness`,
-/// `emissive`, `name`, `double_sided`; glTF's defaults for what is missing.
-fn material(d: &Bound<'_, PyDict>) -> PyResult<Material> {
+/// `emissive`, `name`, `double_sided`, and a `base_color_texture` (see [`texture_ref`]) with its
+/// `base_color_factor` (default: `base_color`; the material's `base_color` is then the factor
+/// times the texture's mean, set where the scene's textures are known); glTF's defaults for
+/// what is missing.
+fn material(py: Python<'_>, d: &Bound<'_, PyDict>) -> PyResult<Material> {
     let get = |k: &str| d.get_item(k);
     let color: Vec<f32> = match get("base_color")? {
         Some(v) => v.extract()?,
@@ -374,14 +571,30 @@ fn material(d: &Bound<'_, PyDict>) -> PyResult<Material> {
     for (dst, src) in em.iter_mut().zip(&emissive) {
         *dst = *src;
     }
+    let texture = match get("base_color_texture")? {
+        Some(v) if !v.is_none() => Some(texture_ref(py, v.cast::<PyDict>()?)?),
+        _ => None,
+    };
+    let factor = match (get("base_color_factor")?, &texture) {
+        (Some(v), Some(_)) => {
+            let f: Vec<f32> = v.extract()?;
+            let mut out = [1.0f32; 4];
+            for (dst, src) in out.iter_mut().zip(&f) {
+                *dst = *src;
+            }
+            out
+        }
+        _ => rgba,
+    };
     Ok(Material {
         name: match get("name")? {
             Some(v) => v.extract()?,
             None => String::new(),
         },
-        base_color: rgba,
-        base_color_factor: rgba,
-        base_color_textured: false,
+        base_color: factor,
+        base_color_factor: factor,
+        base_color_textured: texture.is_some(),
+        base_color_texture: texture,
         metallic: match get("metallic")? {
             Some(v) => v.extract()?,
             None => 1.0,
@@ -454,4 +667,66 @@ fn light(py: Python<'_>, d: &Bound<'_, PyDict>) -> PyResult<Light> {
         inner_cone_angle: opt("inner_cone_angle")?,
         outer_cone_angle: opt("outer_cone_angle")?,
     })
+}
+
+/// The attributes of samples of `scene`'s surface: per sample its triangle id (−1: nothing)
+/// and where on the triangle, as barycentrics (N, 2) or world points (N, 3); with per-sample
+/// footprints (N,) in world units for the texture's level (none: the finest). A dict of
+/// `texcoord` (N, 2), `color`, `shading_normal`, `normal` (N, 3).
+#[pyfunction]
+#[pyo3(signature = (scene, triangle, barycentric=None, points=None, footprint=None))]
+pub fn surface_attributes<'py>(
+    py: Python<'py>,
+    scene: &PyScene,
+    triangle: &Bound<'py, PyAny>,
+    barycentric: Option<&Bound<'py, PyAny>>,
+    points: Option<&Bound<'py, PyAny>>,
+    footprint: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    use crate::scene::surface::{attributes, Where};
+    let triangle = flat_i32(triangle, "triangle")?;
+    let bary = barycentric
+        .map(|b| rows_f32::<2>(b, "barycentric"))
+        .transpose()?;
+    let pts = points.map(|p| rows_f32::<3>(p, "points")).transpose()?;
+    let footprint = footprint
+        .map(|f| rows_f32::<1>(&f.call_method1("reshape", ((-1i64, 1i64),))?, "footprint"))
+        .transpose()?
+        .map(|f| f.into_iter().map(|[x]| x).collect::<Vec<f32>>());
+    let at = match (&bary, &pts) {
+        (Some(b), None) => Where::Barycentric(b),
+        (None, Some(p)) => Where::Points(p),
+        _ => {
+            return Err(input(
+                py,
+                "give the samples' barycentric coordinates or their points, one of the two".into(),
+            ))
+        }
+    };
+    let s = scene.inner.clone();
+    let a = super::run(py, || {
+        attributes(&s, &triangle, at_again(&at), footprint.as_deref())
+    })?;
+    let n = triangle.len();
+    let d = PyDict::new(py);
+    d.set_item(
+        "texcoord",
+        super::convert::rows_owned(py, a.texcoord, &[n, 2])?,
+    )?;
+    d.set_item("color", super::convert::rows_owned(py, a.color, &[n, 3])?)?;
+    d.set_item(
+        "shading_normal",
+        super::convert::rows_owned(py, a.shading_normal, &[n, 3])?,
+    )?;
+    d.set_item("normal", super::convert::rows_owned(py, a.normal, &[n, 3])?)?;
+    Ok(d)
+}
+
+/// `at` borrowed again (`run` may call its work more than once).
+fn at_again<'a>(at: &crate::scene::surface::Where<'a>) -> crate::scene::surface::Where<'a> {
+    use crate::scene::surface::Where;
+    match at {
+        Where::Barycentric(b) => Where::Barycentric(b),
+        Where::Points(p) => Where::Points(p),
+    }
 }

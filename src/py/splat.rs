@@ -111,6 +111,8 @@ fn points_dict<'py>(
     d.set_item("length", array(py, p.length, &[n])?)?;
     d.set_item("triangle", array(py, p.triangle, &[n])?)?;
     d.set_item("normal", rows_owned(py, p.normal, &[n, 3])?)?;
+    d.set_item("shading_normal", rows_owned(py, p.shading_normal, &[n, 3])?)?;
+    d.set_item("color", rows_owned(py, p.color, &[n, 3])?)?;
     d.set_item("material", array(py, p.material, &[n])?)?;
     d.set_item("views", array(py, p.views, &[n, words])?)?;
     let cams: Vec<PyCamera> = views.into_iter().map(PyCamera::from).collect();

@@ -7,7 +7,7 @@
 
 use glam::{DMat4, DQuat, DVec3};
 
-use super::skin::{Place, Rigging};
+use super::skin::{Place, Posed, Rigging};
 use crate::error::Result;
 use crate::input_err;
 
@@ -82,6 +82,118 @@ pub struct Animations {
     pub rigging: Rigging,
 }
 
+impl Animations {
+    /// The animations as JSON text (what a pickle of their scene carries).
+    pub fn to_json(&self) -> String {
+        serde_json::to_string(self).unwrap_or_else(|e| unreachable!("plain data serializes: {e}"))
+    }
+
+    /// Animations read back from [`Animations::to_json`]'s text, checked against the scene
+    /// they belong to (`objects` objects, `lights` lights, `cameras` cameras, `vertices`
+    /// vertices): every index they hold names something that exists, so that no later pose
+    /// indexes out of range. An error names what does not fit.
+    pub fn from_json(
+        text: &str,
+        objects: usize,
+        lights: usize,
+        cameras: usize,
+        vertices: usize,
+    ) -> Result<Animations> {
+        let a: Animations = match serde_json::from_str(text) {
+            Ok(a) => a,
+            Err(e) => return input_err!("the animations cannot be read: {e}"),
+        };
+        a.check(objects, lights, cameras, vertices)?;
+        Ok(a)
+    }
+
+    pub fn check(
+        &self,
+        objects: usize,
+        lights: usize,
+        cameras: usize,
+        vertices: usize,
+    ) -> Result<()> {
+        let nodes = self.nodes.len();
+        let node_ok = |i: usize| i < nodes;
+        let bad = |what: &str| -> Result<()> {
+            input_err!("the animations do not fit their scene: {what}")
+        };
+        if self.rest.len() != nodes || self.nodes.iter().any(|n| !n.parent.is_none_or(node_ok)) {
+            return bad("a node's parent or rest transform is missing");
+        }
+        // Every chain of parents ends at a root within `nodes` steps (no node is its own
+        // ancestor: a pose walks the chains).
+        for start in 0..nodes {
+            let mut at = self.nodes[start].parent;
+            let mut steps = 0;
+            while let Some(p) = at {
+                steps += 1;
+                if steps > nodes {
+                    return bad("a node is its own ancestor");
+                }
+                at = self.nodes[p].parent;
+            }
+        }
+        for (places, count, what) in [
+            (&self.objects, objects, "objects"),
+            (&self.lights, lights, "lights"),
+            (&self.cameras, cameras, "cameras"),
+        ] {
+            if places.len() != count || places.iter().any(|p| !node_ok(p.node)) {
+                return bad(&format!("{} places for {count} {what}", places.len()));
+            }
+        }
+        for c in &self.clips {
+            for ch in &c.channels {
+                let cubic = ch.interpolation == Interpolation::CubicSpline;
+                let per_key = ch.width * if cubic { 3 } else { 1 };
+                let width_ok = match ch.property {
+                    Property::Translation | Property::Scale => ch.width == 3,
+                    Property::Rotation => ch.width == 4,
+                    Property::Weights => ch.width > 0,
+                };
+                if !node_ok(ch.node)
+                    || !width_ok
+                    || ch.times.is_empty()
+                    || ch.values.len() != per_key * ch.times.len()
+                {
+                    return bad(&format!("a channel of clip {:?}", c.name));
+                }
+            }
+        }
+        let r = &self.rigging;
+        for s in &r.skins {
+            if s.joints.iter().any(|&j| !node_ok(j)) || s.inverse_bind.len() != s.joints.len() {
+                return bad("a skin's joints");
+            }
+        }
+        for d in &r.deformables {
+            let n = d.base.len();
+            let joints = d.skin.map(|s| r.skins.get(s).map_or(0, |s| s.joints.len()));
+            let rows_ok =
+                |rows: &Vec<Vec<[f32; 3]>>| rows.iter().all(|t| t.is_empty() || t.len() == n);
+            if d.object >= objects
+                || !node_ok(d.node)
+                || d.first + n > vertices
+                || d.normals.len() != n
+                || d.targets.len() != d.normal_targets.len()
+                || !rows_ok(&d.targets)
+                || !rows_ok(&d.normal_targets)
+                || joints == Some(0)
+                || d.joints.len() != n * d.influences
+                || d.joint_weights.len() != n * d.influences
+                || d.joints
+                    .iter()
+                    .any(|&j| joints.is_some_and(|k| usize::from(j) >= k))
+            {
+                return bad(&format!("the deformation of object {}", d.object));
+            }
+        }
+        Ok(())
+    }
+}
+
 /// A clip sampled at one time: each object's transform from its place as loaded (the identity
 /// exactly under no animated node), and the world transform of each light's and camera's node
 /// (`None` under no animated node: it stays where it was loaded). An object that a skin moves
@@ -90,9 +202,9 @@ pub struct Animations {
 #[derive(Debug, Clone)]
 pub struct At {
     pub objects: Vec<DMat4>,
-    /// Per moved deformable object: the object, its first vertex, and its vertices in world
-    /// space (in the order of the scene's).
-    pub deformed: Vec<(usize, usize, Vec<DVec3>)>,
+    /// Per moved deformable object: the object, its first vertex, and its vertices and
+    /// normals in world space (in the order of the scene's).
+    pub deformed: Vec<(usize, usize, Posed)>,
     pub lights: Vec<Option<DMat4>>,
     pub cameras: Vec<Option<DMat4>>,
 }
@@ -307,7 +419,7 @@ impl Animations {
                     }
                     let worlds = skin.joints.iter().zip(&placed);
                     let mats = skin.matrices(worlds.map(|(&j, w)| w.unwrap_or(self.rest[j])));
-                    d.positions(w, &Place::Joints(&mats))
+                    d.place(w, &Place::Joints(&mats))
                 }
                 None => {
                     if keyed.is_none() {
@@ -315,7 +427,7 @@ impl Animations {
                     }
                     let node = self.world_at(d.node, trs, &mut world);
                     let place = node.unwrap_or(self.rest[d.node]) * d.instance;
-                    d.positions(w, &Place::Node(place))
+                    d.place(w, &Place::Node(place))
                 }
             };
             at.deformed.push((d.object, d.first, moved));

@@ -11,7 +11,8 @@ pub mod obj;
 pub mod pose;
 pub mod shapes;
 pub mod skin;
-mod texture;
+pub mod surface;
+pub mod texture;
 
 use std::any::{Any, TypeId};
 use std::collections::HashMap;
@@ -24,16 +25,20 @@ use crate::camera::Camera;
 use crate::error::Result;
 use crate::{input_err, scene_err};
 
-/// A glTF metallic-roughness material, reduced to the factors the methods use.
+/// A glTF metallic-roughness material, reduced to what the methods use.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Material {
     pub name: String,
     /// Linear RGBA: `base_color_factor` × the mean texel of the base-colour texture (sRGB decoded),
-    /// or the factor alone when there is no texture or it could not be read.
+    /// or the factor alone when there is no texture or it could not be read: the material's one
+    /// colour, for the methods that need one.
     pub base_color: [f32; 4],
     pub base_color_factor: [f32; 4],
     /// Whether `base_color` includes a texture average.
     pub base_color_textured: bool,
+    /// The base-colour texture as samples read it (texture, sampler, transform), where it
+    /// could be read; the scene's texture coordinates are the set it names.
+    pub base_color_texture: Option<texture::TextureRef>,
     pub metallic: f32,
     pub roughness: f32,
     pub emissive: [f32; 3],
@@ -48,6 +53,7 @@ impl Default for Material {
             base_color: [1.0; 4],
             base_color_factor: [1.0; 4],
             base_color_textured: false,
+            base_color_texture: None,
             metallic: 1.0,
             roughness: 1.0,
             emissive: [0.0; 3],
@@ -95,9 +101,17 @@ impl Light {
 pub struct SceneParts {
     pub vertices: Vec<[f32; 3]>,
     pub faces: Vec<[u32; 3]>,
+    /// Per-vertex normals (a zero row: that vertex has none, and shading uses the
+    /// area-weighted normal of its faces there, [`surface`]).
     pub normals: Option<Vec<[f32; 3]>>,
-    /// Per-vertex linear RGB base colour; white when `None`.
+    /// Per-vertex linear RGB base colour (glTF: the base colour factor × COLOR_0; a textured
+    /// material's texture multiplies it per sample, [`surface`]); white when `None`.
     pub colors: Option<Vec<[f32; 3]>>,
+    /// Per-vertex texture coordinates: the set its material's base-colour texture names
+    /// (0..1 spans the image, v down); `None` when no material has a texture.
+    pub texcoords: Option<Vec<[f32; 2]>>,
+    /// The decoded base-colour textures that materials refer to.
+    pub textures: Vec<Arc<texture::Texture>>,
     /// Per-triangle material index into `materials`, −1 for glTF's default material.
     pub material_ids: Vec<i32>,
     /// Per-triangle object index into `objects`.
@@ -130,14 +144,17 @@ pub struct Scene {
     derived: Derived,
 }
 
-/// The faces, their material and object ids and the vertices' colours: what poses leave as
-/// they are (but an animation that mirrors an object rewinds its faces, `Scene::at`).
+/// The faces, their material and object ids, the vertices' colours and texture coordinates,
+/// and the textures: what poses leave as they are (but an animation that mirrors an object
+/// rewinds its faces, `Scene::at`).
 #[derive(Debug, Clone)]
 pub(crate) struct Shared {
     faces: Vec<[u32; 3]>,
     material_ids: Vec<i32>,
     object_ids: Vec<i32>,
     colors: Vec<[f32; 3]>,
+    texcoords: Option<Vec<[f32; 2]>>,
+    textures: Vec<Arc<texture::Texture>>,
 }
 
 /// One cached value per type, each built once.
@@ -176,6 +193,8 @@ impl Scene {
             material_ids: std::mem::take(&mut parts.material_ids),
             object_ids: std::mem::take(&mut parts.object_ids),
             colors,
+            texcoords: parts.texcoords.take(),
+            textures: std::mem::take(&mut parts.textures),
         });
         Ok(Self::assemble(parts, shared, None))
     }
@@ -233,6 +252,8 @@ impl Scene {
         parts.material_ids = pick(self.material_ids());
         parts.object_ids = pick(self.object_ids());
         parts.colors = Some(self.colors().to_vec());
+        parts.texcoords = self.texcoords().map(<[_]>::to_vec);
+        parts.textures = self.textures().to_vec();
         parts.warnings.clear();
         Self::new(parts)
     }
@@ -268,6 +289,12 @@ impl Scene {
     }
     pub fn colors(&self) -> &[[f32; 3]] {
         &self.shared.colors
+    }
+    pub fn texcoords(&self) -> Option<&[[f32; 2]]> {
+        self.shared.texcoords.as_deref()
+    }
+    pub fn textures(&self) -> &[Arc<texture::Texture>] {
+        &self.shared.textures
     }
     pub fn material_ids(&self) -> &[i32] {
         &self.shared.material_ids
@@ -379,6 +406,12 @@ fn validate(p: &SceneParts) -> Result<()> {
     }
     check_len("normals", p.normals.as_ref().map(Vec::len), n, "vertices")?;
     check_len("colors", p.colors.as_ref().map(Vec::len), n, "vertices")?;
+    check_len(
+        "texcoords",
+        p.texcoords.as_ref().map(Vec::len),
+        n,
+        "vertices",
+    )?;
     check_len("material_ids", Some(p.material_ids.len()), m, "faces")?;
     check_len("object_ids", Some(p.object_ids.len()), m, "faces")?;
     if let Some(normals) = &p.normals {
@@ -392,6 +425,31 @@ fn validate(p: &SceneParts) -> Result<()> {
     if let Some(colors) = &p.colors {
         if let Some(i) = colors.iter().position(|v| v.iter().any(|x| !x.is_finite())) {
             return scene_err!("color {i} is not finite: {:?}", colors[i]);
+        }
+    }
+    if let Some(uv) = &p.texcoords {
+        if let Some(i) = uv.iter().position(|v| v.iter().any(|x| !x.is_finite())) {
+            return scene_err!("texture coordinate {i} is not finite: {:?}", uv[i]);
+        }
+    }
+    for (k, m) in p.materials.iter().enumerate() {
+        if let Some(r) = &m.base_color_texture {
+            if r.texture >= p.textures.len() {
+                return scene_err!(
+                    "material {k} names texture {} but there are {} textures",
+                    r.texture,
+                    p.textures.len()
+                );
+            }
+            if p.texcoords.is_none() {
+                return scene_err!(
+                    "material {k} has a base-colour texture but the scene has no texture \
+                     coordinates"
+                );
+            }
+            if r.transform.iter().any(|x| !x.is_finite()) {
+                return scene_err!("material {k}'s texture transform is not finite");
+            }
         }
     }
     let nm = p.materials.len() as i32;

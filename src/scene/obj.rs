@@ -1,13 +1,17 @@
 //! Wavefront OBJ with MTL materials, read natively so the effect planner sees the materials of
 //! the most common research format.
 //!
-//! Geometry: `v` (with the optional per-vertex colour `v x y z r g b`), `f` (any polygon, fan
-//! triangulated; `v`, `v/vt`, `v//vn`, `v/vt/vn`; negative indices count back from the last
-//! vertex), `o` and `g` (object ids), `usemtl`, `mtllib`. Texture coordinates, normals, lines,
-//! points, smoothing groups and free-form geometry are not used.
+//! Geometry: `v` (with the optional per-vertex colour `v x y z r g b`), `vt` and `vn`, `f` (any
+//! polygon, fan triangulated; `v`, `v/vt`, `v//vn`, `v/vt/vn`; negative indices count back from
+//! the last one), `o` and `g` (object ids), `usemtl`, `mtllib`. A corner's `vn` is its shading
+//! normal (a corner without one gets the area-weighted normal of its faces, as for glTF) and
+//! its `vt` its texture coordinate (v up, as OBJ has it). Lines, points, smoothing groups and
+//! free-form geometry are not used.
 //!
 //! Materials (MTL), mapped onto the metallic-roughness model the package uses:
-//! - `Kd` (default 0.8 grey) times the mean texel of `map_Kd` (sRGB decoded, as for glTF);
+//! - `Kd` (default 0.8 grey) times `map_Kd` sampled at each point (sRGB decoded, filtered as
+//!   for glTF, `surface`), with its `-o` offset, `-s` scale and `-clamp on`; the material's one
+//!   colour (`Material::base_color`) is `Kd` times the texture's mean texel;
 //! - `Ke` is the emissive colour;
 //! - roughness: `Pr` when given, else from the specular exponent `Ns` as
 //!   `1 - sqrt(clamp(Ns, 0, 1000) / 1000)` (the inverse of Blender's exporter), else 1;
@@ -21,7 +25,9 @@
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
+use super::texture::{self, Sampler, Texture, TextureRef, Wrap};
 use super::{Material, Scene, SceneParts};
 use crate::error::{Error, Result};
 
@@ -46,13 +52,17 @@ struct Reader<'a> {
     positions: Vec<[f32; 3]>,
     /// Per position, its colour when the file gives one.
     vertex_colors: Vec<Option<[f32; 3]>>,
+    /// `vt` and `vn` statements, in order.
+    texcoords: Vec<[f32; 2]>,
+    normals: Vec<[f32; 3]>,
     materials: Vec<Material>,
     by_name: HashMap<String, usize>,
     objects: Vec<String>,
     object_of: HashMap<String, usize>,
-    /// (position, material) -> output vertex: a position used by faces of several materials
-    /// becomes one vertex per material, each with its material's colour.
-    vertex_of: HashMap<(u32, i32), u32>,
+    /// A corner (position, `vt`, `vn`; `u32::MAX` for none) of a face of a material -> output
+    /// vertex: a position used with several texture coordinates, normals or materials becomes
+    /// one vertex per combination.
+    vertex_of: HashMap<(Corner, i32), u32>,
     parts: SceneParts,
     /// Warnings already given, so a repeated problem is reported once.
     said: std::collections::HashSet<String>,
@@ -64,6 +74,8 @@ fn parse(text: &str, base: &Path, path: &Path) -> Result<SceneParts> {
         path,
         positions: Vec::new(),
         vertex_colors: Vec::new(),
+        texcoords: Vec::new(),
+        normals: Vec::new(),
         materials: Vec::new(),
         by_name: HashMap::new(),
         objects: Vec::new(),
@@ -94,15 +106,7 @@ fn parse(text: &str, base: &Path, path: &Path) -> Result<SceneParts> {
         let rest = rest.trim();
         let at = || format!("{}:{}", path.display(), number + 1);
         match key {
-            "v" => {
-                let x: Vec<f32> = numbers(rest).map_err(|m| r.err(&at(), m))?;
-                if x.len() < 3 {
-                    return Err(r.err(&at(), format!("a vertex needs 3 coordinates: {line:?}")));
-                }
-                r.positions.push([x[0], x[1], x[2]]);
-                r.vertex_colors
-                    .push((x.len() >= 6).then(|| [x[3], x[4], x[5]]));
-            }
+            "v" | "vt" | "vn" => r.vertex_data(key, rest, &at)?,
             "f" => {
                 let o = match object {
                     Some(o) => o,
@@ -142,6 +146,10 @@ fn parse(text: &str, base: &Path, path: &Path) -> Result<SceneParts> {
         objects,
         ..
     } = r;
+    // A texture whose faces give no `vt` is read at (0, 0).
+    if parts.texcoords.is_none() && materials.iter().any(|m| m.base_color_texture.is_some()) {
+        parts.texcoords = Some(vec![[0.0; 2]; parts.vertices.len()]);
+    }
     parts.materials = materials;
     parts.objects = objects;
     Ok(parts)
@@ -150,6 +158,26 @@ fn parse(text: &str, base: &Path, path: &Path) -> Result<SceneParts> {
 impl Reader<'_> {
     fn err(&self, at: &str, message: impl std::fmt::Display) -> Error {
         Error::Scene(format!("{at}: {message}"))
+    }
+
+    /// `v x y z [r g b]`, `vt u [v]` or `vn x y z`.
+    fn vertex_data(&mut self, key: &str, rest: &str, at: &dyn Fn() -> String) -> Result<()> {
+        let x: Vec<f32> = numbers(rest).map_err(|m| self.err(&at(), m))?;
+        let get = |k: usize| x.get(k).copied().unwrap_or(0.0);
+        let what = if key == "v" { "vertex" } else { "normal" };
+        if key != "vt" && x.len() < 3 {
+            return Err(self.err(&at(), format!("a {what} needs 3 coordinates: {key} {rest}")));
+        }
+        match key {
+            "v" => {
+                self.positions.push([x[0], x[1], x[2]]);
+                self.vertex_colors
+                    .push((x.len() >= 6).then(|| [x[3], x[4], x[5]]));
+            }
+            "vt" => self.texcoords.push([get(0), get(1)]),
+            _ => self.normals.push([x[0], x[1], x[2]]),
+        }
+        Ok(())
     }
 
     fn warn(&mut self, message: String) {
@@ -178,19 +206,35 @@ impl Reader<'_> {
     ) -> Result<()> {
         let mut corners = Vec::with_capacity(4);
         for token in rest.split_whitespace() {
-            let first = token.split('/').next().unwrap_or("");
-            let i: i64 = first
-                .parse()
-                .map_err(|_| self.err(&at(), format!("bad vertex reference {token:?}")))?;
-            let n = self.positions.len() as i64;
-            let index = if i < 0 { n + i } else { i - 1 };
-            if i == 0 || !(0..n).contains(&index) {
-                return Err(self.err(
-                    &at(),
-                    format!("vertex {i} does not exist ({n} vertices defined so far)"),
-                ));
+            let mut refs = token.split('/');
+            let counts = [
+                ("vertex", self.positions.len()),
+                ("texture coordinate", self.texcoords.len()),
+                ("normal", self.normals.len()),
+            ];
+            let mut corner = [u32::MAX; 3];
+            for (k, (what, n)) in counts.into_iter().enumerate() {
+                let Some(text) = refs.next().filter(|t| !t.is_empty() || k == 0) else {
+                    continue;
+                };
+                let i: i64 = text
+                    .parse()
+                    .map_err(|_| self.err(&at(), format!("bad {what} reference {token:?}")))?;
+                let n = n as i64;
+                let index = if i < 0 { n + i } else { i - 1 };
+                if i == 0 || !(0..n).contains(&index) {
+                    let message = format!("{what} {i} does not exist ({n} defined so far)");
+                    if k == 0 {
+                        return Err(self.err(&at(), message));
+                    }
+                    // A corner's missing texture coordinate or normal is left out, as
+                    // viewers do.
+                    self.warn(format!("{}: {message}; the corner has none", at()));
+                    continue;
+                }
+                corner[k] = index as u32;
             }
-            corners.push(self.vertex(index as u32, material));
+            corners.push(self.vertex(corner, material));
         }
         if corners.len() < 3 {
             self.warn(format!(
@@ -209,23 +253,43 @@ impl Reader<'_> {
         Ok(())
     }
 
-    /// The output vertex of `position` for faces of `material`.
-    fn vertex(&mut self, position: u32, material: i32) -> u32 {
-        if let Some(&v) = self.vertex_of.get(&(position, material)) {
+    /// The output vertex of `corner` for faces of `material`: its position, colour (`Kd` times
+    /// the vertex colour), texture coordinate and normal. Normals and texture coordinates start
+    /// (zero-filled for the vertices before) with the first corner that has one.
+    fn vertex(&mut self, corner: Corner, material: i32) -> u32 {
+        if let Some(&v) = self.vertex_of.get(&(corner, material)) {
             return v;
         }
-        let v = self.parts.vertices.len() as u32;
-        self.parts.vertices.push(self.positions[position as usize]);
+        let [position, vt, vn] = corner.map(|i| (i != u32::MAX).then_some(i as usize));
+        let position = position.unwrap_or(0);
+        let parts = &mut self.parts;
+        let before = parts.vertices.len();
+        let v = before as u32;
+        parts.vertices.push(self.positions[position]);
         let base = usize::try_from(material)
             .ok()
-            .map_or([1.0; 4], |m| self.materials[m].base_color);
-        let c = self.vertex_colors[position as usize].unwrap_or([1.0; 3]);
-        self.parts.colors.get_or_insert_with(Vec::new).push([
+            .map_or([1.0; 4], |m| self.materials[m].base_color_factor);
+        let c = self.vertex_colors[position].unwrap_or([1.0; 3]);
+        parts.colors.get_or_insert_with(Vec::new).push([
             base[0] * c[0],
             base[1] * c[1],
             base[2] * c[2],
         ]);
-        self.vertex_of.insert((position, material), v);
+        if let Some(k) = vt {
+            let uv = parts
+                .texcoords
+                .get_or_insert_with(|| vec![[0.0; 2]; before]);
+            uv.push(self.texcoords[k]);
+        } else if let Some(uv) = parts.texcoords.as_mut() {
+            uv.push([0.0; 2]);
+        }
+        if let Some(k) = vn {
+            let ns = parts.normals.get_or_insert_with(|| vec![[0.0; 3]; before]);
+            ns.push(self.normals[k]);
+        } else if let Some(ns) = parts.normals.as_mut() {
+            ns.push([0.0; 3]);
+        }
+        self.vertex_of.insert((corner, material), v);
         v
     }
 
@@ -316,7 +380,7 @@ impl Reader<'_> {
                 "Pm" => extra.pm = vals().first().copied(),
                 "d" => extra.d = vals().last().copied(),
                 "Tr" => extra.tr = vals().last().copied(),
-                "map_Kd" => extra.map_kd = Some(map_file(rest)),
+                "map_Kd" => extra.map_kd = Some(rest.to_string()),
                 _ => {}
             }
         }
@@ -338,25 +402,17 @@ impl Reader<'_> {
             (None, None) => 1.0,
         };
         m.base_color = m.base_color_factor;
-        if let Some(name) = x.map_kd.filter(|n| !n.is_empty()) {
-            let base = file.parent().unwrap_or(Path::new("."));
-            let found = [name.clone(), name.replace('\\', "/")]
-                .iter()
-                .map(|n| base.join(n))
-                .find(|p| p.is_file());
-            let mean = match found {
-                Some(p) => std::fs::read(&p)
-                    .map_err(|e| e.to_string())
-                    .and_then(|b| super::texture::mean_linear_rgba(&b))
-                    .map_err(|e| format!("cannot decode {}: {e}", p.display())),
-                None => Err(format!("the texture {name:?} is missing")),
-            };
-            match mean {
+        if let Some(statement) = x.map_kd {
+            let map = MapKd::parse(&statement);
+            match self.texture(&map.file, file) {
                 Ok(t) => {
-                    for (c, t) in m.base_color.iter_mut().zip(t) {
+                    let mean = t.mean();
+                    for (c, t) in m.base_color.iter_mut().zip(mean) {
                         *c *= t;
                     }
                     m.base_color_textured = true;
+                    self.parts.textures.push(Arc::new(t));
+                    m.base_color_texture = Some(map.binding(self.parts.textures.len() - 1));
                 }
                 Err(e) => self.warn(format!(
                     "{}: material {:?}: {e}; its colour is Kd alone",
@@ -375,6 +431,29 @@ impl Reader<'_> {
         }
     }
 }
+
+impl Reader<'_> {
+    /// The texture of the image `name` (relative to the MTL file `file`), decoded.
+    fn texture(&self, name: &str, file: &Path) -> std::result::Result<Texture, String> {
+        if name.is_empty() {
+            return Err("map_Kd names no file".into());
+        }
+        let base = file.parent().unwrap_or(Path::new("."));
+        let found = [name.to_string(), name.replace('\\', "/")]
+            .iter()
+            .map(|n| base.join(n))
+            .find(|p| p.is_file())
+            .ok_or_else(|| format!("the texture {name:?} is missing"))?;
+        std::fs::read(&found)
+            .map_err(|e| e.to_string())
+            .and_then(|b| texture::decode(&b))
+            .and_then(Texture::new)
+            .map_err(|e| format!("cannot decode {}: {e}", found.display()))
+    }
+}
+
+/// A corner of a face: its position, `vt` and `vn` (0-based; `u32::MAX` for none).
+type Corner = [u32; 3];
 
 /// The MTL statements that need the whole material before they can be applied.
 #[derive(Default)]
@@ -399,33 +478,88 @@ fn numbers(s: &str) -> std::result::Result<Vec<f32>, String> {
         .collect()
 }
 
-/// The file name of a texture statement: what follows its options (`-s 1 1 1`, `-bm 0.5`,
-/// `-clamp on`, ...), spaces included.
-fn map_file(rest: &str) -> String {
-    let args = |opt: &str| match opt {
-        "-o" | "-s" | "-t" => 3,
-        "-mm" => 2,
-        "-bm" | "-boost" | "-texres" | "-blendu" | "-blendv" | "-clamp" | "-cc" | "-imfchan"
-        | "-type" => 1,
-        _ => 0,
-    };
-    let words: Vec<&str> = rest.split_whitespace().collect();
-    let mut i = 0;
-    while i < words.len() && words[i].starts_with('-') && words[i].len() > 1 {
-        let n = args(words[i]);
-        // Options with up to three numbers: take only the numbers.
-        let mut taken = 0;
-        while taken < n && i + 1 + taken < words.len() {
-            let w = words[i + 1 + taken];
-            if n == 1 || w.parse::<f32>().is_ok() {
-                taken += 1;
-            } else {
-                break;
+/// A `map_Kd` statement: its file name (what follows its options, spaces included) and the
+/// options that change where the texture is read: `-o` (offset), `-s` (scale) and `-clamp`.
+#[derive(Debug, PartialEq)]
+struct MapKd {
+    file: String,
+    offset: [f64; 2],
+    scale: [f64; 2],
+    clamp: bool,
+}
+
+impl MapKd {
+    fn parse(rest: &str) -> MapKd {
+        let args = |opt: &str| match opt {
+            "-o" | "-s" | "-t" => 3,
+            "-mm" => 2,
+            "-bm" | "-boost" | "-texres" | "-blendu" | "-blendv" | "-clamp" | "-cc"
+            | "-imfchan" | "-type" => 1,
+            _ => 0,
+        };
+        let mut map = MapKd {
+            file: String::new(),
+            offset: [0.0; 2],
+            scale: [1.0; 2],
+            clamp: false,
+        };
+        let words: Vec<&str> = rest.split_whitespace().collect();
+        let mut i = 0;
+        while i < words.len() && words[i].starts_with('-') && words[i].len() > 1 {
+            let n = args(words[i]);
+            // Options with up to three numbers: take only the numbers.
+            let mut taken = Vec::new();
+            while taken.len() < n && i + 1 + taken.len() < words.len() {
+                let w = words[i + 1 + taken.len()];
+                if n == 1 || w.parse::<f64>().is_ok() {
+                    taken.push(w);
+                } else {
+                    break;
+                }
             }
+            let num = |k: usize, default: f64| {
+                taken
+                    .get(k)
+                    .and_then(|w| w.parse::<f64>().ok())
+                    .filter(|x| x.is_finite())
+                    .unwrap_or(default)
+            };
+            match words[i] {
+                "-o" => map.offset = [num(0, 0.0), num(1, 0.0)],
+                "-s" => map.scale = [num(0, 1.0), num(1, 1.0)],
+                "-clamp" => map.clamp = taken.first() == Some(&"on"),
+                _ => {}
+            }
+            i += 1 + taken.len();
         }
-        i += 1 + taken;
+        map.file = words[i.min(words.len())..].join(" ");
+        map
     }
-    words[i.min(words.len())..].join(" ")
+
+    /// How a material reads texture `texture`: OBJ's `vt` has v up, so the lookup is at
+    /// `(s_u·u + o_u, 1 − (s_v·v + o_v))` in the image (row 0 at the top); repeat or clamp.
+    fn binding(&self, texture: usize) -> TextureRef {
+        let wrap = if self.clamp {
+            Wrap::ClampToEdge
+        } else {
+            Wrap::Repeat
+        };
+        TextureRef {
+            texture,
+            sampler: Sampler {
+                wrap: [wrap; 2],
+                ..Sampler::default()
+            },
+            transform: [
+                self.scale[0],
+                0.0,
+                self.offset[0],
+                0.0,
+                -self.scale[1],
+                1.0 - self.offset[1],
+            ],
+        }
+    }
 }
 
 #[cfg(test)]
@@ -433,14 +567,20 @@ mod tests {
     use super::*;
 
     #[test]
-    fn texture_options_are_skipped_and_spaces_kept() {
-        assert_eq!(map_file("-s 1 1 1 -bm 0.5 my tex.png"), "my tex.png");
+    fn texture_options_are_read_and_spaces_kept() {
+        let m = MapKd::parse("-s 2 3 1 -bm 0.5 my tex.png");
         assert_eq!(
-            map_file("-clamp on .\\textures\\a.jpg"),
-            ".\\textures\\a.jpg"
+            (m.file.as_str(), m.scale, m.clamp),
+            ("my tex.png", [2.0, 3.0], false)
         );
-        assert_eq!(map_file("-o 0.5 wood.png"), "wood.png");
-        assert_eq!(map_file("plain.png"), "plain.png");
+        let m = MapKd::parse("-clamp on .\\textures\\a.jpg");
+        assert_eq!((m.file.as_str(), m.clamp), (".\\textures\\a.jpg", true));
+        let m = MapKd::parse("-o 0.5 wood.png");
+        assert_eq!((m.file.as_str(), m.offset), ("wood.png", [0.5, 0.0]));
+        assert_eq!(MapKd::parse("plain.png").file, "plain.png");
+        // v up in OBJ, down in the image: (0.25, 0.75) is read at (0.25, 0.25).
+        let r = MapKd::parse("plain.png").binding(0);
+        assert_eq!(r.apply([0.25, 0.75]), [0.25, 0.25]);
     }
 
     #[test]

@@ -13,6 +13,7 @@ use glam::{DMat3, DMat4, DVec3};
 use rayon::prelude::*;
 
 use super::animation::ClipKey;
+use super::skin::{normal_map, Posed};
 use super::{Scene, SceneParts, Shared};
 use crate::error::Result;
 use crate::input_err;
@@ -36,12 +37,13 @@ pub struct Pose {
 }
 
 /// The vertices of a pose besides its transforms: none, the objects a clip's skins or morph
-/// targets moved (each object, its first vertex, and its vertices in world space before the
-/// user's pose), or every vertex (a pose made again from its vertices).
+/// targets moved (each object, its first vertex, and its vertices and normals in world space
+/// before the user's pose), or every vertex (a pose made again from its vertices, with their
+/// normals when it has them).
 enum Moved<'a> {
     Rigid,
-    Objects(&'a [(usize, usize, Vec<DVec3>)]),
-    All(Vec<[f32; 3]>),
+    Objects(&'a [(usize, usize, Posed)]),
+    All(Vec<[f32; 3]>, Option<Vec<[f32; 3]>>),
 }
 
 /// What posing needs from a scene as loaded, built once per scene: each vertex's object, and
@@ -63,6 +65,7 @@ impl Rig {
         let mut vertices = scene.parts.vertices.clone();
         let mut normals = scene.parts.normals.clone();
         let mut colors = scene.colors().to_vec();
+        let mut texcoords = scene.texcoords().map(<[_]>::to_vec);
         let mut vertex_object = vec![u32::MAX; n];
         let mut copies: std::collections::HashMap<(u32, u32), u32> = Default::default();
         let mut faces = scene.faces().to_vec();
@@ -81,6 +84,9 @@ impl Rig {
                         nr.push(nr[v]);
                     }
                     colors.push(colors[v]);
+                    if let Some(uv) = texcoords.as_mut() {
+                        uv.push(uv[v]);
+                    }
                     vertex_object.push(o);
                     (vertices.len() - 1) as u32
                 });
@@ -92,6 +98,8 @@ impl Rig {
                 material_ids: scene.material_ids().to_vec(),
                 object_ids: scene.object_ids().to_vec(),
                 colors,
+                texcoords,
+                textures: scene.textures().to_vec(),
             }),
             vertices,
             normals,
@@ -111,20 +119,6 @@ fn transform_point(m: &DMat4, p: [f32; 3]) -> [f32; 3] {
     let [x, y, z] = p.map(f64::from);
     let c = m.to_cols_array();
     std::array::from_fn(|a| (c[a] * x + c[4 + a] * y + c[8 + a] * z + c[12 + a]) as f32)
-}
-
-/// How `m` moves normals: the inverse transpose of its linear part; where that is singular (a
-/// zero scale), its cofactor matrix (the inverse transpose times the determinant, which exists
-/// for every matrix): a flattened object's normals then point across its plane, and a hidden
-/// one's are 0 (normalised later, where they are not 0).
-fn normal_map(m: &DMat4) -> DMat3 {
-    let l = DMat3::from_mat4(*m);
-    let inverse = l.inverse();
-    if l.determinant() != 0.0 && inverse.is_finite() {
-        return inverse.transpose();
-    }
-    let (x, y, z) = (l.x_axis, l.y_axis, l.z_axis);
-    DMat3::from_cols(y.cross(z), z.cross(x), x.cross(y))
 }
 
 /// Check that `m` is finite and affine (its last row 0, 0, 0, 1).
@@ -165,6 +159,11 @@ impl Scene {
     /// The scene posed from, and each object's transform (`None` for a scene as loaded).
     pub fn pose(&self) -> Option<&Pose> {
         self.pose.as_ref()
+    }
+
+    /// The scene's animations (node hierarchy, clips, rigging), if it has any.
+    pub fn animations_data(&self) -> Option<&Arc<super::animation::Animations>> {
+        self.parts.animations.as_ref()
     }
 
     /// The scene's animation clips as (name, duration in seconds); empty without any.
@@ -251,7 +250,8 @@ impl Scene {
     /// A pose made again from what it is made of: [`Scene::posed`] (or, with `rewinds`, as
     /// [`Scene::at`] winds mirrored objects), with `lights` in place of the scene as loaded's
     /// when given, and `vertices` (one per vertex of the pose, finite) in place of the
-    /// transformed ones when given (a pose whose skins or morph targets moved vertices).
+    /// transformed ones when given (a pose whose skins or morph targets moved vertices), with
+    /// their `normals` when given.
     /// Unpickling a posed scene takes this way, so that the scene it poses from travels with it.
     pub fn posed_again(
         self: &Arc<Self>,
@@ -259,8 +259,9 @@ impl Scene {
         rewinds: bool,
         lights: Option<Vec<crate::scene::Light>>,
         vertices: Option<Vec<[f32; 3]>>,
+        normals: Option<Vec<[f32; 3]>>,
     ) -> Result<Scene> {
-        let moved = vertices.map_or(Moved::Rigid, Moved::All);
+        let moved = vertices.map_or(Moved::Rigid, |v| Moved::All(v, normals));
         self.posed_with(transforms, rewinds, None, moved, |parts| {
             if let Some(lights) = lights {
                 parts.lights = lights;
@@ -305,9 +306,9 @@ impl Scene {
         let deforms = match &moved {
             Moved::Rigid => false,
             Moved::Objects(objects) => !objects.is_empty(),
-            Moved::All(_) => true,
+            Moved::All(..) => true,
         };
-        let vertices = moved_vertices(&rig, transforms, moved, after.as_deref())?;
+        let (vertices, normals) = moved_vertices(&rig, transforms, moved, after.as_deref())?;
         if let Some(i) = vertices
             .iter()
             .position(|v| v.iter().any(|x| !x.is_finite()))
@@ -318,21 +319,6 @@ impl Scene {
                 objects[o as usize]
             );
         }
-        let normal_maps: Vec<DMat3> = transforms.iter().map(normal_map).collect();
-        let normals = rig.normals.as_ref().map(|ns| {
-            ns.par_iter()
-                .zip(&rig.vertex_object)
-                .with_min_len(4096)
-                .map(|(&n, &o)| match normal_maps.get(o as usize) {
-                    Some(m) => {
-                        let v = *m * DVec3::from(n.map(f64::from));
-                        let len = v.length();
-                        if len > 0.0 { v / len } else { v }.as_vec3().to_array()
-                    }
-                    None => n,
-                })
-                .collect()
-        });
         let mut parts = SceneParts {
             vertices,
             normals,
@@ -372,30 +358,33 @@ impl Scene {
     }
 }
 
-/// The vertices of a pose: each of `rig`'s moved by its object's transform, then those that
-/// `moved` gives instead (a clip's skinned or morphed objects, placed by the user's pose
-/// `after` if any; or every vertex, checked).
+/// The vertices and normals of a pose: each of `rig`'s moved by its object's transform
+/// (normals by its inverse transpose, normalized), then those that `moved` gives instead (a
+/// clip's skinned or morphed objects, placed by the user's pose `after` if any; or every vertex,
+/// checked, with its normals when given: else the rig's, which no longer fit, are dropped).
 fn moved_vertices(
     rig: &Rig,
     transforms: &[DMat4],
     moved: Moved,
     after: Option<&Vec<DMat4>>,
-) -> Result<Vec<[f32; 3]>> {
-    if let Moved::All(vertices) = moved {
-        if vertices.len() != rig.vertices.len() {
+) -> Result<VerticesAndNormals> {
+    if let Moved::All(vertices, normals) = moved {
+        let n = rig.vertices.len();
+        if vertices.len() != n || normals.as_ref().is_some_and(|ns| ns.len() != n) {
             return input_err!(
-                "the pose's vertices must be one per vertex ({}), got {}",
-                rig.vertices.len(),
-                vertices.len()
+                "the pose's vertices and normals must be one per vertex ({n}), got {} and {:?}",
+                vertices.len(),
+                normals.as_ref().map(Vec::len)
             );
         }
-        if let Some(i) = vertices
-            .iter()
-            .position(|v| v.iter().any(|x| !x.is_finite()))
-        {
+        let finite = |v: &[[f32; 3]]| v.iter().position(|v| v.iter().any(|x| !x.is_finite()));
+        if let Some(i) = finite(&vertices) {
             return input_err!("the pose's vertex {i} is not finite: {:?}", vertices[i]);
         }
-        return Ok(vertices);
+        if let Some(i) = normals.as_deref().and_then(finite) {
+            return input_err!("the pose's normal {i} is not finite");
+        }
+        return Ok((vertices, normals));
     }
     let identity = DMat4::IDENTITY;
     let of = |o: u32| transforms.get(o as usize).unwrap_or(&identity);
@@ -406,20 +395,46 @@ fn moved_vertices(
         .with_min_len(4096)
         .map(|(&p, &o)| transform_point(of(o), p))
         .collect();
+    let normal_maps: Vec<DMat3> = transforms.iter().map(normal_map).collect();
+    let mut normals: Option<Vec<[f32; 3]>> = rig.normals.as_ref().map(|ns| {
+        ns.par_iter()
+            .zip(&rig.vertex_object)
+            .with_min_len(4096)
+            .map(|(&n, &o)| match normal_maps.get(o as usize) {
+                Some(m) => unit(*m * DVec3::from(n.map(f64::from))),
+                None => n,
+            })
+            .collect()
+    });
     if let Moved::Objects(objects) = moved {
-        for (o, first, ps) in objects {
+        for (o, first, posed) in objects {
             let user = after.and_then(|a| a.get(*o)).copied();
-            let out = &mut vertices[*first..*first + ps.len()];
+            let out = &mut vertices[*first..*first + posed.positions.len()];
             out.par_iter_mut()
-                .zip(ps)
+                .zip(&posed.positions)
                 .with_min_len(4096)
                 .for_each(|(v, p)| {
                     let p = user.map_or(*p, |m| m.transform_point3(*p));
                     *v = p.as_vec3().to_array();
                 });
+            if let Some(ns) = normals.as_mut() {
+                let turn = user.map_or(DMat3::IDENTITY, |m| normal_map(&m));
+                let out = &mut ns[*first..*first + posed.normals.len()];
+                for (n, m) in out.iter_mut().zip(&posed.normals) {
+                    *n = unit(turn * DVec3::from(m.map(f64::from)));
+                }
+            }
         }
     }
-    Ok(vertices)
+    Ok((vertices, normals))
+}
+
+/// A pose's vertices, and its normals when it has them.
+type VerticesAndNormals = (Vec<[f32; 3]>, Option<Vec<[f32; 3]>>);
+
+/// `v` normalized (a zero vector stays zero), in f32.
+fn unit(v: DVec3) -> [f32; 3] {
+    v.normalize_or_zero().as_vec3().to_array()
 }
 
 #[cfg(test)]

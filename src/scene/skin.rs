@@ -5,7 +5,7 @@
 //! `IBM` its inverse bind matrix). The skinned mesh's own node transform is ignored, as the
 //! spec says. Everything is evaluated in f64 and rounded once to f32.
 
-use glam::{DMat4, DVec3};
+use glam::{DMat3, DMat4, DVec3};
 use rayon::prelude::*;
 
 /// A skin: its joints (node indices) and each joint's inverse bind matrix (the identity when
@@ -14,6 +14,20 @@ use rayon::prelude::*;
 pub struct Skin {
     pub joints: Vec<usize>,
     pub inverse_bind: Vec<DMat4>,
+}
+
+/// How `m` moves normals: the inverse transpose of its linear part; where that is singular (a
+/// zero scale), its cofactor matrix (the inverse transpose times the determinant, which exists
+/// for every matrix): a flattened object's normals then point across its plane, and a hidden
+/// one's are 0 (normalised later, where they are not 0).
+pub fn normal_map(m: &DMat4) -> DMat3 {
+    let l = DMat3::from_mat4(*m);
+    let inverse = l.inverse();
+    if l.determinant() != 0.0 && inverse.is_finite() {
+        return inverse.transpose();
+    }
+    let (x, y, z) = (l.x_axis, l.y_axis, l.z_axis);
+    DMat3::from_cols(y.cross(z), z.cross(x), x.cross(y))
 }
 
 /// An object whose vertices morph targets or a skin move.
@@ -29,6 +43,11 @@ pub struct Deformable {
     /// Per morph target, per vertex, its POSITION displacement (zero where a primitive's
     /// target has none).
     pub targets: Vec<Vec<[f32; 3]>>,
+    /// Normals in the mesh's own space: the NORMAL attributes of its primitives, in order (a
+    /// zero row where a primitive has none: shading then uses area-weighted normals).
+    pub normals: Vec<[f32; 3]>,
+    /// Per morph target, per vertex, its NORMAL displacement (zero where it has none).
+    pub normal_targets: Vec<Vec<[f32; 3]>>,
     /// The weights where no clip keys them: the node's `weights`, else the mesh's, else 0.
     pub weights: Vec<f64>,
     /// The skin (an index into [`Rigging::skins`]), or `None`: the node's world transform
@@ -100,27 +119,50 @@ impl Skin {
     }
 }
 
+/// A deformable object's vertices in world space, and their unit normals (zero where the
+/// object has none).
+#[derive(Debug, Clone)]
+pub struct Posed {
+    pub positions: Vec<DVec3>,
+    pub normals: Vec<[f32; 3]>,
+}
+
 impl Deformable {
-    /// Its vertices in world space with morph target `weights` (one per target; missing ones
-    /// are 0) placed by `place`.
-    pub fn positions(&self, weights: &[f64], place: &Place) -> Vec<DVec3> {
-        let active: Vec<(f64, &Vec<[f32; 3]>)> = weights
-            .iter()
-            .zip(&self.targets)
-            .filter(|(w, _)| **w != 0.0)
-            .map(|(w, t)| (*w, t))
-            .collect();
+    /// Its vertices and normals in world space with morph target `weights` (one per target;
+    /// missing ones are 0) placed by `place`: positions by the node's or the blended joints'
+    /// matrix, normals (morphed by the targets' NORMAL displacements) by its inverse
+    /// transpose ([`normal_map`]), normalized.
+    pub fn place(&self, weights: &[f64], place: &Place) -> Posed {
+        let active = |targets: &'_ [Vec<[f32; 3]>]| -> Vec<(f64, usize)> {
+            weights
+                .iter()
+                .enumerate()
+                .filter(|(k, w)| **w != 0.0 && targets.get(*k).is_some_and(|t| !t.is_empty()))
+                .map(|(k, w)| (*w, k))
+                .collect()
+        };
+        let (moving, turning) = (active(&self.targets), active(&self.normal_targets));
+        let node_normals = match place {
+            Place::Node(m) => Some(normal_map(m)),
+            Place::Joints(_) => None,
+        };
         let m = self.influences;
-        (0..self.base.len())
+        let (positions, normals) = (0..self.base.len())
             .into_par_iter()
             .with_min_len(4096)
             .map(|i| {
                 let mut p = DVec3::from(self.base[i].map(f64::from));
-                for (w, t) in &active {
-                    p += *w * DVec3::from(t[i].map(f64::from));
+                for &(w, k) in &moving {
+                    p += w * DVec3::from(self.targets[k][i].map(f64::from));
                 }
-                match place {
-                    Place::Node(m) => m.transform_point3(p),
+                let mut n = DVec3::from(self.normals.get(i).map_or([0.0; 3], |n| n.map(f64::from)));
+                if n != DVec3::ZERO {
+                    for &(w, k) in &turning {
+                        n += w * DVec3::from(self.normal_targets[k][i].map(f64::from));
+                    }
+                }
+                let (p, n) = match place {
+                    Place::Node(m) => (m.transform_point3(p), node_normals.unwrap() * n),
                     Place::Joints(mats) => {
                         let js = &self.joints[i * m..(i + 1) * m];
                         let ws = &self.joint_weights[i * m..(i + 1) * m];
@@ -130,11 +172,14 @@ impl Deformable {
                                 blend += mats[usize::from(j)] * f64::from(w);
                             }
                         }
-                        blend.transform_point3(p)
+                        let to_world = normal_map(&blend);
+                        (blend.transform_point3(p), to_world * n)
                     }
-                }
+                };
+                (p, n.normalize_or_zero().as_vec3().to_array())
             })
-            .collect()
+            .unzip();
+        Posed { positions, normals }
     }
 }
 
@@ -161,6 +206,8 @@ mod tests {
             first: 0,
             base: vec![[1.0, 0.0, 0.0]],
             targets: vec![vec![[0.0, 2.0, 0.0]]],
+            normals: vec![[1.0, 0.0, 0.0]],
+            normal_targets: vec![vec![[0.0, 1.0, 0.0]]],
             weights: vec![0.0],
             skin: Some(0),
             joints: vec![0, 1, 0, 0],
@@ -172,9 +219,18 @@ mod tests {
             DMat4::IDENTITY,
             DMat4::from_translation(DVec3::new(0.0, 0.0, 4.0)),
         ];
-        let p = d.positions(&[0.5], &Place::Joints(&mats));
-        assert_eq!(p[0], DVec3::new(1.0, 1.0, 3.0));
-        let p = d.positions(&[], &Place::Node(DMat4::from_scale(DVec3::splat(2.0))));
-        assert_eq!(p[0], DVec3::new(2.0, 0.0, 0.0));
+        let p = d.place(&[0.5], &Place::Joints(&mats));
+        assert_eq!(p.positions[0], DVec3::new(1.0, 1.0, 3.0));
+        // The normal (1, 0, 0) + 0.5 (0, 1, 0), blended by translations: only normalized.
+        let expect = DVec3::new(1.0, 0.5, 0.0).normalize();
+        let got = DVec3::from(p.normals[0].map(f64::from));
+        assert!((got - expect).length() < 1e-6, "{:?}", p.normals);
+        let p = d.place(
+            &[],
+            &Place::Node(DMat4::from_scale(DVec3::new(2.0, 1.0, 1.0))),
+        );
+        assert_eq!(p.positions[0], DVec3::new(2.0, 0.0, 0.0));
+        // A stretch along x leaves a normal along x pointing along x.
+        assert_eq!(p.normals[0], [1.0, 0.0, 0.0]);
     }
 }

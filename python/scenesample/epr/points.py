@@ -11,6 +11,7 @@ from typing import Any, Optional, Union
 import numpy as np
 
 from .. import _core
+from .._attributes import surface_attributes
 from .._progress import Bar, Progress
 from .._scene import Scene
 from ..errors import InputError
@@ -163,6 +164,12 @@ class Points:
     triangle : (P,) int32
     normal : (P, 3) float32
         Unit geometric normal of the point's triangle.
+    shading_normal : (P, 3) float32
+        Unit shading normal at the point's centre (the vertices' normals interpolated, see
+        :func:`scenesample.surface_attributes`).
+    color : (P, 3) float32
+        Linear base colour over the point's square (the material's texture filtered over its
+        side).
     material : (P,) int32
         Material id (-1: none).
     views : (P, ceil(V / 64)) uint64
@@ -181,6 +188,8 @@ class Points:
     length: np.ndarray
     triangle: np.ndarray
     normal: np.ndarray
+    shading_normal: np.ndarray
+    color: np.ndarray
     material: np.ndarray
     views: np.ndarray
     cameras: list = field(default_factory=list)
@@ -219,17 +228,20 @@ class Points:
             bits = np.ascontiguousarray(views, dtype=np.uint64)
             if bits.ndim != 2 or len(bits) != n:
                 raise InputError(f"views must have shape ({n}, words), got {bits.shape}")
-        fn = np.asarray(scene.faces)
-        v = np.asarray(scene.vertices, dtype=np.float64)
-        ok = (tri >= 0) & (tri < len(fn))
-        nrm = np.zeros((n, 3), dtype=np.float32)
-        if ok.all() and n:
-            p = v[fn[tri]]
-            cr = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-            ln = np.linalg.norm(cr, axis=1, keepdims=True)
-            nrm = np.where(ln > 0, cr / np.where(ln > 0, ln, 1), 0).astype(np.float32)
-        mat = np.asarray(scene.material_ids, dtype=np.int32)[np.where(ok, tri, 0)] if n else tri
-        return cls(c, length, tri, nrm, mat, bits, cams, [], {}, {}, scene)
+        ok = (tri >= 0) & (tri < scene.triangle_count)
+        if not ok.all():
+            bad = int(np.flatnonzero(~ok)[0])
+            raise InputError(
+                f"triangle[{bad}] is {int(tri[bad])}: the scene has {scene.triangle_count} "
+                "triangles"
+            )
+        if len(length) != n:
+            raise InputError(f"{n} centres need {n} lengths, got {len(length)}")
+        a = surface_attributes(scene, triangle=tri, points=c, footprint=length)
+        mat = np.asarray(scene.material_ids, dtype=np.int32)[tri]
+        return cls(
+            c, length, tri, a.normal, a.shading_normal, a.color, mat, bits, cams, [], {}, {}, scene
+        )
 
     @classmethod
     def _from_core(
@@ -242,6 +254,8 @@ class Points:
             d["length"],
             d["triangle"],
             d["normal"],
+            d["shading_normal"],
+            d["color"],
             d["material"],
             d["views"],
             list(d["cameras"]),

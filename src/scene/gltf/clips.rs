@@ -13,10 +13,10 @@ impl Loader<'_> {
     /// The animations (`animation::Animations`), kept only when the file has some: the node
     /// hierarchy, the clips, and the skins and deformable objects they move. A channel that
     /// cannot be read is skipped with a warning.
-    pub(super) fn animations(&mut self) {
+    pub(super) fn animations(&mut self) -> crate::error::Result<()> {
         let doc = self.doc;
         if doc.animations().next().is_none() {
-            return;
+            return Ok(());
         }
         let nodes = doc
             .nodes()
@@ -62,7 +62,7 @@ impl Loader<'_> {
                 channels,
             });
         }
-        self.parts.animations = Some(Arc::new(Animations {
+        let animations = Animations {
             nodes,
             rest: std::mem::take(&mut self.rest),
             objects: std::mem::take(&mut self.placed),
@@ -70,7 +70,20 @@ impl Loader<'_> {
             cameras: std::mem::take(&mut self.placed_cameras),
             clips,
             rigging: std::mem::take(&mut self.rigging),
-        }));
+        };
+        // What a pickle's animations are checked for holds for a file's too (a skin's joint
+        // in a loop of nodes outside the scene would make a pose walk that loop forever).
+        let p = &self.parts;
+        animations
+            .check(
+                p.objects.len(),
+                p.lights.len(),
+                p.cameras.len(),
+                p.vertices.len(),
+            )
+            .map_err(|e| self.err(e))?;
+        self.parts.animations = Some(Arc::new(animations));
+        Ok(())
     }
 
     /// One channel's keys, checked: as many values per key as the property has (three, four,

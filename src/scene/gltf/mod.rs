@@ -8,19 +8,21 @@ use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
 use base64::Engine;
-use glam::{DMat4, DVec4};
-use gltf::accessor::{DataType, Dimensions};
+use glam::DMat4;
 use gltf::mesh::Mode;
 
 use super::animation::Placed;
 use super::skin::{self, Rigging};
-use super::{Light, LightKind, Material, Scene, SceneParts};
+use super::{Light, LightKind, Scene, SceneParts};
 use crate::camera::{rigid_from, Camera, Projection};
 use crate::error::{Error, Result};
 
+mod accessors;
 mod checks;
 mod clips;
+mod materials;
 mod pointer;
+mod primitives;
 mod skins;
 
 use checks::{prevalidate, refuse_version_one, version_one};
@@ -31,12 +33,14 @@ const HANDLED: &[&str] = &[
     "KHR_lights_punctual",
     "EXT_mesh_gpu_instancing",
     "KHR_materials_emissive_strength",
+    "KHR_mesh_quantization",
+    "KHR_texture_transform",
 ];
 
 /// Extensions we can honour when a file requires them: geometry is intact without them, and
 /// only shading detail that no method here simulates is lost (a warning says so).
 fn honourable(ext: &str) -> bool {
-    HANDLED.contains(&ext) || ext.starts_with("KHR_materials_") || ext == "KHR_texture_transform"
+    HANDLED.contains(&ext) || ext.starts_with("KHR_materials_")
 }
 
 /// Default image height for glTF cameras (glTF cameras carry no resolution).
@@ -130,7 +134,8 @@ fn load_parts(path: &Path) -> Result<SceneParts> {
             warnings,
             ..Default::default()
         },
-        image_means: HashMap::new(),
+        images: HashMap::new(),
+        texcoord_sets: Vec::new(),
         placed: Vec::new(),
         placed_lights: Vec::new(),
         placed_cameras: Vec::new(),
@@ -141,8 +146,18 @@ fn load_parts(path: &Path) -> Result<SceneParts> {
     };
     loader.materials();
     loader.nodes()?;
-    loader.animations();
-    Ok(loader.parts)
+    loader.animations()?;
+    let mut parts = loader.parts;
+    // A texture whose primitives all lack its coordinates is read at (0, 0).
+    if parts.texcoords.is_none()
+        && parts
+            .materials
+            .iter()
+            .any(|m| m.base_color_texture.is_some())
+    {
+        parts.texcoords = Some(vec![[0.0; 2]; parts.vertices.len()]);
+    }
+    Ok(parts)
 }
 
 fn load_buffers(
@@ -224,7 +239,10 @@ pub(super) struct Loader<'a> {
     buffers: Vec<Vec<u8>>,
     base: &'a Path,
     parts: SceneParts,
-    image_means: HashMap<usize, Option<[f32; 4]>>,
+    /// Per glTF image read so far, its index among the scene's textures (`None`: unreadable).
+    images: HashMap<usize, Option<usize>>,
+    /// Per material, the texture coordinate set its base-colour texture reads.
+    texcoord_sets: Vec<u32>,
     /// Per object, where it hangs in the node hierarchy (for animations).
     placed: Vec<Placed>,
     /// The nodes of `parts.lights` and `parts.cameras`, in order, for animations to move.
@@ -247,74 +265,6 @@ impl Loader<'_> {
         self.parts
             .warnings
             .push(format!("{}: {m}", self.path.display()));
-    }
-
-    /// Materials: base colour = factor × mean texel of the base-colour texture (sRGB decoded to
-    /// linear, averaged over the whole image), or the factor alone without a readable texture.
-    fn materials(&mut self) {
-        let doc = self.doc;
-        // Every missing external image is reported, also those no method reads (normal maps...).
-        for img in doc.images() {
-            if let gltf::image::Source::Uri { uri, .. } = img.source() {
-                if !uri.starts_with("data:") && !self.base.join(percent_decode(uri)).is_file() {
-                    self.warn(format!("image {} ('{uri}') is missing", img.index()));
-                    self.image_means.insert(img.index(), None);
-                }
-            }
-        }
-        for m in doc.materials() {
-            let pbr = m.pbr_metallic_roughness();
-            let factor = pbr.base_color_factor();
-            let mean = pbr
-                .base_color_texture()
-                .and_then(|t| self.image_mean(t.texture().source(), m.index().unwrap_or(0)));
-            let base_color = match mean {
-                Some(t) => [0, 1, 2, 3].map(|k| factor[k] * t[k]),
-                None => factor,
-            };
-            let strength = m
-                .extension_value("KHR_materials_emissive_strength")
-                .and_then(|v| v.get("emissiveStrength"))
-                .and_then(|v| v.as_f64())
-                .unwrap_or(1.0) as f32;
-            self.parts.materials.push(Material {
-                name: m.name().unwrap_or("").to_string(),
-                base_color,
-                base_color_factor: factor,
-                base_color_textured: mean.is_some(),
-                metallic: pbr.metallic_factor(),
-                roughness: pbr.roughness_factor(),
-                emissive: m.emissive_factor().map(|e| e * strength),
-                double_sided: m.double_sided(),
-            });
-        }
-    }
-
-    fn image_mean(&mut self, image: gltf::Image, material: usize) -> Option<[f32; 4]> {
-        if let Some(m) = self.image_means.get(&image.index()) {
-            return *m;
-        }
-        let bytes = match image.source() {
-            gltf::image::Source::View { view, .. } => {
-                let buf = &self.buffers[view.buffer().index()];
-                buf.get(view.offset()..view.offset() + view.length())
-                    .map(<[u8]>::to_vec)
-                    .ok_or_else(|| "its buffer view is out of bounds".to_string())
-            }
-            gltf::image::Source::Uri { uri, .. } => read_uri(uri, self.base),
-        };
-        let mean = match bytes.and_then(|b| super::texture::mean_linear_rgba(&b)) {
-            Ok(m) => Some(m),
-            Err(e) => {
-                self.warn(format!(
-                    "image {} of material {material} could not be read ({e}); its base colour uses the factor alone",
-                    image.index()
-                ));
-                None
-            }
-        };
-        self.image_means.insert(image.index(), mean);
-        mean
     }
 
     fn nodes(&mut self) -> Result<()> {
@@ -404,149 +354,6 @@ impl Loader<'_> {
         Ok(())
     }
 
-    /// Object `name`: the triangle primitives of `mesh` under `node`, placed by `world` (the
-    /// node's world transform times `instance`, its `EXT_mesh_gpu_instancing` transform); a
-    /// skin or morph targets place them instead (`skins.rs`), in their rest pose.
-    fn mesh(
-        &mut self,
-        mesh: &gltf::Mesh,
-        node: &gltf::Node,
-        world: DMat4,
-        instance: DMat4,
-        name: String,
-    ) -> Result<()> {
-        let object = self.parts.objects.len() as i32;
-        self.parts.objects.push(name);
-        let mut deform = self.deformation(mesh, node, instance, object as usize)?;
-        // A skinned mesh ignores its node's transform, so its winding too (glTF 2.0 §3.7.4).
-        let skinned = deform.as_ref().is_some_and(|d| d.skin.is_some());
-        let flip = !skinned && world.determinant() < 0.0;
-        for prim in mesh.primitives() {
-            let what = format!("mesh {} primitive {}", mesh.index(), prim.index());
-            match prim.mode() {
-                Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan => {}
-                other => {
-                    self.warn(format!(
-                        "{what}: {other:?} primitives are not triangles and were skipped"
-                    ));
-                    continue;
-                }
-            }
-            let (positions, indices, colors) = self.read_primitive(&prim, &what)?;
-            if let Some(d) = deform.as_mut() {
-                self.add_primitive(d, &prim, &what, &positions)?;
-            }
-            let material = prim.material().index().map_or(-1, |i| i as i32);
-            let base = material_color(&self.parts.materials, material);
-            let offset = self.parts.vertices.len() as u32;
-            for (k, p) in positions.iter().enumerate() {
-                let w = world * DVec4::new(p[0] as f64, p[1] as f64, p[2] as f64, 1.0);
-                self.parts.vertices.push(w.truncate().as_vec3().to_array());
-                let c = colors.as_ref().map_or([1.0; 4], |c| c[k]);
-                self.parts.colors.get_or_insert_with(Vec::new).push([
-                    base[0] * c[0],
-                    base[1] * c[1],
-                    base[2] * c[2],
-                ]);
-            }
-            for mut f in triangles(prim.mode(), &indices) {
-                if flip {
-                    f.swap(1, 2);
-                }
-                self.parts.faces.push(f.map(|i| i + offset));
-                self.parts.material_ids.push(material);
-                self.parts.object_ids.push(object);
-            }
-        }
-        if let Some(d) = deform {
-            self.place_deformable(d);
-        }
-        Ok(())
-    }
-
-    /// A triangle primitive's positions (finite), indices (in range; every vertex in order
-    /// when it has none) and COLOR_0, checked.
-    #[allow(clippy::type_complexity)]
-    fn read_primitive(
-        &self,
-        prim: &gltf::Primitive,
-        what: &str,
-    ) -> Result<(Vec<[f32; 3]>, Vec<u32>, Option<Vec<[f32; 4]>>)> {
-        let Some(pos_acc) = prim.get(&gltf::Semantic::Positions) else {
-            return Err(self.err(format!("{what} has no POSITION attribute")));
-        };
-        self.check_accessor(
-            &pos_acc,
-            &format!("{what} POSITION"),
-            &[Dimensions::Vec3],
-            &[DataType::F32],
-        )?;
-        let buffers = &self.buffers;
-        let reader = prim.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
-        let positions: Vec<[f32; 3]> = reader
-            .read_positions()
-            .ok_or_else(|| {
-                self.err(format!(
-                    "{what}: POSITION accessor {} could not be read",
-                    pos_acc.index()
-                ))
-            })?
-            .collect();
-        if let Some(k) = positions
-            .iter()
-            .position(|p| p.iter().any(|x| !x.is_finite()))
-        {
-            return Err(self.err(format!(
-                "{what}: POSITION accessor {} has a non-finite vertex at index {k}: {:?}",
-                pos_acc.index(),
-                positions[k]
-            )));
-        }
-        let indices: Vec<u32> = match prim.indices() {
-            Some(acc) => {
-                self.check_accessor(
-                    &acc,
-                    &format!("{what} indices"),
-                    &[Dimensions::Scalar],
-                    &[DataType::U8, DataType::U16, DataType::U32],
-                )?;
-                let idx: Vec<u32> = reader
-                    .read_indices()
-                    .ok_or_else(|| {
-                        self.err(format!(
-                            "{what}: index accessor {} could not be read",
-                            acc.index()
-                        ))
-                    })?
-                    .into_u32()
-                    .collect();
-                if let Some(k) = idx.iter().position(|&i| i as usize >= positions.len()) {
-                    return Err(self.err(format!(
-                        "{what}: index accessor {} has index {} at position {k}, but POSITION has {} vertices",
-                        acc.index(),
-                        idx[k],
-                        positions.len()
-                    )));
-                }
-                idx
-            }
-            None => (0..positions.len() as u32).collect(),
-        };
-        let colors: Option<Vec<[f32; 4]>> = match prim.get(&gltf::Semantic::Colors(0)) {
-            Some(acc) => {
-                self.check_accessor(
-                    &acc,
-                    &format!("{what} COLOR_0"),
-                    &[Dimensions::Vec3, Dimensions::Vec4],
-                    &[DataType::F32, DataType::U8, DataType::U16],
-                )?;
-                reader.read_colors(0).map(|c| c.into_rgba_f32().collect())
-            }
-            None => None,
-        };
-        Ok((positions, indices, colors))
-    }
-
     fn light(&mut self, light: &gltf::khr_lights_punctual::Light, world: DMat4) {
         use gltf::khr_lights_punctual::Kind;
         let (kind, inner, outer) = match light.kind() {
@@ -615,13 +422,6 @@ impl Loader<'_> {
 /// A node's local transform (its matrix, or its TRS composed), in f64.
 fn local_of(node: &gltf::Node) -> DMat4 {
     DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(f64::from)))
-}
-
-fn material_color(materials: &[Material], id: i32) -> [f32; 4] {
-    usize::try_from(id)
-        .ok()
-        .and_then(|i| materials.get(i))
-        .map_or([1.0; 4], |m| m.base_color)
 }
 
 /// Triangle lists from glTF primitive modes (glTF 2.0 §3.7.2.1): strips alternate winding,

@@ -7,6 +7,8 @@ use std::collections::HashMap;
 use glam::DMat4;
 use gltf::accessor::{DataType, Dimensions};
 
+use super::accessors::{NORMAL_TYPES, POSITION_TYPES};
+use super::primitives::Vertices;
 use super::Loader;
 use crate::error::Result;
 use crate::scene::skin::{Deformable, Place, Skin};
@@ -64,6 +66,8 @@ impl Loader<'_> {
             first: self.parts.vertices.len(),
             base: Vec::new(),
             targets: vec![Vec::new(); targets],
+            normals: Vec::new(),
+            normal_targets: vec![Vec::new(); targets],
             weights,
             skin,
             joints: Vec::new(),
@@ -118,46 +122,45 @@ impl Loader<'_> {
         Ok(k)
     }
 
-    /// Primitive `prim`'s share of `d`: its mesh-space `positions`, each morph target's
-    /// POSITION displacements (zero where the target has none), and with a skin its JOINTS_n /
-    /// WEIGHTS_n sets, checked (a weight that is not finite, or a joint past the skin's with a
-    /// weight, refuses the file).
+    /// Primitive `prim`'s share of `d`: its mesh-space positions and normals (`v`), each morph
+    /// target's POSITION and NORMAL displacements (zero where the target has none), and with a
+    /// skin its JOINTS_n / WEIGHTS_n sets, checked (a weight that is not finite, or a joint past
+    /// the skin's with a weight, refuses the file).
     pub(super) fn add_primitive(
         &mut self,
         d: &mut Deformable,
         prim: &gltf::Primitive,
         what: &str,
-        positions: &[[f32; 3]],
+        v: &Vertices,
     ) -> Result<()> {
-        let n = positions.len();
-        let buffers = &self.buffers;
-        let reader = prim.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
+        let n = v.positions.len();
         for (k, target) in prim.morph_targets().enumerate() {
-            let deltas = match target.positions() {
-                None => vec![[0.0; 3]; n],
+            let read = |acc: Option<gltf::Accessor>, name: &str, types| match acc {
+                None => Ok(vec![[0.0; 3]; n]),
                 Some(acc) => {
-                    let what = format!("{what} morph target {k} POSITION");
-                    self.check_accessor(&acc, &what, &[Dimensions::Vec3], &[DataType::F32])?;
-                    let deltas: Vec<[f32; 3]> = reader
-                        .read_morph_targets()
-                        .nth(k)
-                        .and_then(|(p, _, _)| p)
-                        .ok_or_else(|| self.err(format!("{what} could not be read")))?
-                        .collect();
-                    if deltas.len() != n || deltas.iter().flatten().any(|x| !x.is_finite()) {
+                    let what = format!("{what} morph target {k} {name}");
+                    let deltas = self.vectors(&acc, &what, Dimensions::Vec3, types)?;
+                    if deltas.len() != n {
                         return Err(self.err(format!(
-                            "{what}: {} displacements for {n} vertices, all finite, expected",
+                            "{what}: {} displacements for {n} vertices",
                             deltas.len()
                         )));
                     }
-                    deltas
+                    Ok(deltas)
                 }
             };
-            d.targets[k].extend(deltas);
+            let moves = read(target.positions(), "POSITION", POSITION_TYPES)?;
+            let turns = read(target.normals(), "NORMAL", NORMAL_TYPES)?;
+            d.targets[k].extend(moves);
+            d.normal_targets[k].extend(turns);
         }
         // Targets this primitive lacks (its mesh's others have more) displace nothing.
-        for t in d.targets.iter_mut() {
+        for t in d.targets.iter_mut().chain(d.normal_targets.iter_mut()) {
             t.resize(d.base.len() + n, [0.0; 3]);
+        }
+        match &v.normals {
+            Some(ns) => d.normals.extend_from_slice(ns),
+            None => d.normals.resize(d.base.len() + n, [0.0; 3]),
         }
         if let Some(s) = d.skin {
             let count = self.rigging.skins[s].joints.len();
@@ -178,7 +181,7 @@ impl Loader<'_> {
                 }
             }
         }
-        d.base.extend_from_slice(positions);
+        d.base.extend_from_slice(&v.positions);
         Ok(())
     }
 
@@ -283,9 +286,15 @@ impl Loader<'_> {
             Some(m) => Place::Joints(m),
             None => Place::Node(self.rest[d.node] * d.instance),
         };
-        let moved = d.positions(&d.weights, &place);
-        for (v, p) in self.parts.vertices[d.first..].iter_mut().zip(moved) {
+        let moved = d.place(&d.weights, &place);
+        for (v, p) in self.parts.vertices[d.first..]
+            .iter_mut()
+            .zip(moved.positions)
+        {
             *v = p.as_vec3().to_array();
+        }
+        if let Some(normals) = self.parts.normals.as_mut() {
+            normals[d.first..d.first + moved.normals.len()].copy_from_slice(&moved.normals);
         }
         self.rigging.deformables.push(d);
     }

@@ -1,11 +1,8 @@
-//! Base-colour textures, read only for their mean: a material's `base_color` is its factor times
-//! the mean texel of its base-colour texture, sRGB decoded (DESIGN.md, "materials"). PNG and JPEG
-//! are the two formats glTF 2.0 allows, and the two an MTL `map_Kd` meets in practice; the format
-//! is told by the file's first bytes, not its name or MIME type.
-//!
-//! Texels are brought to 8-bit RGBA first, as image viewers do: grey is spread over R, G and B,
-//! a missing alpha is opaque, palettes and bit depths under 8 are expanded, and 16-bit samples
-//! are rounded to 8 bits (`(v + 128) / 257`).
+//! PNG and JPEG decoded to 8-bit RGBA, as image viewers bring them: grey is spread over R, G
+//! and B, a missing alpha is opaque, palettes and bit depths under 8 are expanded, and 16-bit
+//! samples are rounded to 8 bits (`(v + 128) / 257`). PNG and JPEG are the two formats glTF 2.0
+//! allows, and the two an MTL `map_Kd` meets in practice; the format is told by the file's
+//! first bytes, not its name or MIME type.
 
 use std::io::Cursor;
 
@@ -13,19 +10,26 @@ use std::io::Cursor;
 /// anything is allocated.
 const MAX_DECODED_BYTES: usize = 512 << 20;
 
-/// The mean of an encoded PNG or JPEG image's texels: linear RGB (sRGB decoded) and alpha as
-/// stored, each in [0, 1]. An error names what could not be read.
-pub(crate) fn mean_linear_rgba(encoded: &[u8]) -> Result<[f32; 4], String> {
+/// An image of 8-bit RGBA texels, row 0 at the top (as stored in the file).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Rgba8 {
+    pub width: u32,
+    pub height: u32,
+    pub texels: Vec<[u8; 4]>,
+}
+
+/// Decode an encoded PNG or JPEG image to RGBA8; an error names what could not be read.
+pub fn decode(encoded: &[u8]) -> Result<Rgba8, String> {
     if encoded.starts_with(b"\x89PNG\r\n\x1a\n") {
-        png_mean(encoded)
+        png_rgba(encoded)
     } else if encoded.starts_with(&[0xff, 0xd8, 0xff]) {
-        jpeg_mean(encoded)
+        jpeg_rgba(encoded)
     } else {
         Err("the image is neither PNG nor JPEG".to_string())
     }
 }
 
-fn png_mean(encoded: &[u8]) -> Result<[f32; 4], String> {
+fn png_rgba(encoded: &[u8]) -> Result<Rgba8, String> {
     let limits = png::Limits {
         bytes: MAX_DECODED_BYTES,
     };
@@ -57,20 +61,25 @@ fn png_mean(encoded: &[u8]) -> Result<[f32; 4], String> {
     let samples = buf
         .get(..texels * channels * bytes_per_sample)
         .ok_or("PNG: fewer samples than texels")?;
-    match depth {
-        png::BitDepth::Eight => Ok(mean_of(samples.iter().copied(), channels, texels)),
+    let texels = match depth {
+        png::BitDepth::Eight => rgba_of(samples.iter().copied(), channels, texels),
         png::BitDepth::Sixteen => {
             let eight = samples.chunks_exact(2).map(|b| {
                 let v = u32::from(u16::from_be_bytes([b[0], b[1]]));
                 ((v + 128) / 257) as u8
             });
-            Ok(mean_of(eight, channels, texels))
+            rgba_of(eight, channels, texels)
         }
-        other => Err(format!("PNG: {other:?} bits per sample after expansion")),
-    }
+        other => return Err(format!("PNG: {other:?} bits per sample after expansion")),
+    };
+    Ok(Rgba8 {
+        width: frame.width,
+        height: frame.height,
+        texels,
+    })
 }
 
-fn jpeg_mean(encoded: &[u8]) -> Result<[f32; 4], String> {
+fn jpeg_rgba(encoded: &[u8]) -> Result<Rgba8, String> {
     use zune_core::colorspace::ColorSpace;
     let options = zune_core::options::DecoderOptions::default()
         .set_strict_mode(false)
@@ -99,28 +108,20 @@ fn jpeg_mean(encoded: &[u8]) -> Result<[f32; 4], String> {
     if samples.len() < texels * channels {
         return Err("JPEG: fewer samples than texels".into());
     }
-    Ok(mean_of(
-        samples[..texels * channels].iter().copied(),
-        channels,
-        texels,
-    ))
+    Ok(Rgba8 {
+        width: width as u32,
+        height: height as u32,
+        texels: rgba_of(
+            samples[..texels * channels].iter().copied(),
+            channels,
+            texels,
+        ),
+    })
 }
 
-/// The mean of interleaved 8-bit samples of `channels` per texel (grey, grey+alpha, RGB, RGBA),
-/// RGB decoded from sRGB to linear. The sums run in texel order in f64, so the result is the
-/// same on every machine.
-fn mean_of(samples: impl Iterator<Item = u8>, channels: usize, texels: usize) -> [f32; 4] {
-    let lut: Vec<f64> = (0..256)
-        .map(|i| {
-            let c = i as f64 / 255.0;
-            if c <= 0.04045 {
-                c / 12.92
-            } else {
-                ((c + 0.055) / 1.055).powf(2.4)
-            }
-        })
-        .collect();
-    let mut sum = [0.0f64; 4];
+/// Interleaved 8-bit samples of `channels` per texel (grey, grey+alpha, RGB, RGBA) as RGBA.
+fn rgba_of(samples: impl Iterator<Item = u8>, channels: usize, texels: usize) -> Vec<[u8; 4]> {
+    let mut out = Vec::with_capacity(texels);
     let mut texel = [0u8; 4];
     let mut k = 0;
     for s in samples {
@@ -130,19 +131,14 @@ fn mean_of(samples: impl Iterator<Item = u8>, channels: usize, texels: usize) ->
             continue;
         }
         k = 0;
-        let [r, g, b, a] = match channels {
+        out.push(match channels {
             1 => [texel[0], texel[0], texel[0], 255],
             2 => [texel[0], texel[0], texel[0], texel[1]],
             3 => [texel[0], texel[1], texel[2], 255],
             _ => texel,
-        };
-        sum[0] += lut[r as usize];
-        sum[1] += lut[g as usize];
-        sum[2] += lut[b as usize];
-        sum[3] += a as f64 / 255.0;
+        });
     }
-    let n = (texels as f64).max(1.0);
-    sum.map(|s| (s / n) as f32)
+    out
 }
 
 #[cfg(test)]
@@ -160,17 +156,8 @@ mod tests {
         out
     }
 
-    fn srgb(v: u8) -> f32 {
-        let c = v as f64 / 255.0;
-        (if c <= 0.04045 {
-            c / 12.92
-        } else {
-            ((c + 0.055) / 1.055).powf(2.4)
-        }) as f32
-    }
-
     #[test]
-    fn grey_rgb_and_alpha_pngs_average_to_linear_rgba() {
+    fn grey_rgb_and_alpha_pngs_decode_to_rgba() {
         let rgba = png(
             png::ColorType::Rgba,
             png::BitDepth::Eight,
@@ -178,8 +165,9 @@ mod tests {
             1,
             &[255, 0, 0, 255, 0, 0, 255, 0],
         );
-        let m = mean_linear_rgba(&rgba).unwrap();
-        assert_eq!(m, [0.5, 0.0, 0.5, 0.5]);
+        let m = decode(&rgba).unwrap();
+        assert_eq!((m.width, m.height), (2, 1));
+        assert_eq!(m.texels, [[255, 0, 0, 255], [0, 0, 255, 0]]);
         let grey = png(
             png::ColorType::Grayscale,
             png::BitDepth::Eight,
@@ -187,8 +175,7 @@ mod tests {
             2,
             &[128, 128],
         );
-        let g = srgb(128);
-        assert_eq!(mean_linear_rgba(&grey).unwrap(), [g, g, g, 1.0]);
+        assert_eq!(decode(&grey).unwrap().texels, [[128, 128, 128, 255]; 2]);
         // 16 bits round to the nearest 8-bit value: 0x8080 / 257 = 128, 0x807f rounds to 128 too.
         let deep = png(
             png::ColorType::Grayscale,
@@ -197,16 +184,16 @@ mod tests {
             1,
             &[0x80, 0x80, 0x80, 0x7f],
         );
-        assert_eq!(mean_linear_rgba(&deep).unwrap(), [g, g, g, 1.0]);
+        assert_eq!(decode(&deep).unwrap().texels, [[128, 128, 128, 255]; 2]);
     }
 
     #[test]
     fn other_bytes_are_refused_with_a_reason() {
-        assert!(mean_linear_rgba(b"GIF89a").unwrap_err().contains("neither"));
+        assert!(decode(b"GIF89a").unwrap_err().contains("neither"));
         let mut cut = png(png::ColorType::Rgb, png::BitDepth::Eight, 4, 4, &[7; 48]);
         cut.truncate(cut.len() - 20);
-        assert!(mean_linear_rgba(&cut).unwrap_err().starts_with("PNG"));
+        assert!(decode(&cut).unwrap_err().starts_with("PNG"));
         let jpeg = [0xff, 0xd8, 0xff, 0xe0, 0, 16];
-        assert!(mean_linear_rgba(&jpeg).unwrap_err().starts_with("JPEG"));
+        assert!(decode(&jpeg).unwrap_err().starts_with("JPEG"));
     }
 }
