@@ -30,3 +30,19 @@ def test_ci_runs_the_readmes_test_command():
     assert [
         line for line in run.splitlines() if line and not line.startswith(("#", "set", "cd"))
     ] == ["make test"]
+
+
+def test_every_python_snippet_of_the_readme_runs_as_written(tmp_path, monkeypatch):
+    """The README's examples, one block after another as a reader pastes them, in a fresh
+    folder: every name they use is defined by them, and the shared scenes are found through
+    ``$SCENESAMPLE_SCENES`` (as a user's copy elsewhere would be)."""
+    import scenesample as ss
+
+    scenes = ss.scenes.shared_scenes_dir()
+    assert scenes is not None, "the README's examples read ../shared/scenes"
+    blocks = re.findall(r"```python\n(.*?)```", README, re.S)
+    assert len(blocks) >= 8
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("SCENESAMPLE_SCENES", str(scenes))
+    exec(compile("\n".join(blocks), "README.md", "exec"), {"__name__": "readme"})
+    assert (tmp_path / "views.exr").is_file()

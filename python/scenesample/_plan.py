@@ -101,6 +101,7 @@ class Effect:
 
     @property
     def name(self) -> str:
+        """``kind: source``, e.g. ``reflections: sphere 0``."""
         return f"{self.kind}: {self.source}"
 
     def __repr__(self) -> str:
@@ -167,6 +168,7 @@ class Frame:
         return f"Frame({w}x{h}, effects {list(self.effects)})"
 
     def as_dict(self) -> dict[str, Any]:
+        """Every field by name, as a dict (the arrays are not copied)."""
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 

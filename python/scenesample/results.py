@@ -95,10 +95,12 @@ class DepthImages:
 
     @property
     def height(self) -> int:
+        """Image height H in pixels."""
         return int(self.depth.shape[1])
 
     @property
     def width(self) -> int:
+        """Image width W in pixels."""
         return int(self.depth.shape[2])
 
     @property
@@ -215,6 +217,7 @@ class RayHits:
         return int(np.prod(self.shape, dtype=np.int64))
 
     def as_dict(self) -> dict[str, Any]:
+        """Every field by name, as a dict (the arrays are not copied)."""
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
     def __repr__(self) -> str:
@@ -265,6 +268,7 @@ class AllHits:
         return int(self.t.shape[0])
 
     def as_dict(self) -> dict[str, Any]:
+        """Every field by name, as a dict (the arrays are not copied)."""
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
     def __repr__(self) -> str:
@@ -298,6 +302,7 @@ class SurfaceSamples:
     normal: np.ndarray
 
     def as_dict(self) -> dict[str, Any]:
+        """Every field by name, as a dict (the arrays are not copied)."""
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
     def __repr__(self) -> str:
@@ -330,6 +335,7 @@ class ClosestPoints:
     timings: dict[str, float] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
+        """Every field by name, as a dict (the arrays are not copied)."""
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
     def __repr__(self) -> str:

@@ -6,7 +6,9 @@ the same triangles, bit for bit.
 
 from __future__ import annotations
 
+import json
 import os
+import tempfile
 from pathlib import Path
 from typing import Any, Optional
 
@@ -15,9 +17,11 @@ import numpy as np
 from ._core import Camera
 from ._paper_scenes import PAPER_SCENES, bird_nest, grass, reference_cameras, tree, turtles, urban
 from ._scene import Scene
+from .errors import SceneFileError
 
 __all__ = [
     "PAPER_SCENES",
+    "bending_tube",
     "bird_nest",
     "grass",
     "icosphere",
@@ -25,6 +29,7 @@ __all__ = [
     "reflective_room",
     "reflective_room_eye",
     "shapes",
+    "shared",
     "shared_scene_files",
     "shared_scenes_dir",
     "tree",
@@ -272,3 +277,101 @@ def shared_scene_files() -> dict[str, Path]:
         if files:
             out[d.name] = files[0]
     return out
+
+
+def shared(name: str) -> Path:
+    """The main file of the shared scene ``name`` (a folder of :func:`shared_scenes_dir`, e.g.
+    ``"stanford_bunny"``): glTF/GLB before OBJ. Raises :class:`SceneFileError` naming where it
+    looked when the folder or the scene is absent."""
+    files = shared_scene_files()
+    if name not in files:
+        where = shared_scenes_dir()
+        raise SceneFileError(
+            f"no shared scene {name!r}: "
+            + (
+                f"{where} has {sorted(files)}"
+                if where
+                else "set SCENESAMPLE_SCENES to the folder of the shared scenes"
+            )
+        )
+    return files[name]
+
+
+def bending_tube(
+    folder: Optional[os.PathLike] = None, rows: int = 200, around: int = 256, joints: int = 8
+) -> Path:
+    """Write a skinned, animated glTF file and return its path: a tube of radius 0.3 and
+    ``joints - 1`` units high (``2 * rows * around`` triangles, NORMAL included) on a chain of
+    ``joints`` joints one unit apart, each vertex weighted between the two joints nearest its
+    height, and a 2-second clip ``"bend"`` that turns every joint about a horizontal axis.
+    ``folder`` defaults to a new temporary directory. The same arguments write the same bytes.
+    """
+    out = Path(folder) if folder is not None else Path(tempfile.mkdtemp(prefix="scenesample-"))
+    y = np.linspace(0.0, joints - 1.0, rows + 1)
+    a = np.linspace(0.0, 2 * np.pi, around, endpoint=False)
+    yy, aa = np.meshgrid(y, a, indexing="ij")
+    v = np.stack([0.3 * np.cos(aa), yy, 0.3 * np.sin(aa)], -1).reshape(-1, 3)
+    n = np.stack([np.cos(aa), 0 * aa, np.sin(aa)], -1).reshape(-1, 3)
+    r, c = np.meshgrid(np.arange(rows), np.arange(around), indexing="ij")
+    p0, p1 = r * around + c, r * around + (c + 1) % around
+    q0, q1 = p0 + around, p1 + around
+    faces = np.stack([np.stack([p0, q0, p1], -1), np.stack([p1, q0, q1], -1)], 2)
+    low = np.minimum(np.floor(v[:, 1]).astype(np.uint16), joints - 2)
+    w = v[:, 1] - low
+    js = np.stack([low, low + 1, low * 0, low * 0], -1).astype(np.uint16)
+    ws = np.stack([1 - w, w, 0 * w, 0 * w], -1).astype(np.float32)
+    ibm = np.tile(np.eye(4, dtype=np.float32), (joints, 1, 1))
+    ibm[:, 1, 3] = -np.arange(joints)
+    times = np.linspace(0.0, 2.0, 9, dtype=np.float32)
+    parts = [v.astype(np.float32), faces.reshape(-1).astype(np.uint32), js, ws]
+    parts += [ibm.transpose(0, 2, 1).copy(), times, n.astype(np.float32)]
+    for k in range(1, joints):
+        angle = 0.25 * np.sin(np.pi * times + k)
+        axis = np.array([np.cos(k), 0.0, np.sin(k)])
+        parts.append(np.c_[np.outer(np.sin(angle / 2), axis), np.cos(angle / 2)].astype(np.float32))
+    blob, views, accessors = b"", [], []
+    kinds = [("VEC3", 5126), ("SCALAR", 5125), ("VEC4", 5123), ("VEC4", 5126), ("MAT4", 5126)]
+    kinds += [("SCALAR", 5126), ("VEC3", 5126)] + [("VEC4", 5126)] * (joints - 1)
+    for data, (kind, component) in zip(parts, kinds):
+        views.append({"buffer": 0, "byteOffset": len(blob), "byteLength": data.nbytes})
+        width = {"SCALAR": 1, "VEC3": 3, "VEC4": 4, "MAT4": 16}[kind]
+        accessors.append(
+            {"bufferView": len(views) - 1, "componentType": component,
+             "count": data.size // width, "type": kind}
+        )  # fmt: skip
+        blob += data.tobytes()
+    (out / "tube.bin").write_bytes(blob)
+    nodes: list[dict[str, Any]] = [{"mesh": 0, "skin": 0}]
+    for k in range(joints):
+        node: dict[str, Any] = {"translation": [0.0, float(k > 0), 0.0]}
+        if k + 1 < joints:
+            node["children"] = [k + 2]
+        nodes.append(node)
+    attributes = {"POSITION": 0, "NORMAL": 6, "JOINTS_0": 2, "WEIGHTS_0": 3}
+    doc = {
+        "asset": {"version": "2.0"},
+        "buffers": [{"byteLength": len(blob), "uri": "tube.bin"}],
+        "bufferViews": views,
+        "accessors": accessors,
+        "meshes": [{"primitives": [{"attributes": attributes, "indices": 1}]}],
+        "nodes": nodes,
+        "skins": [{"joints": list(range(1, joints + 1)), "inverseBindMatrices": 4}],
+        "animations": [
+            {
+                "name": "bend",
+                "samplers": [
+                    {"input": 5, "output": 6 + k, "interpolation": "LINEAR"}
+                    for k in range(1, joints)
+                ],
+                "channels": [
+                    {"sampler": k - 1, "target": {"node": k + 1, "path": "rotation"}}
+                    for k in range(1, joints)
+                ],
+            }
+        ],
+        "scenes": [{"nodes": [0, 1]}],
+        "scene": 0,
+    }
+    path = out / "tube.gltf"
+    path.write_text(json.dumps(doc))
+    return path

@@ -10,7 +10,7 @@ use std::time::Instant;
 
 use glam::{DVec3, Vec3};
 
-use crate::scene::surface::{Footprint, Surfaces};
+use crate::scene::surface::{Corners, Footprint, Surfaces};
 use rayon::prelude::*;
 
 use crate::camera::Camera;
@@ -340,13 +340,14 @@ fn resolve_one(
     *px.depth = s.depth as f32;
     *px.position = s.point.as_vec3().to_array();
     *px.normal = plane.normal.as_vec3().to_array();
-    *px.shading_normal = surfaces.shading_normal(t, s.b);
-    let footprint = if surfaces.textured(t) {
-        plane.footprint(cam, (x, y), s.unclamped)
-    } else {
-        Footprint::Point
+    *px.shading_normal = plane.corners.shading_normal(s.b);
+    *px.color = match surfaces.texture_of(t) {
+        Some(r) => {
+            let footprint = plane.footprint(cam, (x, y), s.unclamped);
+            surfaces.textured_color(&plane.corners, t, r, s.b, footprint)
+        }
+        None => plane.corners.tint(s.b).to_array(),
     };
-    *px.color = surfaces.color(t, s.b, footprint);
 }
 
 /// Give the pixels `changed` (flat indices over all images) of resolved images `img` the
@@ -392,10 +393,13 @@ pub(crate) struct SurfacePlane {
     g2: DVec3,
     /// Degenerate triangles have no plane: their centroid stands in.
     centroid: Option<DVec3>,
+    /// The corners' colours and shading normals.
+    corners: Corners,
 }
 
 impl SurfacePlane {
-    fn new(scene: &Scene, i: usize) -> Self {
+    fn new(surfaces: &Surfaces, i: usize) -> Self {
+        let scene = surfaces.scene();
         let [a, b, c] = scene.triangle(i);
         let (e1, e2) = (b - a, c - a);
         let n = e1.cross(e2);
@@ -419,16 +423,18 @@ impl SurfacePlane {
                 n.cross(e1) / nn
             },
             centroid: degenerate.then(|| (a + b + c) / 3.0),
+            corners: Corners::of(surfaces, i),
         }
     }
 
     /// The scene's planes, built in parallel on first use and cached on the scene.
     pub(crate) fn of(scene: &Scene) -> Arc<ScenePlanes> {
         scene.derived(|| {
+            let surfaces = scene.surfaces();
             ScenePlanes(
                 (0..scene.triangle_count())
                     .into_par_iter()
-                    .map(|i| Self::new(scene, i))
+                    .map(|i| Self::new(&surfaces, i))
                     .collect(),
             )
         })

@@ -7,6 +7,13 @@ use super::convert::{array, mat4, mat4_to_numpy, rows_f64, vec3};
 use super::errors::{input, IntoPy};
 use crate::camera::{Camera, Projection};
 
+/// A pinhole (perspective) or orthographic camera, immutable, its math in float64.
+///
+/// Conventions follow OpenGL, pyrender and glTF: ``pose`` is the 4x4 camera-to-world matrix,
+/// the camera looks along its -Z with +Y up; ``yfov`` is the vertical field of view in
+/// radians; images have ``height`` rows of ``width`` pixels, row 0 at the top, pixel centres
+/// at +0.5; depth is camera-space z. ``znear``/``zfar`` are None for "from the scene's bounds".
+/// Make one with :meth:`look_at`, :meth:`from_pose`, :meth:`orthographic` or :meth:`cube`.
 #[pyclass(
     name = "Camera",
     module = "scenesample._core",
@@ -40,6 +47,10 @@ type CameraState = (
 
 #[pymethods]
 impl PyCamera {
+    /// A perspective camera at ``eye`` (3 floats) looking at ``target``, with ``up`` (default
+    /// +Y) kept upward; ``yfov`` radians, ``width`` x ``height`` pixels, optional
+    /// ``znear``/``zfar``. Raises InputError when eye and target coincide or up is parallel
+    /// to the view.
     #[staticmethod]
     #[pyo3(signature = (eye, target, up=None, *, yfov, width, height, znear=None, zfar=None))]
     #[allow(clippy::too_many_arguments)]
@@ -69,6 +80,9 @@ impl PyCamera {
         .map(Self::from)
     }
 
+    /// A camera between ``cameras`` (of one resolution and projection): positions and
+    /// fields of view averaged with ``weights`` (default equal), orientations blended as
+    /// quaternions; the in-between views of ``evaluate``'s intermediate frames.
     #[staticmethod]
     #[pyo3(signature = (cameras, weights=None))]
     fn blend(py: Python<'_>, cameras: Vec<PyCamera>, weights: Option<Vec<f64>>) -> PyResult<Self> {
@@ -77,6 +91,8 @@ impl PyCamera {
         Camera::blend(&cams, &weights).map(Self::from).py_err(py)
     }
 
+    /// A perspective camera with the 4x4 camera-to-world ``pose`` (rigid: rotation and
+    /// translation), ``yfov`` radians, ``width`` x ``height`` pixels.
     #[staticmethod]
     #[pyo3(signature = (pose, *, yfov, width, height, znear=None, zfar=None))]
     fn from_pose(
@@ -100,6 +116,8 @@ impl PyCamera {
         .map(Self::from)
     }
 
+    /// An orthographic camera with the 4x4 camera-to-world ``pose``: it sees ``[-xmag,
+    /// xmag] x [-ymag, ymag]`` (glTF's half extents) over ``width`` x ``height`` pixels.
     #[staticmethod]
     #[pyo3(signature = (pose, *, xmag, ymag, width, height, znear=None, zfar=None))]
     #[allow(clippy::too_many_arguments)]
@@ -125,6 +143,8 @@ impl PyCamera {
         .map(Self::from)
     }
 
+    /// The six 90-degree faces of a cube map at ``center``, ``resolution`` pixels square, in
+    /// OpenGL's order +X, -X, +Y, -Y, +Z, -Z with OpenGL's up vectors.
     #[staticmethod]
     #[pyo3(signature = (center, resolution, *, znear=None, zfar=None))]
     fn cube(
@@ -200,6 +220,7 @@ impl PyCamera {
         Ok(Self::from(c))
     }
 
+    /// The same camera with ``width`` x ``height`` pixels (the same field of view vertically).
     fn with_resolution(&self, py: Python<'_>, width: u32, height: u32) -> PyResult<Self> {
         self.inner
             .with_resolution(width, height)
@@ -207,10 +228,12 @@ impl PyCamera {
             .map(Self::from)
     }
 
+    /// (4, 4) float64 camera-to-world matrix.
     #[getter]
     fn pose<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         mat4_to_numpy(py, &self.inner.pose)
     }
+    /// ``"perspective"`` or ``"orthographic"``.
     #[getter]
     fn projection(&self) -> &'static str {
         match self.inner.projection {
@@ -218,6 +241,7 @@ impl PyCamera {
             Projection::Orthographic { .. } => "orthographic",
         }
     }
+    /// Vertical field of view in radians (None for an orthographic camera).
     #[getter]
     fn yfov(&self) -> Option<f64> {
         match self.inner.projection {
@@ -225,6 +249,7 @@ impl PyCamera {
             _ => None,
         }
     }
+    /// Half the horizontal extent of an orthographic view (None for a perspective one).
     #[getter]
     fn xmag(&self) -> Option<f64> {
         match self.inner.projection {
@@ -232,6 +257,7 @@ impl PyCamera {
             _ => None,
         }
     }
+    /// Half the vertical extent of an orthographic view (None for a perspective one).
     #[getter]
     fn ymag(&self) -> Option<f64> {
         match self.inner.projection {
@@ -239,30 +265,37 @@ impl PyCamera {
             _ => None,
         }
     }
+    /// Image width in pixels.
     #[getter]
     fn width(&self) -> u32 {
         self.inner.width
     }
+    /// Image height in pixels.
     #[getter]
     fn height(&self) -> u32 {
         self.inner.height
     }
+    /// Near plane depth, or None (from the scene's bounds).
     #[getter]
     fn znear(&self) -> Option<f64> {
         self.inner.znear
     }
+    /// Far plane depth, or None (from the scene's bounds).
     #[getter]
     fn zfar(&self) -> Option<f64> {
         self.inner.zfar
     }
+    /// The glTF camera's name, or None.
     #[getter]
     fn name(&self) -> Option<String> {
         self.inner.name.clone()
     }
+    /// The camera's position in world space.
     #[getter]
     fn eye(&self) -> [f64; 3] {
         self.inner.eye().to_array()
     }
+    /// The unit direction it looks along (its -Z in world space).
     #[getter]
     fn forward(&self) -> [f64; 3] {
         self.inner.forward().to_array()

@@ -13,7 +13,7 @@
 
 use std::sync::Arc;
 
-use glam::{DVec2, DVec3, Vec3};
+use glam::{DVec2, DVec3, Vec2, Vec3};
 
 use super::texture::TextureRef;
 use super::Scene;
@@ -67,6 +67,53 @@ pub enum Footprint {
     World(f64),
 }
 
+/// A triangle's corner attributes: the vertices' base colours and unit shading normals, in
+/// corner order. What a sample of the triangle interpolates; the image resolve keeps one per
+/// triangle with its plane, so that a pixel reads one record.
+#[derive(Debug, Clone, Copy)]
+pub struct Corners {
+    colors: [Vec3; 3],
+    normals: [Vec3; 3],
+    /// Texture coordinates (zero in a scene without them).
+    uv: [Vec2; 3],
+    /// The triangle's unit geometric normal (zero when degenerate), where the normals cancel.
+    face: Vec3,
+}
+
+impl Corners {
+    /// Triangle `t` of `surfaces`' scene.
+    pub fn of(surfaces: &Surfaces, t: usize) -> Corners {
+        let scene = surfaces.scene;
+        let f = scene.faces()[t];
+        let (colors, ns) = (scene.colors(), &surfaces.normals.0);
+        let uv = scene.texcoords();
+        Corners {
+            colors: f.map(|k| Vec3::from(colors[k as usize])),
+            normals: f.map(|k| Vec3::from(ns[k as usize])),
+            uv: f.map(|k| uv.map_or(Vec2::ZERO, |uv| Vec2::from(uv[k as usize]))),
+            face: scene.face_normal(t).as_vec3(),
+        }
+    }
+
+    /// The vertices' colour interpolated at `(b1, b2)`.
+    #[inline]
+    pub fn tint(&self, b: [f64; 2]) -> Vec3 {
+        let (b1, b2) = (b[0] as f32, b[1] as f32);
+        let [c0, c1, c2] = self.colors;
+        c0 * (1.0 - b1 - b2) + c1 * b1 + c2 * b2
+    }
+
+    /// The unit shading normal at `(b1, b2)`: the vertices' normals interpolated and
+    /// normalized (not turned toward any side); the geometric normal where they cancel.
+    #[inline]
+    pub fn shading_normal(&self, b: [f64; 2]) -> [f32; 3] {
+        let (b1, b2) = (b[0] as f32, b[1] as f32);
+        let [n0, n1, n2] = self.normals;
+        let n = (n0 * (1.0 - b1 - b2) + n1 * b1 + n2 * b2).normalize_or_zero();
+        if n == Vec3::ZERO { self.face } else { n }.to_array()
+    }
+}
+
 /// The attributes of a scene's surface, ready to be sampled: the scene and its shading normals.
 pub struct Surfaces<'a> {
     scene: &'a Scene,
@@ -116,12 +163,6 @@ impl<'a> Surfaces<'a> {
         inside([(c * pd0 - b * pd1) / den, (a * pd1 - b * pd0) / den])
     }
 
-    /// Whether triangle `t` is textured (its colour then depends on the footprint).
-    #[inline]
-    pub fn textured(&self, t: usize) -> bool {
-        self.texture_of(t).is_some()
-    }
-
     /// Triangle `t`'s texture coordinate at `(b1, b2)`, as stored (before the material's
     /// texture transform); `None` for a scene without texture coordinates.
     pub fn texcoord(&self, t: usize, b: [f64; 2]) -> Option<[f64; 2]> {
@@ -134,28 +175,43 @@ impl<'a> Surfaces<'a> {
     /// Linear RGB base colour of triangle `t` at `(b1, b2)`: the vertices' colours interpolated,
     /// times the material's texture there (filtered for `footprint`) when it has one.
     pub fn color(&self, t: usize, b: [f64; 2], footprint: Footprint) -> [f32; 3] {
-        let f = self.scene.faces()[t];
-        let colors = self.scene.colors();
-        let [c0, c1, c2] = f.map(|k| Vec3::from(colors[k as usize]));
-        let (b1, b2) = (b[0] as f32, b[1] as f32);
-        let tint = c0 * (1.0 - b1 - b2) + c1 * b1 + c2 * b2;
+        self.color_of(&Corners::of(self, t), t, b, footprint)
+    }
+
+    /// [`Surfaces::color`] from triangle `t`'s `corners`.
+    #[inline]
+    pub fn color_of(&self, corners: &Corners, t: usize, b: [f64; 2], fp: Footprint) -> [f32; 3] {
         match self.texture_of(t) {
-            Some(r) => {
-                let texel = self.texel(t, r, b, footprint);
-                (tint * Vec3::new(texel[0], texel[1], texel[2])).to_array()
-            }
-            None => tint.to_array(),
+            Some(r) => self.textured_color(corners, t, r, b, fp),
+            None => corners.tint(b).to_array(),
         }
     }
 
-    /// Material texture `r` of triangle `t` sampled at `(b1, b2)` for `footprint`: linear RGBA.
-    fn texel(&self, t: usize, r: &TextureRef, b: [f64; 2], footprint: Footprint) -> [f32; 4] {
+    /// [`Surfaces::color_of`] of a triangle whose material's texture is `r`.
+    #[inline]
+    pub fn textured_color(
+        &self,
+        corners: &Corners,
+        t: usize,
+        r: &TextureRef,
+        b: [f64; 2],
+        fp: Footprint,
+    ) -> [f32; 3] {
+        let texel = self.texel(corners, t, r, b, fp);
+        (corners.tint(b) * Vec3::from(texel)).to_array()
+    }
+
+    /// Material texture `r` of triangle `t` sampled at `(b1, b2)` for `footprint`: linear RGB.
+    fn texel(
+        &self,
+        corners: &Corners,
+        t: usize,
+        r: &TextureRef,
+        b: [f64; 2],
+        footprint: Footprint,
+    ) -> [f32; 3] {
         let tex = &self.scene.textures()[r.texture];
-        let Some(uv) = self.scene.texcoords() else {
-            return tex.mean();
-        };
-        let f = self.scene.faces()[t];
-        let [u0, u1, u2] = f.map(|k| DVec2::from(uv[k as usize].map(f64::from)));
+        let [u0, u1, u2] = corners.uv.map(|u| u.as_dvec2());
         let (e1, e2) = (u1 - u0, u2 - u0);
         let at = r.apply((u0 + e1 * b[0] + e2 * b[1]).to_array());
         let size = DVec2::new(tex.width() as f64, tex.height() as f64);
@@ -187,19 +243,9 @@ impl<'a> Surfaces<'a> {
         tex.sample(at, rho, &r.sampler)
     }
 
-    /// Unit shading normal of triangle `t` at `(b1, b2)`: its vertices' shading normals
-    /// interpolated and normalized (not turned toward any side); the face's geometric normal
-    /// where they cancel (zero for a degenerate triangle).
+    /// Unit shading normal of triangle `t` at `(b1, b2)` ([`Corners::shading_normal`]).
     pub fn shading_normal(&self, t: usize, b: [f64; 2]) -> [f32; 3] {
-        let f = self.scene.faces()[t];
-        let ns = &self.normals.0;
-        let [n0, n1, n2] = f.map(|k| DVec3::from(ns[k as usize].map(f64::from)));
-        let n = (n0 * (1.0 - b[0] - b[1]) + n1 * b[0] + n2 * b[1]).normalize_or_zero();
-        if n == DVec3::ZERO {
-            self.scene.face_normal(t).as_vec3().to_array()
-        } else {
-            n.as_vec3().to_array()
-        }
+        Corners::of(self, t).shading_normal(b)
     }
 }
 

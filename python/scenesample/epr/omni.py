@@ -63,6 +63,7 @@ class OmniShadowResult:
 
     @property
     def samples(self) -> int:
+        """The number of light samples each pixel's visibility averages."""
         return int(self.visible.shape[-1])
 
     def __repr__(self) -> str:
@@ -73,6 +74,7 @@ class OmniShadowResult:
         )
 
     def as_dict(self) -> dict[str, Any]:
+        """Every field by name, as a dict (the arrays are not copied)."""
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 

@@ -272,6 +272,7 @@ class Points:
         return f"Points({len(self):,} points over {len(self.cameras)} views)"
 
     def as_dict(self) -> dict[str, Any]:
+        """Every field by name, as a dict (the arrays are not copied)."""
         return {f.name: getattr(self, f.name) for f in fields(self) if not f.name.startswith("_")}
 
 
@@ -305,6 +306,7 @@ class SplatBuffers:
         return f"SplatBuffers({v} views of {w}x{h})"
 
     def as_dict(self) -> dict[str, Any]:
+        """Every field by name, as a dict (the arrays are not copied)."""
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 

@@ -62,6 +62,7 @@ class ReflectionResult:
         )
 
     def as_dict(self) -> dict[str, Any]:
+        """Every field by name, as a dict (the arrays are not copied)."""
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
     def to_srgb8(self) -> np.ndarray:

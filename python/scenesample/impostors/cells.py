@@ -96,6 +96,7 @@ class Impostors:
         )
 
     def as_dict(self) -> dict[str, Any]:
+        """Every field by name, as a dict (the arrays are not copied)."""
         return {f.name: getattr(self, f.name) for f in fields(self) if not f.name.startswith("_")}
 
 
@@ -159,6 +160,7 @@ class ImpostorView:
         return f"ImpostorView({w}x{h}, {self.stats})"
 
     def as_dict(self) -> dict[str, Any]:
+        """Every field by name, as a dict (the arrays are not copied)."""
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 

@@ -119,6 +119,7 @@ class ShadowResult:
 
     @property
     def samples(self) -> int:
+        """The number of light samples each pixel's visibility averages."""
         return int(self.visible.shape[-1])
 
     def __repr__(self) -> str:
@@ -126,6 +127,7 @@ class ShadowResult:
         return f"ShadowResult({self.discretization}, {w}x{h}, {self.samples} light samples)"
 
     def as_dict(self) -> dict[str, Any]:
+        """Every field by name, as a dict (the arrays are not copied)."""
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 

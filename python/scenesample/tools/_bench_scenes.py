@@ -14,15 +14,15 @@ Per scene, medians of interleaved rounds:
   twentieth of the scene's size high, and its BVH refit) against the same fresh build: target
   <= 10%; and rays on it against the same vertices built flat: target >= 0.8x.
 
-Once per run, a skinned frame: a tube of 102,400 triangles on a chain of 8 joints, written here
-as glTF (no shared scene is skinned), posed by ``Scene.at`` (linear blend skinning and the
-BVH's refit), with the same rays and image, against the same peers fed the same skinned
-vertices (their skinning not charged to them): target >= 3x both; and against a fresh build.
+Once per run, a skinned frame: a tube of 102,400 triangles on a chain of 8 joints, written as
+glTF by ``scenes.bending_tube`` (no shared scene is skinned), posed by ``Scene.at`` (linear
+blend skinning and the BVH's refit), with the same rays and image, against the same peers fed
+the same skinned vertices (their skinning not charged to them): target >= 3x both; and against
+a fresh build.
 """
 
 from __future__ import annotations
 
-import json
 import statistics
 import tempfile
 import time
@@ -35,7 +35,7 @@ import numpy as np
 import scenesample as ss
 
 from .._scene import Scene
-from ..scenes import shared_scene_files
+from ..scenes import bending_tube, shared_scene_files
 
 MIN_TRIANGLES = 5_000
 # 100 tiles of a scene over this many triangles would not fit a 24 GiB machine's rebuilds.
@@ -247,100 +247,11 @@ def _one(name: str, scene: Scene, quick: bool, rounds: int) -> dict[str, Any]:
     }
 
 
-def _skinned_tube(folder: Path, rows: int = 200, around: int = 256, joints: int = 8) -> Path:
-    """A glTF tube (radius 0.3, ``joints`` units high; ``2 * rows * around`` triangles)
-    skinned to a chain of ``joints`` joints one unit apart, each vertex weighted between the two
-    joints nearest its height, and a 2-second clip that bends every joint about z and x."""
-    y = np.linspace(0.0, joints - 1.0, rows + 1)
-    a = np.linspace(0.0, 2 * np.pi, around, endpoint=False)
-    yy, aa = np.meshgrid(y, a, indexing="ij")
-    v = np.stack([0.3 * np.cos(aa), yy, 0.3 * np.sin(aa)], -1).reshape(-1, 3)
-    r, c = np.meshgrid(np.arange(rows), np.arange(around), indexing="ij")
-    p0, p1 = r * around + c, r * around + (c + 1) % around
-    q0, q1 = p0 + around, p1 + around
-    faces = np.stack([np.stack([p0, q0, p1], -1), np.stack([p1, q0, q1], -1)], 2)
-    low = np.minimum(np.floor(v[:, 1]).astype(np.uint16), joints - 2)
-    w = v[:, 1] - low
-    js = np.stack([low, low + 1, low * 0, low * 0], -1).astype(np.uint16)
-    ws = np.stack([1 - w, w, 0 * w, 0 * w], -1).astype(np.float32)
-    ibm = np.tile(np.eye(4, dtype=np.float32), (joints, 1, 1))
-    ibm[:, 1, 3] = -np.arange(joints)
-    times = np.linspace(0.0, 2.0, 9, dtype=np.float32)
-    parts = [
-        v.astype(np.float32),
-        faces.reshape(-1).astype(np.uint32),
-        js,
-        ws,
-        ibm.transpose(0, 2, 1).copy(),
-        times,
-    ]
-    for k in range(1, joints):
-        angle = 0.25 * np.sin(np.pi * times + k)
-        axis = np.array([np.cos(k), 0.0, np.sin(k)])
-        q = np.c_[np.outer(np.sin(angle / 2), axis), np.cos(angle / 2)]
-        parts.append(q.astype(np.float32))
-    blob, views, accessors = b"", [], []
-    kinds = [("VEC3", 5126), ("SCALAR", 5125), ("VEC4", 5123), ("VEC4", 5126), ("MAT4", 5126)]
-    kinds += [("SCALAR", 5126)] + [("VEC4", 5126)] * (joints - 1)
-    for data, (kind, component) in zip(parts, kinds):
-        views.append({"buffer": 0, "byteOffset": len(blob), "byteLength": data.nbytes})
-        width = {"SCALAR": 1, "VEC3": 3, "VEC4": 4, "MAT4": 16}[kind]
-        accessors.append(
-            {
-                "bufferView": len(views) - 1,
-                "componentType": component,
-                "count": data.size // width,
-                "type": kind,
-            }
-        )
-        blob += data.tobytes()
-    (folder / "tube.bin").write_bytes(blob)
-    nodes: list[dict[str, Any]] = [{"mesh": 0, "skin": 0}]
-    for k in range(joints):
-        node: dict[str, Any] = {"translation": [0.0, float(k > 0), 0.0]}
-        if k + 1 < joints:
-            node["children"] = [k + 2]
-        nodes.append(node)
-    doc = {
-        "asset": {"version": "2.0"},
-        "buffers": [{"byteLength": len(blob), "uri": "tube.bin"}],
-        "bufferViews": views,
-        "accessors": accessors,
-        "meshes": [
-            {
-                "primitives": [
-                    {"attributes": {"POSITION": 0, "JOINTS_0": 2, "WEIGHTS_0": 3}, "indices": 1}
-                ]
-            }
-        ],
-        "nodes": nodes,
-        "skins": [{"joints": list(range(1, joints + 1)), "inverseBindMatrices": 4}],
-        "animations": [
-            {
-                "name": "bend",
-                "samplers": [
-                    {"input": 5, "output": 5 + k, "interpolation": "LINEAR"}
-                    for k in range(1, joints)
-                ],
-                "channels": [
-                    {"sampler": k - 1, "target": {"node": k + 1, "path": "rotation"}}
-                    for k in range(1, joints)
-                ],
-            }
-        ],
-        "scenes": [{"nodes": [0, 1]}],
-        "scene": 0,
-    }
-    path = folder / "tube.gltf"
-    path.write_text(json.dumps(doc))
-    return path
-
-
 def _skinned(quick: bool, rounds: int) -> dict[str, Any]:
     """The skinned frame: ``Scene.at`` with its refit, rays and an image, against a fresh
     build, and a frame against the peers."""
     with tempfile.TemporaryDirectory() as folder:
-        scene = Scene.load(_skinned_tube(Path(folder), rows=20 if quick else 200))
+        scene = Scene.load(bending_tube(Path(folder), rows=20 if quick else 200))
     n_rays = 16_384 if quick else 262_144
     size = 128 if quick else 512
     times = [0.25 * k for k in range(rounds + 1)]

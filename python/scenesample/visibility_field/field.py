@@ -174,6 +174,7 @@ class VisibilityField:
         )
 
     def as_dict(self) -> dict[str, Any]:
+        """Every field by name, as a dict (the arrays are not copied)."""
         return {f.name: getattr(self, f.name) for f in fields(self) if not f.name.startswith("_")}
 
     def __reduce__(self) -> tuple[Any, tuple[dict[str, Any]]]:

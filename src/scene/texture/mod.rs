@@ -69,10 +69,10 @@ impl Wrap {
     #[inline]
     fn index(self, i: i64, n: i64) -> usize {
         (match self {
-            Wrap::Repeat => i.rem_euclid(n),
+            Wrap::Repeat => period(i, n),
             Wrap::ClampToEdge => i.clamp(0, n - 1),
             Wrap::MirroredRepeat => {
-                let m = i.rem_euclid(2 * n);
+                let m = period(i, 2 * n);
                 if m < n {
                     m
                 } else {
@@ -80,6 +80,21 @@ impl Wrap {
                 }
             }
         }) as usize
+    }
+}
+
+/// `i` modulo `p` in `0..p`: a step of one period where the lookups keep `i` (their coordinate
+/// wrapped to within two periods first, `reduce`), a division only beyond.
+#[inline(always)]
+fn period(i: i64, p: i64) -> i64 {
+    if (0..p).contains(&i) {
+        i
+    } else if (-p..0).contains(&i) {
+        i + p
+    } else if (p..2 * p).contains(&i) {
+        i - p
+    } else {
+        i.rem_euclid(p)
     }
 }
 
@@ -241,35 +256,34 @@ impl Texture {
     }
 
     /// The filtered texel at texture coordinate `uv` (0..1 spans the image, v down) for a
-    /// footprint whose longer side is `rho` level-0 texels (0 or less: magnified): linear RGBA.
-    pub fn sample(&self, uv: [f64; 2], rho: f64, s: &Sampler) -> [f32; 4] {
-        let lambda = if rho > 0.0 {
-            rho.log2()
-        } else {
-            f64::NEG_INFINITY
-        };
-        if lambda <= 0.0 || s.mipmap == Mipmap::None || self.levels.len() == 1 {
-            let nearest = if lambda <= 0.0 {
-                s.mag_nearest
-            } else {
+    /// footprint whose longer side is `rho` level-0 texels (1 or less: magnified): linear RGB.
+    pub fn sample(&self, uv: [f64; 2], rho: f64, s: &Sampler) -> [f32; 3] {
+        // λ = log2 ρ ≤ 0: magnified (no logarithm needed to tell).
+        if rho <= 1.0 || rho.is_nan() || s.mipmap == Mipmap::None || self.levels.len() == 1 {
+            let nearest = if rho > 1.0 {
                 s.min_nearest
+            } else {
+                s.mag_nearest
             };
             return self.levels[0].filter(uv, nearest, s.wrap);
         }
+        let lambda = log2(rho);
         let top = (self.levels.len() - 1) as f64;
         if s.mipmap == Mipmap::Nearest {
             // OpenGL's nearest level: ceil(λ + ½) − 1, within the chain.
             let d = ((lambda + 0.5).ceil() - 1.0).clamp(0.0, top) as usize;
             return self.levels[d].filter(uv, s.min_nearest, s.wrap);
         }
+        // λ > 0 here, so truncation is its floor.
         let lambda = lambda.min(top);
-        let d = lambda.floor() as usize;
+        let d = lambda as usize;
+        let f = (lambda - d as f64) as f32;
         let a = self.levels[d].filter(uv, s.min_nearest, s.wrap);
-        if d + 1 >= self.levels.len() {
+        // The next level adds nothing that an 8-bit texel could show.
+        if d + 1 >= self.levels.len() || f < 1.0 / 1024.0 {
             return a;
         }
         let b = self.levels[d + 1].filter(uv, s.min_nearest, s.wrap);
-        let f = (lambda - d as f64) as f32;
         std::array::from_fn(|k| a[k] + (b[k] - a[k]) * f)
     }
 }
@@ -324,50 +338,77 @@ impl Level {
         })
     }
 
-    /// Texel `(x, y)` (wrapped) decoded: linear RGB, alpha in [0, 1].
-    #[inline]
-    fn fetch(&self, x: i64, y: i64, wrap: [Wrap; 2]) -> [f32; 4] {
-        let (w, h) = (self.width as i64, self.height as i64);
-        let t = self.texels[wrap[1].index(y, h) * self.width + wrap[0].index(x, w)];
-        let lut = &*SRGB_TO_LINEAR;
-        [
-            lut[t[0] as usize],
-            lut[t[1] as usize],
-            lut[t[2] as usize],
-            f32::from(t[3]) / 255.0,
-        ]
+    /// Texel `(x, y)` (already wrapped into the level) decoded: linear RGB.
+    #[inline(always)]
+    fn texel(&self, x: usize, y: usize, lut: &[f32; 256]) -> [f32; 3] {
+        let t = self.texels[y * self.width + x];
+        [lut[t[0] as usize], lut[t[1] as usize], lut[t[2] as usize]]
     }
 
     /// The level filtered at `uv`: the nearest texel, or the bilinear blend of the four around
     /// it (texel centres at half-integers of `uv · size`).
     #[inline]
-    fn filter(&self, uv: [f64; 2], nearest: bool, wrap: [Wrap; 2]) -> [f32; 4] {
-        let x = uv[0] * self.width as f64;
-        let y = uv[1] * self.height as f64;
-        if !(x.is_finite() && y.is_finite()) {
-            return self.fetch(0, 0, wrap);
-        }
+    fn filter(&self, uv: [f64; 2], nearest: bool, wrap: [Wrap; 2]) -> [f32; 3] {
+        let lut = &*SRGB_TO_LINEAR;
+        let (w, h) = (self.width as i64, self.height as i64);
         // Far outside the image, wrap first so that the texel arithmetic stays in range.
         let (x, y) = (
-            reduce(x, self.width, wrap[0]),
-            reduce(y, self.height, wrap[1]),
+            reduce(uv[0] * self.width as f64, self.width, wrap[0]),
+            reduce(uv[1] * self.height as f64, self.height, wrap[1]),
         );
+        // What no wrap brings near the image (not a number, or beyond f64's integers).
+        if !(x.abs() < 1e15 && y.abs() < 1e15) {
+            return self.texel(0, 0, lut);
+        }
         if nearest {
-            return self.fetch(x.floor() as i64, y.floor() as i64, wrap);
+            let (x, y) = (floor(x), floor(y));
+            return self.texel(wrap[0].index(x, w), wrap[1].index(y, h), lut);
         }
         let (x, y) = (x - 0.5, y - 0.5);
-        let (x0, y0) = (x.floor(), y.floor());
-        let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
-        let (x0, y0) = (x0 as i64, y0 as i64);
-        let a = self.fetch(x0, y0, wrap);
-        let b = self.fetch(x0 + 1, y0, wrap);
-        let c = self.fetch(x0, y0 + 1, wrap);
-        let d = self.fetch(x0 + 1, y0 + 1, wrap);
+        let (x0, y0) = (floor(x), floor(y));
+        let (fx, fy) = ((x - x0 as f64) as f32, (y - y0 as f64) as f32);
+        let (xa, xb) = (wrap[0].index(x0, w), wrap[0].index(x0 + 1, w));
+        let (ya, yb) = (wrap[1].index(y0, h), wrap[1].index(y0 + 1, h));
+        let a = self.texel(xa, ya, lut);
+        let b = self.texel(xb, ya, lut);
+        let c = self.texel(xa, yb, lut);
+        let d = self.texel(xb, yb, lut);
         std::array::from_fn(|k| {
             let top = a[k] + (b[k] - a[k]) * fx;
             let bottom = c[k] + (d[k] - c[k]) * fx;
             top + (bottom - top) * fy
         })
+    }
+}
+
+/// log2 of a positive, normal `x` (> 1 here), to about 1e-9: the exponent from the bits, the
+/// mantissa's logarithm from the atanh series. No libm call; the same bits on every machine.
+#[inline(always)]
+fn log2(x: f64) -> f64 {
+    let bits = x.to_bits();
+    let mut exponent = ((bits >> 52) & 0x7ff) as i64 - 1023;
+    // The mantissa as m in [√½, √2), then t = (m − 1) / (m + 1) (|t| < 0.172) and
+    // ln m = 2 atanh t, whose series is then good to 1e-10 after five terms.
+    let mut m = f64::from_bits((bits & 0x000f_ffff_ffff_ffff) | 0x3ff0_0000_0000_0000);
+    if m > std::f64::consts::SQRT_2 {
+        m *= 0.5;
+        exponent += 1;
+    }
+    let t = (m - 1.0) / (m + 1.0);
+    let t2 = t * t;
+    let atanh = t * (1.0 + t2 * (1.0 / 3.0 + t2 * (1.0 / 5.0 + t2 * (1.0 / 7.0 + t2 / 9.0))));
+    exponent as f64 + 2.0 * atanh * std::f64::consts::LOG2_E
+}
+
+/// ⌊x⌋ of a finite `x` within ±2^62, without a call into libm (the x86-64 baseline has no
+/// rounding instruction for `f64::floor`).
+#[inline(always)]
+fn floor(x: f64) -> i64 {
+    let i = x as i64;
+    if (i as f64) > x {
+        i - 1
+    } else {
+        i
     }
 }
 
@@ -378,8 +419,8 @@ impl Level {
 fn reduce(x: f64, n: usize, wrap: Wrap) -> f64 {
     let n = n as f64;
     match wrap {
-        Wrap::Repeat if x.abs() >= n => x - (x / n).floor() * n,
-        Wrap::MirroredRepeat if x.abs() >= 2.0 * n => x - (x / (2.0 * n)).floor() * 2.0 * n,
+        Wrap::Repeat if x.abs() >= n => x - floor(x / n) as f64 * n,
+        Wrap::MirroredRepeat if x.abs() >= 2.0 * n => x - floor(x / (2.0 * n)) as f64 * 2.0 * n,
         Wrap::ClampToEdge => x.clamp(-1.0, n + 1.0),
         _ => x,
     }
@@ -453,24 +494,30 @@ mod tests {
         // Texel centres at u = 0.25 and 0.75; halfway between them, the mean.
         assert_eq!(t.sample([0.25, 0.5], 0.0, &s)[0], 0.0);
         assert_eq!(t.sample([0.75, 0.5], 0.0, &s)[0], 1.0);
-        assert_eq!(t.sample([0.5, 0.5], 0.0, &s)[3], 0.5);
+        assert_eq!(t.sample([0.5, 0.5], 0.0, &s)[0], 0.5);
         // At u = 0 a repeat blends the two edges, a clamp holds the first texel.
-        assert_eq!(t.sample([0.0, 0.5], 0.0, &s)[3], 0.5);
+        assert_eq!(t.sample([0.0, 0.5], 0.0, &s)[0], 0.5);
         let clamp = Sampler {
             wrap: [Wrap::ClampToEdge; 2],
             ..s
         };
-        assert_eq!(t.sample([0.0, 0.5], 0.0, &clamp)[3], 0.0);
-        assert_eq!(t.sample([-7.3, 0.5], 0.0, &clamp)[3], 0.0);
+        assert_eq!(t.sample([0.0, 0.5], 0.0, &clamp)[0], 0.0);
+        assert_eq!(t.sample([-7.3, 0.5], 0.0, &clamp)[0], 0.0);
         // A repeat one period on reads the same, far out too.
         assert_eq!(t.sample([1.6, 0.5], 0.0, &s), t.sample([0.6, 0.5], 0.0, &s));
-        assert_eq!(t.sample([1e6 + 0.75, 0.5], 0.0, &s)[3], 1.0);
+        assert_eq!(t.sample([1e6 + 0.75, 0.5], 0.0, &s)[0], 1.0);
+        // Nothing wraps a coordinate that is not a number or past f64's integers: texel 0.
+        for u in [f64::NAN, f64::INFINITY, 1e300, -1e300] {
+            assert_eq!(t.sample([u, 0.5], 0.0, &s)[0], 0.0);
+        }
+        assert_eq!(t.sample([f64::NAN, 0.5], 0.0, &clamp)[0], 0.0);
+        assert_eq!(t.sample([f64::INFINITY, 0.5], 0.0, &clamp)[0], 1.0);
         let mirror = Sampler {
             wrap: [Wrap::MirroredRepeat; 2],
             ..s
         };
-        assert_eq!(t.sample([1.25, 0.5], 0.0, &mirror)[3], 1.0);
-        assert_eq!(t.sample([-0.25, 0.5], 0.0, &mirror)[3], 0.0);
+        assert_eq!(t.sample([1.25, 0.5], 0.0, &mirror)[0], 1.0);
+        assert_eq!(t.sample([-0.25, 0.5], 0.0, &mirror)[0], 0.0);
     }
 
     #[test]
@@ -486,6 +533,18 @@ mod tests {
         // Without mip maps a minified lookup reads level 0.
         let flat = Sampler::default().with_filters(None, Some(9729));
         assert_eq!(t.sample([1.0 / 16.0, 1.0 / 16.0], 8.0, &flat)[0], 1.0);
+    }
+
+    #[test]
+    fn log2_agrees_with_libm() {
+        for x in [1.0000001, 1.5, 2.0, 3.0, 7.9, 1024.0, 1e6 + 0.3, 3.3e9] {
+            assert!(
+                (log2(x) - x.log2()).abs() < 1e-9,
+                "{x}: {} {}",
+                log2(x),
+                x.log2()
+            );
+        }
     }
 
     #[test]
