@@ -480,9 +480,8 @@ def test_a_bend_that_loosens_the_refit_tree_is_built_afresh(tmp_path):
     would cost 2.5x a fresh one while its cost relative to the root grew only 1.28x, so the
     pose is built afresh (the same tree as a fresh build). Stretched by 1% instead, it is
     refit (a tree unlike a fresh build's). Hits agree with the flat build either way."""
-    from scenesample.tools._bench_scenes import _skinned_tube
 
-    scene = ss.Scene.load(_skinned_tube(tmp_path))
+    scene = ss.Scene.load(ss.scenes.bending_tube(tmp_path))
     bent = scene.at(0.5)
     stretched = scene.deformed(scene.vertices * np.float32([1.0, 1.01, 1.0]))
     for shape, rebuilt in ((bent, True), (stretched, False)):

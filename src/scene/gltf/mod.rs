@@ -20,6 +20,7 @@ use crate::error::{Error, Result};
 mod accessors;
 mod checks;
 mod clips;
+mod draco;
 mod materials;
 mod pointer;
 mod primitives;
@@ -30,6 +31,7 @@ use checks::{prevalidate, refuse_version_one, version_one};
 /// Extensions whose content we read.
 const HANDLED: &[&str] = &[
     "KHR_animation_pointer",
+    "KHR_draco_mesh_compression",
     "KHR_lights_punctual",
     "EXT_mesh_gpu_instancing",
     "KHR_materials_emissive_strength",
@@ -122,7 +124,8 @@ fn load_parts(path: &Path) -> Result<SceneParts> {
     // gltf's validator rejects required extensions it does not know; we checked them above.
     root.extensions_required.clear();
     prevalidate(&mut root).map_err(|m| scene_err(path, m))?;
-    let doc = gltf::Document::from_json(root).map_err(|e| scene_err(path, e))?;
+    validate(&root).map_err(|e| scene_err(path, e))?;
+    let doc = gltf::Document::from_json_without_validation(root);
     let base = path.parent().unwrap_or(Path::new("."));
     let buffers = load_buffers(path, &doc, base, blob)?;
     let mut loader = Loader {
@@ -422,6 +425,28 @@ impl Loader<'_> {
 /// A node's local transform (its matrix, or its TRS composed), in f64.
 fn local_of(node: &gltf::Node) -> DMat4 {
     DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(f64::from)))
+}
+
+/// gltf's validation of the document, but for one rule it adds to the spec: an accessor with
+/// neither a buffer view nor sparse values is valid glTF (its values are zeros, §3.6.2.5), and
+/// the accessors of a `KHR_draco_mesh_compression` primitive are such accessors.
+fn validate(root: &gltf::json::Root) -> std::result::Result<(), gltf::Error> {
+    use gltf::json::validation::{Error as Invalid, Validate};
+    let mut errors = Vec::new();
+    root.validate(root, gltf::json::Path::new, &mut |path, error| {
+        let path = path();
+        let dataless = path.as_str().starts_with("accessors[")
+            && path.as_str().ends_with("].bufferView")
+            && matches!(error, Invalid::Missing);
+        if !dataless {
+            errors.push((path, error));
+        }
+    });
+    if errors.is_empty() {
+        Ok(())
+    } else {
+        Err(gltf::Error::Validation(errors))
+    }
 }
 
 /// Triangle lists from glTF primitive modes (glTF 2.0 §3.7.2.1): strips alternate winding,

@@ -2,13 +2,15 @@
 //! placed in world space, indices, the vertices' base colour (the material's factor × COLOR_0),
 //! normals (NORMAL, placed by the inverse transpose of the node's transform) and the texture
 //! coordinates that the material's base-colour texture names. Attributes may be float32 or the
-//! integer types `KHR_mesh_quantization` allows ([`super::accessors`]).
+//! integer types `KHR_mesh_quantization` allows ([`super::accessors`]), or come from a
+//! `KHR_draco_mesh_compression` stream ([`super::draco`]).
 
 use glam::{DMat4, DVec3, DVec4};
-use gltf::accessor::{DataType, Dimensions};
+use gltf::accessor::{DataType, Dimensions, Item};
 use gltf::mesh::Mode;
 
 use super::accessors::{NORMAL_TYPES, POSITION_TYPES, TEXCOORD_TYPES};
+use super::draco::Draco;
 use super::{triangles, Loader};
 use crate::error::Result;
 use crate::scene::skin::normal_map;
@@ -16,11 +18,16 @@ use crate::scene::skin::normal_map;
 /// One triangle primitive's vertex data, read and checked.
 pub(super) struct Vertices {
     pub positions: Vec<[f32; 3]>,
-    /// Triangle-list, strip or fan indices (every vertex in order when the file has none).
+    /// Indices in `mode`'s order (every vertex in order when the file has none).
     pub indices: Vec<u32>,
+    /// Triangles, a strip or a fan (a Draco stream decodes to triangles).
+    pub mode: Mode,
     pub colors: Option<Vec<[f32; 4]>>,
     pub normals: Option<Vec<[f32; 3]>>,
     pub texcoords: Option<Vec<[f32; 2]>>,
+    /// The decoded Draco stream of a compressed primitive, for its other attributes (joints
+    /// and weights).
+    pub draco: Option<Draco>,
 }
 
 impl Loader<'_> {
@@ -60,7 +67,7 @@ impl Loader<'_> {
             }
             self.add_vertices(&v, material, world, normals_to_world);
             let offset = self.parts.vertices.len() as u32 - v.positions.len() as u32;
-            for mut f in triangles(prim.mode(), &v.indices) {
+            for mut f in triangles(v.mode, &v.indices) {
                 if flip {
                     f.swap(1, 2);
                 }
@@ -131,77 +138,33 @@ impl Loader<'_> {
     }
 
     /// A triangle primitive's positions (finite), indices (in range), COLOR_0, NORMAL and the
-    /// texture coordinates of `material`'s base-colour texture, checked.
+    /// texture coordinates of `material`'s base-colour texture, checked; from its Draco stream
+    /// when it is compressed.
     fn read_primitive(
         &mut self,
         prim: &gltf::Primitive,
         what: &str,
         material: i32,
     ) -> Result<Vertices> {
-        let Some(pos_acc) = prim.get(&gltf::Semantic::Positions) else {
-            return Err(self.err(format!("{what} has no POSITION attribute")));
+        let draco = self.draco(prim, what)?;
+        let d = draco.as_ref();
+        let positions: Vec<[f32; 3]> = self
+            .attribute(prim, d, gltf::Semantic::Positions, what, POSITION_TYPES)?
+            .ok_or_else(|| self.err(format!("{what} has no POSITION attribute")))?;
+        let (indices, mode) = match d {
+            Some(d) => (d.indices(), Mode::Triangles),
+            None => (self.indices(prim, what, positions.len())?, prim.mode()),
         };
-        let positions: Vec<[f32; 3]> = self.vectors(
-            &pos_acc,
-            &format!("{what} POSITION"),
-            Dimensions::Vec3,
-            POSITION_TYPES,
-        )?;
-        let buffers = &self.buffers;
-        let reader = prim.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
-        let indices: Vec<u32> = match prim.indices() {
-            Some(acc) => {
-                self.check_accessor(
-                    &acc,
-                    &format!("{what} indices"),
-                    &[Dimensions::Scalar],
-                    &[DataType::U8, DataType::U16, DataType::U32],
-                )?;
-                let idx: Vec<u32> = reader
-                    .read_indices()
-                    .ok_or_else(|| {
-                        self.err(format!(
-                            "{what}: index accessor {} could not be read",
-                            acc.index()
-                        ))
-                    })?
-                    .into_u32()
-                    .collect();
-                if let Some(k) = idx.iter().position(|&i| i as usize >= positions.len()) {
-                    return Err(self.err(format!(
-                        "{what}: index accessor {} has index {} at position {k}, but POSITION \
-                         has {} vertices",
-                        acc.index(),
-                        idx[k],
-                        positions.len()
-                    )));
-                }
-                idx
-            }
-            None => (0..positions.len() as u32).collect(),
-        };
-        let colors: Option<Vec<[f32; 4]>> = match prim.get(&gltf::Semantic::Colors(0)) {
-            Some(acc) => {
-                self.check_accessor(
-                    &acc,
-                    &format!("{what} COLOR_0"),
-                    &[Dimensions::Vec3, Dimensions::Vec4],
-                    &[DataType::F32, DataType::U8, DataType::U16],
-                )?;
-                reader.read_colors(0).map(|c| c.into_rgba_f32().collect())
-            }
-            None => None,
-        };
-        let normals = match prim.get(&gltf::Semantic::Normals) {
-            Some(acc) => Some(self.vectors(
-                &acc,
-                &format!("{what} NORMAL"),
-                Dimensions::Vec3,
-                NORMAL_TYPES,
-            )?),
-            None => None,
-        };
-        let texcoords = self.texcoords(prim, what, material)?;
+        if let Some(k) = indices.iter().position(|&i| i as usize >= positions.len()) {
+            return Err(self.err(format!(
+                "{what}: index {} at position {k} is out of range: POSITION has {} vertices",
+                indices[k],
+                positions.len()
+            )));
+        }
+        let colors = self.colors(prim, d, what)?;
+        let normals = self.attribute(prim, d, gltf::Semantic::Normals, what, NORMAL_TYPES)?;
+        let texcoords = self.texcoords(prim, d, what, material)?;
         let n = positions.len();
         for (name, len) in [
             ("COLOR_0", colors.as_ref().map(Vec::len)),
@@ -215,10 +178,112 @@ impl Loader<'_> {
         Ok(Vertices {
             positions,
             indices,
+            mode,
             colors,
             normals,
             texcoords,
+            draco,
         })
+    }
+
+    /// `prim`'s indices from its accessor (in range of `count` vertices is checked by the
+    /// caller), or every vertex in order without one.
+    fn indices(&self, prim: &gltf::Primitive, what: &str, count: usize) -> Result<Vec<u32>> {
+        let Some(acc) = prim.indices() else {
+            return Ok((0..count as u32).collect());
+        };
+        self.check_accessor(
+            &acc,
+            &format!("{what} indices"),
+            &[Dimensions::Scalar],
+            &[DataType::U8, DataType::U16, DataType::U32],
+        )?;
+        let buffers = &self.buffers;
+        let reader = prim.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
+        let idx: Vec<u32> = reader
+            .read_indices()
+            .ok_or_else(|| {
+                self.err(format!(
+                    "{what}: index accessor {} could not be read",
+                    acc.index()
+                ))
+            })?
+            .into_u32()
+            .collect();
+        if let Some(k) = idx.iter().position(|&i| i as usize >= count) {
+            return Err(self.err(format!(
+                "{what}: index accessor {} has index {} at position {k}, but POSITION has \
+                 {count} vertices",
+                acc.index(),
+                idx[k],
+            )));
+        }
+        Ok(idx)
+    }
+
+    /// COLOR_0 of `prim` as RGBA (an RGB attribute is opaque), if it has one.
+    fn colors(
+        &self,
+        prim: &gltf::Primitive,
+        draco: Option<&Draco>,
+        what: &str,
+    ) -> Result<Option<Vec<[f32; 4]>>> {
+        let semantic = gltf::Semantic::Colors(0);
+        let Some(acc) = prim.get(&semantic) else {
+            return Ok(None);
+        };
+        let types = &[DataType::F32, DataType::U8, DataType::U16];
+        Ok(match acc.dimensions() {
+            Dimensions::Vec3 => self
+                .attribute::<3>(prim, draco, semantic, what, types)?
+                .map(|c| c.into_iter().map(|[r, g, b]| [r, g, b, 1.0]).collect()),
+            _ => self.attribute::<4>(prim, draco, semantic, what, types)?,
+        })
+    }
+
+    /// Attribute `semantic` of `prim` as `N` floats per vertex (its accessor's component type
+    /// one of `types`, integers converted as its `normalized` flag says), or `None` when the
+    /// primitive has none: from the Draco stream `draco` when that carries it, else from the
+    /// accessor, checked.
+    pub(super) fn attribute<const N: usize>(
+        &self,
+        prim: &gltf::Primitive,
+        draco: Option<&Draco>,
+        semantic: gltf::Semantic,
+        what: &str,
+        types: &[DataType],
+    ) -> Result<Option<Vec<[f32; N]>>>
+    where
+        [f32; N]: Item,
+        [i8; N]: Item,
+        [u8; N]: Item,
+        [i16; N]: Item,
+        [u16; N]: Item,
+        [u32; N]: Item,
+    {
+        let Some(acc) = prim.get(&semantic) else {
+            return Ok(None);
+        };
+        let name = semantic.to_string();
+        let what = format!("{what} {name}");
+        let dims = match N {
+            1 => Dimensions::Scalar,
+            2 => Dimensions::Vec2,
+            3 => Dimensions::Vec3,
+            _ => Dimensions::Vec4,
+        };
+        let decoded = draco.and_then(|d| d.attribute::<N>(&name, acc.normalized()));
+        let rows = match decoded {
+            Some(rows) => {
+                let rows = rows.map_err(|m| self.err(format!("{what}: {m}")))?;
+                if let Some(k) = rows.iter().position(|v| v.iter().any(|x| !x.is_finite())) {
+                    return Err(self.err(format!("{what} has a non-finite value at index {k}")));
+                }
+                rows
+            }
+            None => self.vectors(&acc, &what, dims, types)?,
+        };
+        Ok(Some(rows))
     }
 
     /// The texture coordinates of `material`'s base-colour texture on `prim` (the set it
@@ -227,6 +292,7 @@ impl Loader<'_> {
     fn texcoords(
         &mut self,
         prim: &gltf::Primitive,
+        draco: Option<&Draco>,
         what: &str,
         material: i32,
     ) -> Result<Option<Vec<[f32; 2]>>> {
@@ -237,13 +303,9 @@ impl Loader<'_> {
         else {
             return Ok(None);
         };
-        match prim.get(&gltf::Semantic::TexCoords(set)) {
-            Some(acc) => Ok(Some(self.vectors(
-                &acc,
-                &format!("{what} TEXCOORD_{set}"),
-                Dimensions::Vec2,
-                TEXCOORD_TYPES,
-            )?)),
+        let semantic = gltf::Semantic::TexCoords(set);
+        match self.attribute(prim, draco, semantic, what, TEXCOORD_TYPES)? {
+            Some(uv) => Ok(Some(uv)),
             None => {
                 self.warn(format!(
                     "{what} has no TEXCOORD_{set}, which its material's base-colour texture \

@@ -8,6 +8,7 @@ use glam::DMat4;
 use gltf::accessor::{DataType, Dimensions};
 
 use super::accessors::{NORMAL_TYPES, POSITION_TYPES};
+use super::draco::Draco;
 use super::primitives::Vertices;
 use super::Loader;
 use crate::error::Result;
@@ -164,7 +165,8 @@ impl Loader<'_> {
         }
         if let Some(s) = d.skin {
             let count = self.rigging.skins[s].joints.len();
-            let (joints, weights, sets) = self.influences(prim, what, n, count)?;
+            let (joints, weights, sets) =
+                self.influences(prim, v.draco.as_ref(), what, n, count)?;
             let width = 4 * sets;
             if width > d.influences {
                 pad(&mut d.joints, d.influences, width);
@@ -191,6 +193,7 @@ impl Loader<'_> {
     fn influences(
         &mut self,
         prim: &gltf::Primitive,
+        draco: Option<&Draco>,
         what: &str,
         n: usize,
         count: usize,
@@ -220,16 +223,29 @@ impl Loader<'_> {
             self.check_accessor(&ja, &j_what, &[Dimensions::Vec4], &types)?;
             let types = [DataType::F32, DataType::U8, DataType::U16];
             self.check_accessor(&wa, &w_what, &[Dimensions::Vec4], &types)?;
-            let js: Vec<[u16; 4]> = reader
-                .read_joints(set as u32)
-                .ok_or_else(|| self.err(format!("{j_what} could not be read")))?
-                .into_u16()
-                .collect();
-            let ws: Vec<[f32; 4]> = reader
-                .read_weights(set as u32)
-                .ok_or_else(|| self.err(format!("{w_what} could not be read")))?
-                .into_f32()
-                .collect();
+            let decoded = |name: &str, normalized: bool| {
+                draco.and_then(|d| d.attribute::<4>(name, normalized))
+            };
+            let js: Vec<[u16; 4]> = match decoded(&format!("JOINTS_{set}"), false) {
+                Some(rows) => rows
+                    .map_err(|m| self.err(format!("{j_what}: {m}")))?
+                    .into_iter()
+                    .map(|j| j.map(|x| x.clamp(0.0, 65535.0) as u16))
+                    .collect(),
+                None => reader
+                    .read_joints(set as u32)
+                    .ok_or_else(|| self.err(format!("{j_what} could not be read")))?
+                    .into_u16()
+                    .collect(),
+            };
+            let ws: Vec<[f32; 4]> = match decoded(&format!("WEIGHTS_{set}"), wa.normalized()) {
+                Some(rows) => rows.map_err(|m| self.err(format!("{w_what}: {m}")))?,
+                None => reader
+                    .read_weights(set as u32)
+                    .ok_or_else(|| self.err(format!("{w_what} could not be read")))?
+                    .into_f32()
+                    .collect(),
+            };
             if js.len() != n || ws.len() != n {
                 return Err(self.err(format!(
                     "{what}: JOINTS_{set} and WEIGHTS_{set} have {} and {} entries for {n} vertices",
