@@ -1,4 +1,5 @@
-"""Adapters to the tools users cross-check against: pyrender (OpenGL raster), raw Embree
+"""Adapters to the tools users cross-check against: pyrender (OpenGL raster, depth and unlit
+colour), trimesh (a file's own normals), raw Embree
 (through embreex) and Open3D's ``RaycastingScene`` (Embree on every core). Tests and
 ``scenesample.bench`` use these, so each tool's quirks are handled in exactly one place. All are
 optional dependencies (``pip install scenesample[test]``).
@@ -38,7 +39,9 @@ from ._scene import Scene
 
 __all__ = [
     "PyrenderReference",
+    "FileNormals",
     "pyrender_depth",
+    "pyrender_unlit",
     "EmbreeReference",
     "Open3DReference",
     "embree_memory",
@@ -181,6 +184,79 @@ def pyrender_depth(
         scene, cameras[0].width, cameras[0].height, multisample=multisample, origin=origin
     ) as r:
         return r.depth(cameras)
+
+
+def pyrender_unlit(path: Any, cameras: Sequence[Camera]) -> tuple[np.ndarray, np.ndarray]:
+    """What pyrender draws of the file at ``path`` (read by trimesh, as pyrender's users do),
+    unlit (``RenderFlags.FLAT``: each pixel the material's base colour factor times its
+    texture, as glTF viewers sample it), single-sampled at pixel centres, both sides of every
+    face: ((n, H, W, 3) uint8 sRGB colour, (n, H, W) bool coverage) per perspective camera of
+    one resolution. Its clip planes come from the file's bounds, widened; a scene that far
+    from the origin loses float32 precision in pyrender, not here."""
+    pr = _import_pyrender()
+    import trimesh
+
+    loaded = trimesh.load(str(path), force="scene")
+    scene = pr.Scene.from_trimesh_scene(loaded, ambient_light=np.ones(3))
+    bounds = np.asarray(loaded.bounds, dtype=np.float64)
+    w, h = cameras[0].width, cameras[0].height
+    node = scene.add(pr.PerspectiveCamera(yfov=1.0, aspectRatio=w / h), pose=np.eye(4))
+    colors = np.zeros((len(cameras), h, w, 3), np.uint8)
+    covered = np.zeros((len(cameras), h, w), bool)
+    flags = pr.RenderFlags.FLAT | pr.RenderFlags.SKIP_CULL_FACES
+    with _single_sample(pr):
+        renderer = pr.OffscreenRenderer(w, h)
+        try:
+            for i, cam in enumerate(cameras):
+                if (cam.width, cam.height) != (w, h) or cam.yfov is None:
+                    raise ValueError("pyrender_unlit renders perspective cameras of one size")
+                node.camera.yfov = cam.yfov
+                node.camera.znear, node.camera.zfar = _clip_planes(cam, bounds)
+                scene.set_pose(node, np.asarray(cam.pose, dtype=np.float64))
+                color, depth = renderer.render(scene, flags=flags)
+                colors[i] = color[..., :3]
+                covered[i] = depth > 0
+        finally:
+            renderer.delete()
+    return colors, covered
+
+
+class FileNormals:
+    """The normals a file gives its vertices, read by trimesh (``process=False``: NORMAL as
+    stored), placed in world space by the inverse transpose of each node's transform, and
+    interpolated at surface points: an independent reading of what scenesample's
+    ``shading_normal`` should be."""
+
+    def __init__(self, path: Any) -> None:
+        import trimesh
+
+        loaded = trimesh.load(str(path), force="scene", process=False)
+        vertices, faces, normals, offset = [], [], [], 0
+        for name in loaded.graph.nodes_geometry:
+            transform, geometry = loaded.graph[name]
+            mesh = loaded.geometry[geometry]
+            if not isinstance(mesh, trimesh.Trimesh):
+                continue
+            linear = np.asarray(transform, dtype=np.float64)[:3, :3]
+            v = np.asarray(mesh.vertices, dtype=np.float64) @ linear.T + transform[:3, 3]
+            n = np.asarray(mesh.vertex_normals, dtype=np.float64) @ np.linalg.inv(linear)
+            vertices.append(v)
+            faces.append(np.asarray(mesh.faces) + offset)
+            normals.append(n / np.linalg.norm(n, axis=1, keepdims=True))
+            offset += len(v)
+        self.mesh = trimesh.Trimesh(np.concatenate(vertices), np.concatenate(faces), process=False)
+        self.normals = np.concatenate(normals)
+
+    def at(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """((N, 3) unit normals interpolated at the surface point nearest each of ``points``,
+        (N,) that point's distance)."""
+        import trimesh
+
+        near, distance, triangle = trimesh.proximity.closest_point(self.mesh, points)
+        corners = self.mesh.faces[triangle]
+        b = trimesh.triangles.points_to_barycentric(self.mesh.triangles[triangle], near)
+        n = (self.normals[corners] * b[:, :, None]).sum(1)
+        return n / np.linalg.norm(n, axis=1, keepdims=True), distance
 
 
 class EmbreeReference:

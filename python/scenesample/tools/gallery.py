@@ -1,6 +1,6 @@
 """One labelled panel per paper, each on a shared real scene (procedural stand-ins where
-``../shared/scenes`` is absent), and one accuracy-vs-time sweep: what the package's methods do,
-at a glance.
+``../shared/scenes`` is absent), one of what every sample carries (texture colour and shading
+normals), and one accuracy-vs-time sweep: what the package's methods do, at a glance.
 
     python -m scenesample.gallery [--out DIR] [--quick]     # writes DIR/gallery.png
 
@@ -30,6 +30,7 @@ SCENES = {
     "reflections": ("khr_transmission_test", lambda: ss.scenes.reflective_room(spheres=6)),
     "field": ("khr_simple_instancing", ss.scenes.turtles),
     "impostors": ("stanford_bunny", lambda: ss.scenes.shapes(seed=2, detail=2)),
+    "samples": ("khr_toy_car", lambda: ss.scenes.shapes(seed=3, detail=2)),
 }
 NEW = np.array([1.0, 0.55, 0.1])  # the tint of samples a non-redundant image adds
 SIZE, QUICK = 256, 96  # panel image sizes: the README's, and --quick's
@@ -136,6 +137,31 @@ def field_panel(size: int) -> dict[str, Any]:
     }
 
 
+def samples_panel(size: int) -> dict[str, Any]:
+    """What every sample carries, as viewers draw it: the base-colour texture sampled per
+    pixel (filtered for its footprint), and the file's normals interpolated (shading normals),
+    against the faces' own normals."""
+    scene, name = _scene("samples")
+    cam = _view(scene, size, (0.5, 0.45, 0.9), 0.75)
+    img = ss.discretize(scene, cam, backend="gpu")
+    mask = img.mask[0]
+    n = img.shading_normal[0]
+    shown = np.where(mask[..., None], (n * 0.5 + 0.5) * 255, 0).round().astype(np.uint8)
+    cos = np.clip((n[mask] * img.normal[0][mask]).sum(-1), -1, 1)
+    textured = sum(m["base_color_textured"] for m in scene.materials)
+    resolve = img.timings.get("resolve", 0.0) * 1e3
+    return {
+        "title": f"every sample's colour and normal ({name})",
+        "images": [linear_to_srgb(img.color[0]), shown],
+        "labels": [
+            f"color: {textured} textured materials sampled per pixel (bilinear / trilinear by "
+            f"footprint); resolve {resolve:.0f} ms",
+            f"shading_normal: the file's normals interpolated; "
+            f"{np.degrees(np.median(np.arccos(cos))):.1f}° from the faces' at the median",
+        ],
+    }
+
+
 def impostors_panel(size: int) -> dict[str, Any]:
     scene, name = _scene("impostors")
     # --quick's 96-pixel panel shows each cell a few pixels wide: 32² impostor images are
@@ -197,11 +223,12 @@ def make(out: Path, size: int = SIZE) -> Path:
         reflections_panel(size),
         field_panel(size),
         impostors_panel(size),
+        samples_panel(size),
     ]
     sweep = tradeoff_panel()
     fig = plt.figure(figsize=(18, 8.5), dpi=100)
     grid = fig.add_gridspec(2, 3, hspace=0.3, wspace=0.22)
-    spots = [grid[0, 0], grid[0, 1], grid[0, 2], grid[1, 0]]
+    spots = [grid[0, 0], grid[0, 1], grid[0, 2], grid[1, 0], grid[1, 1]]
     for spot, p in zip(spots, panels):
         sub = spot.subgridspec(1, 2, wspace=0.04)
         for k, (img, label) in enumerate(zip(p["images"], p["labels"])):
@@ -212,11 +239,12 @@ def make(out: Path, size: int = SIZE) -> Path:
             ax.set_xlabel(textwrap.fill(label, 34), fontsize=8)
             if k == 0:
                 ax.set_title(p["title"], fontsize=10, loc="left")
-    ax = fig.add_subplot(grid[1, 1:])
+    ax = fig.add_subplot(grid[1, 2])
     ss.plot.tradeoff(sweep["table"], ax=ax)
     ax.set_title(sweep["title"], fontsize=10, loc="left")
     ax.set_title("")  # the plot's own centred title: the panel's says it
-    fig.suptitle("scenesample: one panel per paper", fontsize=13, x=0.01, y=0.96, ha="left")
+    title = "scenesample: one panel per paper, and what every sample carries"
+    fig.suptitle(title, fontsize=13, x=0.01, y=0.96, ha="left")
     out.mkdir(parents=True, exist_ok=True)
     path = out / "gallery.png"
     fig.savefig(path, bbox_inches="tight")

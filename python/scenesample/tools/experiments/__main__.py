@@ -1,13 +1,22 @@
 """``python -m scenesample.experiments
-{sampling,shadows,reconstruction,epr,epr_animation,visibility_field,impostors} [options]``; see each
-module."""
+{sampling,shadows,reconstruction,epr,epr_animation,visibility_field,impostors,viewers}
+[options]``; see each module."""
 
 from __future__ import annotations
 
 import argparse
 from typing import Optional
 
-from . import epr, epr_animation, impostors, reconstruction, sampling, shadows, visibility_field
+from . import (
+    epr,
+    epr_animation,
+    impostors,
+    reconstruction,
+    sampling,
+    shadows,
+    viewers,
+    visibility_field,
+)
 
 EXPERIMENTS = {
     "sampling": sampling,
@@ -17,6 +26,7 @@ EXPERIMENTS = {
     "epr_animation": epr_animation,
     "visibility_field": visibility_field,
     "impostors": impostors,
+    "viewers": viewers,
 }
 
 
