@@ -219,11 +219,12 @@ impl<'a> Surfaces<'a> {
         let rho = match footprint {
             Footprint::Point => 0.0,
             Footprint::Barycentric { dx, dy } => {
+                // Squared sides, one square root (glam's length is a libm `hypot` call).
                 let side = |d: [f64; 2]| {
                     let duv = DVec2::from(r.apply_linear((e1 * d[0] + e2 * d[1]).to_array()));
-                    (duv * size).length()
+                    (duv * size).length_squared()
                 };
-                side(dx).max(side(dy))
+                side(dx).max(side(dy)).sqrt()
             }
             Footprint::World(s) => {
                 let (a1, a2) = (

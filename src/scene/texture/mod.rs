@@ -400,13 +400,13 @@ fn log2(x: f64) -> f64 {
     exponent as f64 + 2.0 * atanh * std::f64::consts::LOG2_E
 }
 
-/// ⌊x⌋ of a finite `x` within ±2^62, without a call into libm (the x86-64 baseline has no
-/// rounding instruction for `f64::floor`).
+/// ⌊x⌋ of `x` within ±2^62, without a call into libm (the x86-64 baseline has no rounding
+/// instruction for `f64::floor`); saturated beyond, 0 for NaN.
 #[inline(always)]
 fn floor(x: f64) -> i64 {
     let i = x as i64;
     if (i as f64) > x {
-        i - 1
+        i.saturating_sub(1)
     } else {
         i
     }
