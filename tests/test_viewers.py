@@ -23,7 +23,8 @@ def test_colour_and_normals_agree_with_pyrender_and_the_file(name, gpu):
     pytest.importorskip("pyrender")
     if name not in SHARED:
         pytest.skip(f"{name} is not among the shared scenes")
-    for backend in ("gpu", "cpu"):
+    # The backends share the resolve: both on the textured scene, the CPU's on the other.
+    for backend in ("gpu", "cpu") if name == "balloon" else ("cpu",):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ss.SceneWarning)
             row, _ = compare(name, 512, backend)
