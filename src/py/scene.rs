@@ -273,7 +273,7 @@ impl PyScene {
         self.inner
             .textures()
             .iter()
-            .map(|t| rows_array(py, t.texels(), &[t.height(), t.width(), 4]))
+            .map(|t| rows_array(py, &t.texels(), &[t.height(), t.width(), 4]))
             .collect()
     }
 

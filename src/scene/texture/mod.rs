@@ -5,7 +5,13 @@
 //! trilinearly between the two mip levels that bracket the footprint's level of detail
 //! λ = log2 ρ, ρ the footprint's longer side in texels (the isotropic rule of OpenGL §8.14.1).
 //! The mip levels halve each side (rounded down, at least 1) and average their parent's 2×2
-//! texels in linear space (3 texels across an odd side), stored sRGB encoded again.
+//! texels in linear space (3 texels across an odd side).
+//!
+//! Every level is stored decoded, as linear 16-bit RGBA (the sRGB decode done once, when the
+//! texture is made): a lookup then converts and blends four texels as four-lane vectors, with
+//! no table per channel. 16 bits hold every 8-bit sRGB value apart (the closest two, 0 and 1,
+//! are 20 steps apart) and give it back exactly ([`Texture::texels`]); a texel reads within
+//! 8e-6 of its exact decode.
 //!
 //! A material also keeps its texture's mean texel, for the methods that need one colour per
 //! material (`Material::base_color`).
@@ -14,19 +20,28 @@ mod decode;
 
 use std::sync::LazyLock;
 
+use glam::Vec4;
+
 pub use decode::{decode, Rgba8};
 
-/// 8-bit sRGB to linear, per value (IEC 61966-2-1).
-static SRGB_TO_LINEAR: LazyLock<[f32; 256]> = LazyLock::new(|| {
-    std::array::from_fn(|i| {
-        let c = i as f64 / 255.0;
-        (if c <= 0.04045 {
-            c / 12.92
-        } else {
-            ((c + 0.055) / 1.055).powf(2.4)
-        }) as f32
-    })
+/// 8-bit sRGB to linear, per value.
+static SRGB_TO_LINEAR: LazyLock<[f32; 256]> =
+    LazyLock::new(|| std::array::from_fn(|i| srgb8_to_linear_f64(i as u8) as f32));
+
+/// 8-bit sRGB to linear 16-bit (0..65535), rounded to the nearest value.
+static SRGB_TO_LINEAR16: LazyLock<[u16; 256]> = LazyLock::new(|| {
+    std::array::from_fn(|i| (srgb8_to_linear_f64(i as u8) * 65535.0).round() as u16)
 });
+
+/// 8-bit sRGB to linear, in f64 (IEC 61966-2-1).
+fn srgb8_to_linear_f64(v: u8) -> f64 {
+    let c = f64::from(v) / 255.0;
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
 
 /// Linear [0, 1] to 8-bit sRGB, rounded to the nearest value.
 fn linear_to_srgb8(v: f64) -> u8 {
@@ -199,12 +214,19 @@ impl TextureRef {
     }
 }
 
-/// One mip level: `width`×`height` sRGB-encoded RGBA8 texels, row-major from the top.
+/// One mip level: `width`×`height` texels, linear RGB and alpha in 16 bits (0..65535 for
+/// [0, 1]), row-major from the top.
 #[derive(Debug, Clone, PartialEq)]
 struct Level {
     width: usize,
     height: usize,
-    texels: Vec<[u8; 4]>,
+    texels: Vec<[u16; 4]>,
+    /// The sides as floats, and less one: the lookups' constants (a float from an integer
+    /// costs several instructions on x86-64's baseline).
+    size: [f64; 2],
+    last: [f64; 2],
+    /// The level's number in the chain, as a float.
+    depth: f64,
 }
 
 /// A decoded texture and its mip chain, and its mean texel (linear RGB, alpha as stored).
@@ -226,11 +248,21 @@ impl Texture {
             ));
         }
         let mean = mean_linear(&image.texels);
-        let mut levels = vec![Level {
-            width: w,
-            height: h,
-            texels: image.texels,
-        }];
+        let lut = &*SRGB_TO_LINEAR16;
+        let texels = image
+            .texels
+            .iter()
+            .map(|t| {
+                let a = u16::from(t[3]) * 257;
+                [
+                    lut[t[0] as usize],
+                    lut[t[1] as usize],
+                    lut[t[2] as usize],
+                    a,
+                ]
+            })
+            .collect();
+        let mut levels = vec![Level::new(w, h, texels, 0)];
         while let Some(next) = levels.last().and_then(Level::half) {
             levels.push(next);
         }
@@ -243,9 +275,17 @@ impl Texture {
     pub fn height(&self) -> usize {
         self.levels[0].height
     }
-    /// Level 0's texels, sRGB-encoded RGBA8, row-major from the top.
-    pub fn texels(&self) -> &[[u8; 4]] {
-        &self.levels[0].texels
+    /// Level 0's texels, sRGB-encoded RGBA8, row-major from the top: the image the texture
+    /// was made from, exactly.
+    pub fn texels(&self) -> Vec<[u8; 4]> {
+        self.levels[0]
+            .texels
+            .iter()
+            .map(|t| {
+                let c = |k: usize| linear_to_srgb8(f64::from(t[k]) / 65535.0);
+                [c(0), c(1), c(2), (t[3] / 257) as u8]
+            })
+            .collect()
     }
     /// The mean texel: linear RGB (sRGB decoded) and alpha as stored, each in [0, 1].
     pub fn mean(&self) -> [f32; 4] {
@@ -265,30 +305,43 @@ impl Texture {
             } else {
                 s.mag_nearest
             };
-            return self.levels[0].filter(uv, nearest, s.wrap);
+            return rgb(self.levels[0].filter(uv, nearest, s.wrap));
         }
         let lambda = log2(rho);
-        let top = (self.levels.len() - 1) as f64;
+        let top = self.levels[self.levels.len() - 1].depth;
         if s.mipmap == Mipmap::Nearest {
             // OpenGL's nearest level: ceil(λ + ½) − 1, within the chain.
-            let d = ((lambda + 0.5).ceil() - 1.0).clamp(0.0, top) as usize;
-            return self.levels[d].filter(uv, s.min_nearest, s.wrap);
+            let d = ((lambda + 0.5).ceil() - 1.0).clamp(0.0, top) as i64 as usize;
+            return rgb(self.levels[d].filter(uv, s.min_nearest, s.wrap));
         }
         // λ > 0 here, so truncation is its floor.
         let lambda = lambda.min(top);
-        let d = lambda as usize;
+        let d = lambda as i64;
         let f = (lambda - d as f64) as f32;
+        let d = d as usize;
         let a = self.levels[d].filter(uv, s.min_nearest, s.wrap);
         // The next level adds nothing that an 8-bit texel could show.
         if d + 1 >= self.levels.len() || f < 1.0 / 1024.0 {
-            return a;
+            return rgb(a);
         }
         let b = self.levels[d + 1].filter(uv, s.min_nearest, s.wrap);
-        std::array::from_fn(|k| a[k] + (b[k] - a[k]) * f)
+        rgb(a + (b - a) * f)
     }
 }
 
 impl Level {
+    fn new(width: usize, height: usize, texels: Vec<[u16; 4]>, depth: usize) -> Level {
+        let (fw, fh) = (width as f64, height as f64);
+        Level {
+            width,
+            height,
+            texels,
+            size: [fw, fh],
+            last: [fw - 1.0, fh - 1.0],
+            depth: depth as f64,
+        }
+    }
+
     /// The next level: sides halved (rounded down, at least 1), each texel the linear mean of
     /// the 2×2 (3 across an odd side) it covers; `None` past a 1×1 level.
     fn half(&self) -> Option<Level> {
@@ -306,79 +359,122 @@ impl Level {
                 2 * i..2 * i + 2
             }
         };
-        let lut = &*SRGB_TO_LINEAR;
         let texels = (0..w * h)
             .map(|k| {
                 let (x, y) = (k % w, k / w);
-                let mut sum = [0.0f64; 4];
-                let mut count = 0.0;
+                let mut sum = [0u32; 4];
+                let mut count = 0;
                 for sy in span(y, self.height, h) {
                     for sx in span(x, self.width, w) {
                         let t = self.texels[sy * self.width + sx];
-                        for c in 0..3 {
-                            sum[c] += f64::from(lut[t[c] as usize]);
+                        for c in 0..4 {
+                            sum[c] += u32::from(t[c]);
                         }
-                        sum[3] += f64::from(t[3]) / 255.0;
-                        count += 1.0;
+                        count += 1;
                     }
                 }
-                let [r, g, b, a] = sum.map(|v| v / count);
-                [
-                    linear_to_srgb8(r),
-                    linear_to_srgb8(g),
-                    linear_to_srgb8(b),
-                    (a * 255.0).round() as u8,
-                ]
+                // The mean, rounded to the nearest (integers: the same on every machine).
+                sum.map(|v| ((v + count / 2) / count) as u16)
             })
             .collect();
-        Some(Level {
-            width: w,
-            height: h,
-            texels,
-        })
+        Some(Level::new(w, h, texels, self.depth as usize + 1))
     }
 
-    /// Texel `(x, y)` (already wrapped into the level) decoded: linear RGB.
+    /// Texel `(x, y)` (already wrapped into the level): linear RGBA in units of 1/65535.
     #[inline(always)]
-    fn texel(&self, x: usize, y: usize, lut: &[f32; 256]) -> [f32; 3] {
-        let t = self.texels[y * self.width + x];
-        [lut[t[0] as usize], lut[t[1] as usize], lut[t[2] as usize]]
+    fn texel(&self, x: usize, y: usize) -> Vec4 {
+        self.decoded(y * self.width + x)
+    }
+
+    /// Texel `k` (row-major): linear RGBA in units of 1/65535.
+    #[inline(always)]
+    fn decoded(&self, k: usize) -> Vec4 {
+        widen(self.texels[k])
     }
 
     /// The level filtered at `uv`: the nearest texel, or the bilinear blend of the four around
     /// it (texel centres at half-integers of `uv · size`).
-    #[inline]
-    fn filter(&self, uv: [f64; 2], nearest: bool, wrap: [Wrap; 2]) -> [f32; 3] {
-        let lut = &*SRGB_TO_LINEAR;
+    #[inline(always)]
+    fn filter(&self, uv: [f64; 2], nearest: bool, wrap: [Wrap; 2]) -> Vec4 {
+        let (x, y) = (uv[0] * self.size[0] - 0.5, uv[1] * self.size[1] - 0.5);
+        // Most lookups fall between four texels inside the level: no wrap, one index. The
+        // same texels and weights as the general path below, which wraps each corner.
+        if !nearest && x >= 0.0 && y >= 0.0 && x < self.last[0] && y < self.last[1] {
+            // Both within [0, 2^53): truncation is the floor, through i64 (one instruction).
+            let (x0, y0) = (x as i64, y as i64);
+            let (fx, fy) = ((x - x0 as f64) as f32, (y - y0 as f64) as f32);
+            let k = y0 as usize * self.width + x0 as usize;
+            let a = self.decoded(k);
+            let b = self.decoded(k + 1);
+            let c = self.decoded(k + self.width);
+            let d = self.decoded(k + self.width + 1);
+            return blend(a, b, c, d, fx, fy);
+        }
+        self.filter_wrapped(uv, nearest, wrap)
+    }
+
+    /// [`Level::filter`] of any coordinate: each texel's index wrapped on its own.
+    #[inline(never)]
+    fn filter_wrapped(&self, uv: [f64; 2], nearest: bool, wrap: [Wrap; 2]) -> Vec4 {
         let (w, h) = (self.width as i64, self.height as i64);
         // Far outside the image, wrap first so that the texel arithmetic stays in range.
         let (x, y) = (
-            reduce(uv[0] * self.width as f64, self.width, wrap[0]),
-            reduce(uv[1] * self.height as f64, self.height, wrap[1]),
+            reduce(uv[0] * self.size[0], self.width, wrap[0]),
+            reduce(uv[1] * self.size[1], self.height, wrap[1]),
         );
         // What no wrap brings near the image (not a number, or beyond f64's integers).
         if !(x.abs() < 1e15 && y.abs() < 1e15) {
-            return self.texel(0, 0, lut);
+            return self.texel(0, 0);
         }
         if nearest {
             let (x, y) = (floor(x), floor(y));
-            return self.texel(wrap[0].index(x, w), wrap[1].index(y, h), lut);
+            return self.texel(wrap[0].index(x, w), wrap[1].index(y, h));
         }
         let (x, y) = (x - 0.5, y - 0.5);
         let (x0, y0) = (floor(x), floor(y));
         let (fx, fy) = ((x - x0 as f64) as f32, (y - y0 as f64) as f32);
         let (xa, xb) = (wrap[0].index(x0, w), wrap[0].index(x0 + 1, w));
         let (ya, yb) = (wrap[1].index(y0, h), wrap[1].index(y0 + 1, h));
-        let a = self.texel(xa, ya, lut);
-        let b = self.texel(xb, ya, lut);
-        let c = self.texel(xa, yb, lut);
-        let d = self.texel(xb, yb, lut);
-        std::array::from_fn(|k| {
-            let top = a[k] + (b[k] - a[k]) * fx;
-            let bottom = c[k] + (d[k] - c[k]) * fx;
-            top + (bottom - top) * fy
-        })
+        let at = |x: usize, y: usize| self.texel(x, y);
+        blend(at(xa, ya), at(xb, ya), at(xa, yb), at(xb, yb), fx, fy)
     }
+}
+
+/// The bilinear blend of texels `a b` (top row) and `c d` (bottom row) at fractions `fx, fy`.
+#[inline(always)]
+fn blend(a: Vec4, b: Vec4, c: Vec4, d: Vec4, fx: f32, fy: f32) -> Vec4 {
+    let top = a + (b - a) * fx;
+    let bottom = c + (d - c) * fx;
+    top + (bottom - top) * fy
+}
+
+/// A 16-bit texel as four floats (exact: every u16 is an f32).
+#[inline(always)]
+fn widen(t: [u16; 4]) -> Vec4 {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::*;
+        // SSE2, part of every x86-64: zero-extend the four lanes to 32 bits, convert.
+        // SAFETY: the load reads the texel's 8 bytes and nothing else; SSE2 is always present.
+        unsafe {
+            let v = _mm_loadl_epi64(t.as_ptr().cast());
+            Vec4::from(_mm_cvtepi32_ps(_mm_unpacklo_epi16(v, _mm_setzero_si128())))
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        Vec4::new(t[0] as f32, t[1] as f32, t[2] as f32, t[3] as f32)
+    }
+}
+
+/// 1/65535: a blend of 16-bit texels to [0, 1].
+const UNIT16: f32 = 1.0 / 65535.0;
+
+/// The RGB of a blend of 16-bit texels, in [0, 1].
+#[inline(always)]
+fn rgb(v: Vec4) -> [f32; 3] {
+    let v = v * UNIT16;
+    [v.x, v.y, v.z]
 }
 
 /// log2 of a positive, normal `x` (> 1 here), to 2e-5: the exponent from the bits, the
@@ -465,11 +561,11 @@ mod tests {
         let t = Texture::new(checker(8)).unwrap();
         assert_eq!(t.levels(), 4);
         assert_eq!(t.mean(), [0.5, 0.5, 0.5, 1.0]);
-        // Level 1 averages black and white in linear space: 0.5 linear, 188 in sRGB.
+        // Level 1 averages black and white in linear space: 0.5 linear, stored as 32768/65535.
         assert!(t.levels[1]
             .texels
             .iter()
-            .all(|x| *x == [188, 188, 188, 255]));
+            .all(|x| *x == [32768, 32768, 32768, 65535]));
         let odd = Texture::new(Rgba8 {
             width: 3,
             height: 1,
@@ -478,6 +574,25 @@ mod tests {
         .unwrap();
         assert_eq!(odd.levels(), 2);
         assert_eq!((odd.levels[1].width, odd.levels[1].height), (1, 1));
+    }
+
+    #[test]
+    fn every_srgb_value_is_stored_apart_and_read_back_exactly() {
+        let texels: Vec<[u8; 4]> = (0..=255u8).map(|v| [v, 255 - v, v, v]).collect();
+        let t = Texture::new(Rgba8 {
+            width: 256,
+            height: 1,
+            texels: texels.clone(),
+        })
+        .unwrap();
+        assert_eq!(t.texels(), texels);
+        // Each stored value within one step of its exact decode, and strictly increasing.
+        let stored: Vec<u16> = t.levels[0].texels.iter().map(|x| x[0]).collect();
+        for (v, s) in stored.iter().enumerate() {
+            let exact = srgb8_to_linear_f64(v as u8) * 65535.0;
+            assert!((f64::from(*s) - exact).abs() <= 0.5, "{v}: {s} vs {exact}");
+        }
+        assert!(stored.windows(2).all(|w| w[0] < w[1]));
     }
 
     #[test]
