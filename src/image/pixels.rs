@@ -372,13 +372,13 @@ fn resolve_one(
     *px.position = s.point.as_vec3().to_array();
     *px.normal = plane.normal.as_vec3().to_array();
     *px.shading_normal = plane.corners.shading_normal(s.b);
-    *px.color = match surfaces.texture_of(t) {
-        Some(r) => {
-            let footprint = plane.footprint(cam, (x, y), s.unclamped);
-            surfaces.textured_color(&plane.corners, t, r, s.b, footprint)
-        }
-        None => plane.corners.tint(s.b).to_array(),
+    // Only a texture's lookup needs the footprint.
+    let footprint = if plane.corners.textured() {
+        plane.footprint(cam, (x, y), s.unclamped)
+    } else {
+        Footprint::Point
     };
+    *px.color = surfaces.color_of(&plane.corners, s.b, footprint);
 }
 
 /// Give the pixels `changed` (flat indices over all images) of resolved images `img` the

@@ -13,9 +13,9 @@
 
 use std::sync::Arc;
 
-use glam::{DVec2, DVec3, Vec2, Vec3};
+use glam::{DVec2, DVec3, Vec3};
 
-use super::texture::TextureRef;
+use super::texture::{Sampler, TextureRef};
 use super::Scene;
 
 /// The scene's unit shading normal per vertex (zero only for a vertex that no face with area
@@ -68,16 +68,62 @@ pub enum Footprint {
 }
 
 /// A triangle's corner attributes: the vertices' base colours and unit shading normals, in
-/// corner order. What a sample of the triangle interpolates; the image resolve keeps one per
-/// triangle with its plane, so that a pixel reads one record.
+/// corner order, and how its material's texture maps onto it. What a sample of the triangle
+/// interpolates; the image resolve keeps one per triangle with its plane, so that a pixel reads
+/// one record.
 #[derive(Debug, Clone, Copy)]
 pub struct Corners {
     colors: [Vec3; 3],
     normals: [Vec3; 3],
-    /// Texture coordinates (zero in a scene without them).
-    uv: [Vec2; 3],
     /// The triangle's unit geometric normal (zero when degenerate), where the normals cancel.
     face: Vec3,
+    /// Its material's base-colour texture on it, if it has one.
+    map: Option<TexMap>,
+}
+
+/// A base-colour texture on one triangle: the texture coordinate (through the material's
+/// `KHR_texture_transform`, an affine map, so applied to the corners once) at corner 0 and
+/// its changes along `b1` and `b2`, the same changes in level-0 texels, and the texels per
+/// unit of length on the surface. What a lookup needs, without the material.
+#[derive(Debug, Clone, Copy)]
+struct TexMap {
+    texture: usize,
+    sampler: Sampler,
+    at: DVec2,
+    along: [DVec2; 2],
+    texels: [DVec2; 2],
+    /// √(texel area / surface area): a square of side s on the surface covers s·per_unit
+    /// texels on a side (zero for a triangle without area).
+    per_unit: f64,
+}
+
+impl TexMap {
+    fn new(surfaces: &Surfaces, t: usize, r: &TextureRef) -> Option<TexMap> {
+        let scene = surfaces.scene;
+        let tex = scene.textures().get(r.texture)?;
+        let uv = scene.texcoords();
+        let [u0, u1, u2] = scene.faces()[t]
+            .map(|k| uv.map_or(DVec2::ZERO, |uv| DVec2::from(uv[k as usize].map(f64::from))));
+        let linear = |d: DVec2| DVec2::from(r.apply_linear(d.to_array()));
+        let along = [linear(u1 - u0), linear(u2 - u0)];
+        let size = DVec2::new(tex.width() as f64, tex.height() as f64);
+        let texels = along.map(|a| a * size);
+        let [p0, p1, p2] = scene.triangle(t);
+        let area = (p1 - p0).cross(p2 - p0).length();
+        let per_unit = if area > 0.0 {
+            (texels[0].perp_dot(texels[1]).abs() / area).sqrt()
+        } else {
+            0.0
+        };
+        Some(TexMap {
+            texture: r.texture,
+            sampler: r.sampler,
+            at: DVec2::from(r.apply(u0.to_array())),
+            along,
+            texels,
+            per_unit: if per_unit.is_finite() { per_unit } else { 0.0 },
+        })
+    }
 }
 
 impl Corners {
@@ -86,13 +132,21 @@ impl Corners {
         let scene = surfaces.scene;
         let f = scene.faces()[t];
         let (colors, ns) = (scene.colors(), &surfaces.normals.0);
-        let uv = scene.texcoords();
         Corners {
             colors: f.map(|k| Vec3::from(colors[k as usize])),
             normals: f.map(|k| Vec3::from(ns[k as usize])),
-            uv: f.map(|k| uv.map_or(Vec2::ZERO, |uv| Vec2::from(uv[k as usize]))),
             face: scene.face_normal(t).as_vec3(),
+            map: surfaces
+                .texture_of(t)
+                .and_then(|r| TexMap::new(surfaces, t, r)),
         }
+    }
+
+    /// Whether the triangle's material has a base-colour texture (its colour then depends on
+    /// the sample's footprint).
+    #[inline]
+    pub fn textured(&self) -> bool {
+        self.map.is_some()
     }
 
     /// The vertices' colour interpolated at `(b1, b2)`.
@@ -175,73 +229,34 @@ impl<'a> Surfaces<'a> {
     /// Linear RGB base colour of triangle `t` at `(b1, b2)`: the vertices' colours interpolated,
     /// times the material's texture there (filtered for `footprint`) when it has one.
     pub fn color(&self, t: usize, b: [f64; 2], footprint: Footprint) -> [f32; 3] {
-        self.color_of(&Corners::of(self, t), t, b, footprint)
+        self.color_of(&Corners::of(self, t), b, footprint)
     }
 
-    /// [`Surfaces::color`] from triangle `t`'s `corners`.
+    /// [`Surfaces::color`] from a triangle's `corners`.
     #[inline]
-    pub fn color_of(&self, corners: &Corners, t: usize, b: [f64; 2], fp: Footprint) -> [f32; 3] {
-        match self.texture_of(t) {
-            Some(r) => self.textured_color(corners, t, r, b, fp),
-            None => corners.tint(b).to_array(),
+    pub fn color_of(&self, corners: &Corners, b: [f64; 2], footprint: Footprint) -> [f32; 3] {
+        let tint = corners.tint(b);
+        match &corners.map {
+            Some(m) => (tint * Vec3::from(self.texel(m, b, footprint))).to_array(),
+            None => tint.to_array(),
         }
     }
 
-    /// [`Surfaces::color_of`] of a triangle whose material's texture is `r`.
+    /// The texture `m` maps onto a triangle, sampled at `(b1, b2)` for `footprint`: linear RGB.
     #[inline]
-    pub fn textured_color(
-        &self,
-        corners: &Corners,
-        t: usize,
-        r: &TextureRef,
-        b: [f64; 2],
-        fp: Footprint,
-    ) -> [f32; 3] {
-        let texel = self.texel(corners, t, r, b, fp);
-        (corners.tint(b) * Vec3::from(texel)).to_array()
-    }
-
-    /// Material texture `r` of triangle `t` sampled at `(b1, b2)` for `footprint`: linear RGB.
-    fn texel(
-        &self,
-        corners: &Corners,
-        t: usize,
-        r: &TextureRef,
-        b: [f64; 2],
-        footprint: Footprint,
-    ) -> [f32; 3] {
-        let tex = &self.scene.textures()[r.texture];
-        let [u0, u1, u2] = corners.uv.map(|u| u.as_dvec2());
-        let (e1, e2) = (u1 - u0, u2 - u0);
-        let at = r.apply((u0 + e1 * b[0] + e2 * b[1]).to_array());
-        let size = DVec2::new(tex.width() as f64, tex.height() as f64);
+    fn texel(&self, m: &TexMap, b: [f64; 2], footprint: Footprint) -> [f32; 3] {
+        let at = m.at + m.along[0] * b[0] + m.along[1] * b[1];
         // The footprint's longer side, in level-0 texels.
         let rho = match footprint {
             Footprint::Point => 0.0,
             Footprint::Barycentric { dx, dy } => {
                 // Squared sides, one square root (glam's length is a libm `hypot` call).
-                let side = |d: [f64; 2]| {
-                    let duv = DVec2::from(r.apply_linear((e1 * d[0] + e2 * d[1]).to_array()));
-                    (duv * size).length_squared()
-                };
+                let side = |d: [f64; 2]| (m.texels[0] * d[0] + m.texels[1] * d[1]).length_squared();
                 side(dx).max(side(dy)).sqrt()
             }
-            Footprint::World(s) => {
-                let (a1, a2) = (
-                    DVec2::from(r.apply_linear(e1.to_array())) * size,
-                    DVec2::from(r.apply_linear(e2.to_array())) * size,
-                );
-                let texels = a1.perp_dot(a2).abs();
-                let [p0, p1, p2] = self.scene.triangle(t);
-                let area = (p1 - p0).cross(p2 - p0).length();
-                if area > 0.0 {
-                    s * (texels / area).sqrt()
-                } else {
-                    0.0
-                }
-            }
+            Footprint::World(s) => s * m.per_unit,
         };
-        tex.sample(at, rho, &r.sampler)
+        self.scene.textures()[m.texture].sample(at.to_array(), rho, &m.sampler)
     }
 
     /// Unit shading normal of triangle `t` at `(b1, b2)` ([`Corners::shading_normal`]).
