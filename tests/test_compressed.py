@@ -1,13 +1,16 @@
 """Compressed and quantized meshes (issue 72, item 3): a Draco-compressed copy of a mesh
 (`KHR_draco_mesh_compression`, written by Google's encoder through DracoPy) against its
-uncompressed twin, attributes quantized by `KHR_mesh_quantization`, and a file that needs an
-extension nothing here decodes refused by that extension's name."""
+uncompressed twin; `EXT_meshopt_compression` streams written by meshoptimizer's encoder
+(tests/data/meshopt_streams.json says how) against the arrays they encode and meshoptimizer's
+own decode; attributes quantized by `KHR_mesh_quantization`; and a file that needs an extension
+nothing here decodes refused by that extension's name."""
 
 from __future__ import annotations
 
 import copy
 import json
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -166,10 +169,295 @@ def test_quantized_attributes_read_as_the_spec_converts_them(tmp_path):
 def test_a_file_that_needs_an_unknown_extension_is_refused_by_its_name(tmp_path):
     v, f = sphere(4, 8)
     doc = twin(v, f)
-    doc["extensionsUsed"] = doc["extensionsRequired"] = ["EXT_meshopt_compression"]
-    with pytest.raises(ss.SceneError, match="requires the extension EXT_meshopt_compression"):
-        ss.Scene.load(write(doc, tmp_path / "meshopt.gltf"))
+    doc["extensionsUsed"] = doc["extensionsRequired"] = ["EXT_example_compression"]
+    with pytest.raises(ss.SceneError, match="requires the extension EXT_example_compression"):
+        ss.Scene.load(write(doc, tmp_path / "unknown.gltf"))
     doc["extensionsRequired"] = []
-    with pytest.warns(ss.SceneWarning, match="EXT_meshopt_compression is not simulated"):
+    with pytest.warns(ss.SceneWarning, match="EXT_example_compression is not simulated"):
         ss.Scene.load(write(doc, tmp_path / "used.gltf"))
     json.dumps(doc)  # the document stays plain JSON
+
+
+# EXT_meshopt_compression --------------------------------------------------------------------
+
+MESHOPT = json.loads((Path(__file__).parent / "data" / "meshopt_streams.json").read_text())
+STREAMS = {k: bytes.fromhex(v) for k, v in MESHOPT["streams"].items()}
+
+
+def grid(n: int = 17) -> tuple[np.ndarray, np.ndarray]:
+    """The fixture's mesh: an n x n grid whose heights are exact binary fractions (so float32
+    holds every coordinate exactly), two triangles per cell."""
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    z = ((i * 7 + j * 3) % 11) / 64.0
+    v = np.stack([i / 16.0, j / 16.0, z], -1).reshape(-1, 3).astype(np.float32)
+    k = np.arange(n * n).reshape(n, n)
+    a, b, c, d = k[:-1, :-1], k[1:, :-1], k[1:, 1:], k[:-1, 1:]
+    tris = [np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)]
+    return v, np.concatenate(tris).astype(np.uint32)
+
+
+def grid_normals(v: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """Area-weighted vertex normals of the grid, unit length (what the fixture's normals
+    encode)."""
+    n = np.zeros(v.shape, np.float64)
+    t = v[f].astype(np.float64)
+    face = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+    for k in range(3):
+        np.add.at(n, f[:, k], face)
+    return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+def meshopt_document(
+    views: dict[str, tuple[str, int, str, str]], ext: str = "EXT_meshopt_compression"
+) -> tuple[dict, dict[str, int]]:
+    """A glTF document whose buffer views are the fixture's streams: ``views`` maps a role to
+    (stream name, byteStride, mode, filter). Buffer 0 holds the streams, buffer 1 is the
+    extension's fallback buffer (no data: the decoded views go there). Returns the document and
+    each role's buffer view."""
+    blob, out, fallback = b"", {}, 0
+    doc: dict = {
+        "asset": {"version": "2.0"},
+        "bufferViews": [],
+        "extensionsUsed": [ext, "KHR_mesh_quantization"],
+        "extensionsRequired": [ext, "KHR_mesh_quantization"],
+    }
+    for role, (name, stride, mode, filt) in views.items():
+        data = STREAMS[name]
+        count = 512 * 3 if mode != "ATTRIBUTES" else 289
+        size = count * stride
+        view = {"buffer": 1, "byteOffset": fallback, "byteLength": size}
+        if mode == "ATTRIBUTES":
+            view["byteStride"] = stride
+        view["extensions"] = {
+            ext: {
+                "buffer": 0, "byteOffset": len(blob), "byteLength": len(data),
+                "byteStride": stride, "count": count, "mode": mode, "filter": filt,
+            }
+        }  # fmt: skip
+        out[role] = len(doc["bufferViews"])
+        doc["bufferViews"].append(view)
+        blob += data + bytes(-len(data) % 4)
+        fallback += size + (-size % 4)
+    doc["buffers"] = [
+        {"byteLength": len(blob), "uri": data_uri(blob)},
+        {"byteLength": fallback, "extensions": {ext: {"fallback": True}}},
+    ]
+    return doc, out
+
+
+def meshopt_mesh(
+    positions: str, stride: int, filt: str, indices: str, normals: bool = False, **kw
+) -> dict:
+    """The grid as one primitive: positions (float32 VEC3) from stream ``positions``, indices
+    (uint32) from ``indices`` (TRIANGLES or INDICES), optionally int8 octahedral normals and
+    uint8 COLOR-filtered vertex colours."""
+    mode = "TRIANGLES" if indices == "triangles" else "INDICES"
+    views = {
+        "position": (positions, stride, "ATTRIBUTES", filt),
+        "index": (indices, 4, mode, "NONE"),
+    }
+    if normals:
+        views["normal"] = ("normals_oct", 4, "ATTRIBUTES", "OCTAHEDRAL")
+        views["color"] = ("colors_color", 4, "ATTRIBUTES", "COLOR")
+    doc, at = meshopt_document(views, **kw)
+    doc["accessors"] = [
+        {"bufferView": at["position"], "componentType": 5126, "count": 289, "type": "VEC3",
+         "min": [0, 0, 0], "max": [1, 1, 0.25]},
+        {"bufferView": at["index"], "componentType": 5125, "count": 1536, "type": "SCALAR"},
+    ]  # fmt: skip
+    attributes = {"POSITION": 0}
+    if normals:
+        doc["accessors"].append(
+            {"bufferView": at["normal"], "componentType": 5120, "normalized": True,
+             "count": 289, "type": "VEC3"}
+        )  # fmt: skip
+        attributes["NORMAL"] = 2
+        doc["accessors"].append(
+            {"bufferView": at["color"], "componentType": 5121, "normalized": True,
+             "count": 289, "type": "VEC4"}
+        )  # fmt: skip
+        attributes["COLOR_0"] = 3
+    doc["meshes"] = [{"primitives": [{"attributes": attributes, "indices": 1}]}]
+    doc["nodes"] = [{"mesh": 0}]
+    doc["scenes"] = [{"nodes": [0]}]
+    return doc
+
+
+@pytest.mark.parametrize(
+    "positions, indices",
+    [("positions_v0", "triangles"), ("positions_v1", "sequence")],
+)
+def test_meshopt_streams_decode_to_the_arrays_they_encode(tmp_path, positions, indices):
+    """Vertex codec versions 0 and 1, the triangle codec and the index sequence codec: the
+    positions and triangles come back exactly."""
+    v, f = grid()
+    doc = meshopt_mesh(positions, 12, "NONE", indices)
+    scene = ss.Scene.load(write(doc, tmp_path / "meshopt.gltf"))
+    np.testing.assert_array_equal(scene.vertices, v)
+    # The triangle codec may start a triangle at another corner (same winding).
+    np.testing.assert_array_equal(rotated_first_lowest(scene.faces), rotated_first_lowest(f))
+    if indices == "sequence":
+        np.testing.assert_array_equal(scene.faces, f)
+    # A GLB of the same document, its streams in the binary chunk, reads the same.
+    glb = copy.deepcopy(doc)
+    path = tmp_path / "meshopt.glb"
+    path.write_bytes(to_glb_with_bin(glb, base64_blob(glb["buffers"][0].pop("uri"))))
+    again = ss.Scene.load(path)
+    np.testing.assert_array_equal(again.vertices, scene.vertices)
+    np.testing.assert_array_equal(again.faces, scene.faces)
+
+
+def rotated_first_lowest(f: np.ndarray) -> np.ndarray:
+    """Each triangle's corners rotated (winding kept) so that its lowest index comes first."""
+    k = np.argmin(f, axis=1)[:, None]
+    return np.take_along_axis(f, (k + np.arange(3)) % 3, axis=1)
+
+
+def base64_blob(uri: str) -> bytes:
+    import base64
+
+    return base64.b64decode(uri.split(",", 1)[1])
+
+
+def to_glb_with_bin(doc: dict, blob: bytes) -> bytes:
+    """A GLB whose buffer 0 is its binary chunk."""
+    import struct
+
+    text = json.dumps(doc).encode()
+    text += b" " * (-len(text) % 4)
+    blob += bytes(-len(blob) % 4)
+    body = (
+        struct.pack("<II", len(text), 0x4E4F534A)
+        + text
+        + struct.pack("<II", len(blob), 0x004E4942)
+        + blob
+    )
+    return struct.pack("<III", 0x46546C67, 2, 12 + len(body)) + body
+
+
+def test_meshopt_filters_match_meshoptimizers_own_decode(tmp_path):
+    """OCTAHEDRAL normals, EXPONENTIAL positions and COLOR vertex colours read exactly as
+    meshoptimizer decodes them, and within their quantization of the arrays they encode;
+    KHR_meshopt_compression reads the same streams."""
+    v, f = grid()
+    for ext in ("EXT_meshopt_compression", "KHR_meshopt_compression"):
+        doc = meshopt_mesh("positions_exp", 12, "EXPONENTIAL", "triangles", normals=True, ext=ext)
+        scene = ss.Scene.load(write(doc, tmp_path / "filtered.gltf"))
+        reference = np.frombuffer(STREAMS["positions_exp_decoded"], np.float32).reshape(-1, 3)
+        np.testing.assert_array_equal(scene.vertices, reference)
+        np.testing.assert_allclose(scene.vertices, v, atol=2.0**-14)
+        octa = np.frombuffer(STREAMS["normals_oct_decoded"], np.int8).reshape(-1, 4)[:, :3]
+        expected = np.maximum(octa / 127.0, -1.0)  # snorm8, then unit length as loaded
+        expected /= np.linalg.norm(expected, axis=1, keepdims=True)
+        np.testing.assert_allclose(scene.normals, expected, atol=1e-6)
+        cosine = np.sum(scene.normals * grid_normals(v, f), axis=1)
+        angle = np.degrees(np.arccos(np.clip(cosine, -1, 1)))
+        assert angle.max() < 2.0, angle.max()
+        rgba = np.frombuffer(STREAMS["colors_color_decoded"], np.uint8).reshape(-1, 4)
+        np.testing.assert_allclose(scene.colors, rgba[:, :3] / 255.0, atol=1e-6)
+        np.testing.assert_allclose(scene.colors, grid_colors(v)[:, :3], atol=3 / 255)
+
+
+def grid_colors(v: np.ndarray) -> np.ndarray:
+    """The fixture's vertex colours (RGBA) of the grid's vertices."""
+    return np.stack([v[:, 0], v[:, 1], v[:, 2] * 4, 0.25 + 0.75 * v[:, 0]], -1)
+
+
+def test_meshopt_quaternion_rotations_play(tmp_path):
+    """A clip's rotation output as a QUATERNION-filtered stream (normalized int16): the posed
+    vertices are the ones meshoptimizer's decode of the stream gives, and within the filter's
+    12 bits of the rotations it encodes."""
+    v, f = grid()
+    doc, at = meshopt_document({"rotation": ("rotations_quat", 8, "ATTRIBUTES", "QUATERNION")})
+    times = (np.arange(289) / 10).astype(np.float32)
+    plain = len(doc["buffers"])
+    blob = v.tobytes() + times.tobytes() + f.tobytes()
+    doc["buffers"].append({"byteLength": len(blob), "uri": data_uri(blob)})
+    n = len(doc["bufferViews"])
+    for offset, size in (
+        (0, v.nbytes),
+        (v.nbytes, times.nbytes),
+        (v.nbytes + times.nbytes, f.nbytes),
+    ):
+        doc["bufferViews"].append({"buffer": plain, "byteOffset": offset, "byteLength": size})
+    doc["accessors"] = [
+        {"bufferView": n, "componentType": 5126, "count": 289, "type": "VEC3",
+         "min": [0, 0, 0], "max": [1, 1, 0.25]},
+        {"bufferView": n + 2, "componentType": 5125, "count": 1536, "type": "SCALAR"},
+        {"bufferView": n + 1, "componentType": 5126, "count": 289, "type": "SCALAR",
+         "min": [0.0], "max": [float(times[-1])]},
+        {"bufferView": at["rotation"], "componentType": 5122, "normalized": True,
+         "count": 289, "type": "VEC4"},
+    ]  # fmt: skip
+    doc["meshes"] = [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}]
+    doc["nodes"] = [{"mesh": 0}]
+    doc["scenes"] = [{"nodes": [0]}]
+    doc["animations"] = [{
+        "channels": [{"sampler": 0, "target": {"node": 0, "path": "rotation"}}],
+        "samplers": [{"input": 2, "output": 3, "interpolation": "LINEAR"}],
+    }]  # fmt: skip
+    scene = ss.Scene.load(write(doc, tmp_path / "quat.gltf"))
+    decoded = np.frombuffer(STREAMS["rotations_quat_decoded"], np.int16).reshape(-1, 4)
+    for k in (0, 40, 288):
+        q = np.maximum(decoded[k] / 32767.0, -1.0)
+        q = q / np.linalg.norm(q)
+        x, y, z, w = q
+        rotation = np.array([
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ])  # fmt: skip
+        posed = scene.at(float(times[k])).vertices
+        np.testing.assert_allclose(posed, v @ rotation.T, atol=1e-5)
+        angle = k * 0.05
+        exact = np.array(
+            [[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0], [0, 0, 1]]
+        )
+        np.testing.assert_allclose(posed, v @ exact.T, atol=2e-3)
+
+
+def test_mutated_meshopt_streams_load_or_name_what_is_wrong(tmp_path):
+    """300 seeded mutations of the vertex and index streams (bytes flipped, cut, repeated):
+    each file loads or is refused with a SceneError (naming the stream's buffer view, or an
+    index the stream decoded to that names no vertex), never the reader's "internal error" (a
+    panic caught); and a stream that decodes to more than its view holds is refused."""
+    rng = np.random.default_rng(73)
+    failures, refusals = [], set()
+    original = dict(STREAMS)
+    try:
+        for k in range(300):
+            name = ("positions_v0", "positions_v1", "triangles", "sequence")[k % 4]
+            data = bytearray(original[name])
+            for _ in range(rng.integers(1, 6)):
+                if len(data) < 2:
+                    break
+                at = int(rng.integers(len(data)))
+                kind = rng.integers(3)
+                if kind == 0:
+                    data[at] = int(rng.integers(256))
+                elif kind == 1:
+                    del data[at:]
+                else:
+                    data[at:at] = data[at : at + int(rng.integers(1, 16))]
+            STREAMS[name] = bytes(data)
+            positions = name if name.startswith("positions") else "positions_v0"
+            indices = name if name in ("triangles", "sequence") else "triangles"
+            doc = meshopt_mesh(positions, 12, "NONE", indices)
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    ss.Scene.load(write(doc, tmp_path / "mutant.gltf"))
+            except ss.SceneError as e:
+                if "internal error" in str(e):
+                    failures.append((k, str(e)))
+                else:
+                    refusals.add(str(e).split(": ", 1)[1].split(" ")[0])
+            STREAMS[name] = original[name]
+    finally:
+        STREAMS.update(original)
+    assert failures == []
+    assert refusals <= {"buffer", "mesh"}, refusals
+    doc = meshopt_mesh("positions_v0", 12, "NONE", "triangles")
+    doc["bufferViews"][0]["byteLength"] = 12 * 288
+    with pytest.raises(ss.SceneError, match="EXT_meshopt_compression decodes to 289 x 12 bytes"):
+        ss.Scene.load(write(doc, tmp_path / "short.gltf"))

@@ -45,8 +45,11 @@ class Scene:
         glTF 2.0 (``.gltf`` with external or data-URI buffers, ``.glb``) is read natively: every
         triangle primitive of every mesh instance (node hierarchy flattened with world transforms,
         ``EXT_mesh_gpu_instancing`` expanded; strips and fans converted), metallic-roughness
-        materials, ``KHR_lights_punctual`` lights and glTF cameras. Points and lines, missing
-        images and unknown extensions are skipped with a :class:`SceneWarning`.
+        materials, ``KHR_lights_punctual`` lights and glTF cameras. Compressed and quantized
+        geometry is decoded: ``KHR_draco_mesh_compression``, ``EXT_meshopt_compression`` (and
+        ``KHR_meshopt_compression``), ``KHR_mesh_quantization``. Points and lines, missing
+        images and unknown extensions are skipped with a :class:`SceneWarning`; a file that
+        requires an extension nothing here decodes is a :class:`SceneError` naming it.
 
         Wavefront OBJ is read natively too, with its MTL materials: ``Kd`` times the mean texel
         of ``map_Kd`` as the base colour, ``Ke`` as emissive, roughness from ``Pr`` or else

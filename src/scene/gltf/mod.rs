@@ -22,6 +22,7 @@ mod checks;
 mod clips;
 mod draco;
 mod materials;
+mod meshopt;
 mod pointer;
 mod primitives;
 mod skins;
@@ -37,6 +38,8 @@ const HANDLED: &[&str] = &[
     "KHR_materials_emissive_strength",
     "KHR_mesh_quantization",
     "KHR_texture_transform",
+    "EXT_meshopt_compression",
+    "KHR_meshopt_compression",
 ];
 
 /// Extensions we can honour when a file requires them: geometry is intact without them, and
@@ -127,7 +130,8 @@ fn load_parts(path: &Path) -> Result<SceneParts> {
     validate(&root).map_err(|e| scene_err(path, e))?;
     let doc = gltf::Document::from_json_without_validation(root);
     let base = path.parent().unwrap_or(Path::new("."));
-    let buffers = load_buffers(path, &doc, base, blob)?;
+    let mut buffers = load_buffers(path, &doc, base, blob)?;
+    meshopt::decode_views(&doc, &mut buffers).map_err(|m| scene_err(path, m))?;
     let mut loader = Loader {
         path,
         doc: &doc,
@@ -171,6 +175,11 @@ fn load_buffers(
 ) -> Result<Vec<Vec<u8>>> {
     let mut out = Vec::new();
     for b in doc.buffers() {
+        // A meshopt fallback buffer's data is its compressed views', decoded into it later.
+        if meshopt::is_fallback(&b) {
+            out.push(vec![0; b.length()]);
+            continue;
+        }
         let data = match b.source() {
             gltf::buffer::Source::Bin => blob.take().ok_or_else(|| {
                 scene_err(
