@@ -461,3 +461,7 @@ def test_mutated_meshopt_streams_load_or_name_what_is_wrong(tmp_path):
     doc["bufferViews"][0]["byteLength"] = 12 * 288
     with pytest.raises(ss.SceneError, match="EXT_meshopt_compression decodes to 289 x 12 bytes"):
         ss.Scene.load(write(doc, tmp_path / "short.gltf"))
+    doc = meshopt_mesh("positions_v0", 12, "NONE", "triangles")
+    doc["buffers"][1]["byteLength"] = 2**62
+    with pytest.raises(ss.SceneError, match="fallback buffer.*cannot be allocated"):
+        ss.Scene.load(write(doc, tmp_path / "huge.gltf"))

@@ -177,6 +177,20 @@ fn load_buffers(
     for b in doc.buffers() {
         // A meshopt fallback buffer's data is its compressed views', decoded into it later.
         if meshopt::is_fallback(&b) {
+            // Probe for the memory first: an absurd byteLength is an error, not an abort.
+            // The zeroed pages are mapped lazily; decoding touches only what views fill.
+            let mut probe: Vec<u8> = Vec::new();
+            probe.try_reserve_exact(b.length()).map_err(|_| {
+                scene_err(
+                    path,
+                    format!(
+                        "buffer {} (a meshopt fallback buffer) declares byteLength {}, which cannot be allocated",
+                        b.index(),
+                        b.length()
+                    ),
+                )
+            })?;
+            drop(probe);
             out.push(vec![0; b.length()]);
             continue;
         }
