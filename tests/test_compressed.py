@@ -465,3 +465,26 @@ def test_mutated_meshopt_streams_load_or_name_what_is_wrong(tmp_path):
     doc["buffers"][1]["byteLength"] = 2**62
     with pytest.raises(ss.SceneError, match="fallback buffer.*cannot be allocated"):
         ss.Scene.load(write(doc, tmp_path / "huge.gltf"))
+
+
+@pytest.mark.parametrize(
+    "key, value, match",
+    [
+        ("byteStride", 0, "byteStride must be 4..=256"),
+        ("byteStride", "12", "byteStride is not a count"),
+        ("mode", "QUADS", "mode QUADS is not one of"),
+        ("filter", "WAVELET", "filter WAVELET is not one of"),
+        ("count", 2**40, "decodes to 1099511627776 x 12 bytes"),
+        ("buffer", 9, "of buffer 9, which it does not have"),
+        ("mode", None, "has no mode"),
+    ],
+)
+def test_meshopt_parameters_that_make_no_sense_are_named(tmp_path, key, value, match):
+    doc = meshopt_mesh("positions_v0", 12, "NONE", "triangles")
+    ext = doc["bufferViews"][0]["extensions"]["EXT_meshopt_compression"]
+    if value is None:
+        del ext[key]
+    else:
+        ext[key] = value
+    with pytest.raises(ss.SceneError, match=f"buffer view 0: EXT_meshopt_compression.*{match}"):
+        ss.Scene.load(write(doc, tmp_path / "bad.gltf"))
