@@ -86,6 +86,24 @@ def test_a_draco_copy_decodes_to_its_uncompressed_twin(tmp_path):
         ss.Scene.load(write(doc, tmp_path / "broken.gltf"))
 
 
+def mutated(stream: bytes, rng: np.random.Generator) -> bytes:
+    """``stream`` with 1 to 5 seeded mutations: a byte replaced, the rest cut off, or a run of
+    up to 15 bytes repeated in place."""
+    data = bytearray(stream)
+    for _ in range(rng.integers(1, 6)):
+        if len(data) < 2:
+            break
+        at = int(rng.integers(len(data)))
+        kind = rng.integers(3)
+        if kind == 0:
+            data[at] = int(rng.integers(256))
+        elif kind == 1:
+            del data[at:]
+        else:
+            data[at:at] = data[at : at + int(rng.integers(1, 16))]
+    return bytes(data)
+
+
 def test_mutated_draco_streams_load_or_name_what_is_wrong(tmp_path):
     """300 seeded mutations of a Draco stream (bytes flipped, cut, repeated): each file loads or
     is refused with a SceneError, never the reader's "internal error" (a panic caught)."""
@@ -98,23 +116,12 @@ def test_mutated_draco_streams_load_or_name_what_is_wrong(tmp_path):
     rng = np.random.default_rng(72)
     failures = []
     for k in range(300):
-        data = bytearray(stream)
-        for _ in range(rng.integers(1, 6)):
-            if len(data) < 2:
-                break
-            at = int(rng.integers(len(data)))
-            kind = rng.integers(3)
-            if kind == 0:
-                data[at] = int(rng.integers(256))
-            elif kind == 1:
-                del data[at:]
-            else:
-                data[at:at] = data[at : at + int(rng.integers(1, 16))]
+        data = mutated(stream, rng)
         doc = twin(v, f)
         prim = doc["meshes"][0]["primitives"][0]
         prim["attributes"] = {"POSITION": prim["attributes"]["POSITION"]}
         prim.pop("material")
-        doc["buffers"].append({"byteLength": len(data), "uri": data_uri(bytes(data))})
+        doc["buffers"].append({"byteLength": len(data), "uri": data_uri(data)})
         doc["bufferViews"].append({"buffer": len(doc["buffers"]) - 1, "byteLength": len(data)})
         ext = {"bufferView": len(doc["bufferViews"]) - 1, "attributes": ids}
         prim["extensions"] = {"KHR_draco_mesh_compression": ext}
@@ -427,19 +434,7 @@ def test_mutated_meshopt_streams_load_or_name_what_is_wrong(tmp_path):
     try:
         for k in range(300):
             name = ("positions_v0", "positions_v1", "triangles", "sequence")[k % 4]
-            data = bytearray(original[name])
-            for _ in range(rng.integers(1, 6)):
-                if len(data) < 2:
-                    break
-                at = int(rng.integers(len(data)))
-                kind = rng.integers(3)
-                if kind == 0:
-                    data[at] = int(rng.integers(256))
-                elif kind == 1:
-                    del data[at:]
-                else:
-                    data[at:at] = data[at : at + int(rng.integers(1, 16))]
-            STREAMS[name] = bytes(data)
+            STREAMS[name] = mutated(original[name], rng)
             positions = name if name.startswith("positions") else "positions_v0"
             indices = name if name in ("triangles", "sequence") else "triangles"
             doc = meshopt_mesh(positions, 12, "NONE", indices)
