@@ -1,7 +1,10 @@
-"""Posed scenes (``Scene.posed``): a posed scene finds what the same geometry built flat finds,
-ray for ray and pixel for pixel, with non-uniform scale, mirroring and a 1e5 translation;
-every verb runs on it; the same poses give the same bits in another process; bad transforms
-fail clearly."""
+"""Posed scenes (``Scene.posed``): a rigid pose traces its objects' own trees through their
+transforms (a two-level tree), and finds what the same geometry built flat finds, but where a ray
+passes within the rounding of the posed vertices of an edge; with non-uniform scale, mirroring
+and a 1e5 translation (where it traces the exact pose at least as well as the flat tree of the
+rounded vertices); the images, points and point queries match flat pixel for pixel; every verb
+runs on it; the same poses give the same bits in another process; bad transforms fail
+clearly."""
 
 from __future__ import annotations
 
@@ -93,27 +96,65 @@ def test_a_posed_scene_moves_each_object_by_its_transform(scenes):
 
 
 def test_rays_on_a_posed_scene_match_the_same_geometry_built_flat(scenes):
+    """The two-level tree traces the exact pose; the flat one its vertices rounded to float32:
+    the same triangles but within that rounding of an edge, and ``t`` within a few ulps."""
     _, posed, flat = scenes
+    assert ss.bvh_stats(posed)["instances"] == len(posed.objects)
+    assert ss.bvh_stats(flat)["instances"] == 0
     o, d = _rays(posed)
     a, b = ss.cast_rays(posed, o, d), ss.cast_rays(flat, o, d)
     assert (a.triangle >= 0).mean() > 0.5
-    np.testing.assert_array_equal(a.triangle, b.triangle)
-    np.testing.assert_array_equal(a.t, b.t)
-    np.testing.assert_array_equal(ss.occluded(posed, o, d), ss.occluded(flat, o, d))
-    np.testing.assert_array_equal(ss.count_hits(posed, o, d), ss.count_hits(flat, o, d))
+    assert (a.triangle != b.triangle).mean() <= 1e-4
+    same = (a.triangle == b.triangle) & (a.triangle >= 0)
+    np.testing.assert_allclose(a.t[same], b.t[same], rtol=1e-4, atol=1e-6)
+    np.testing.assert_allclose(a.barycentric[same], b.barycentric[same], atol=1e-3)
+    assert (ss.occluded(posed, o, d) != ss.occluded(flat, o, d)).mean() <= 1e-4
+    assert (ss.count_hits(posed, o, d) != ss.count_hits(flat, o, d)).mean() <= 1e-4
 
 
-def test_a_far_translation_matches_flat(scenes):
+def _exact_closest(base, transforms, o, d):
+    """The nearest triangle along each ray in float64 on the exact pose (each object's vertices
+    as loaded moved by its transform in float64), edges included; -1 for none."""
+    v = base.vertices.astype(np.float64)
+    obj = np.zeros(len(v), dtype=np.int64)
+    obj[base.faces.ravel()] = np.repeat(base.object_ids, 3)
+    m = np.asarray(transforms)[obj]
+    w = np.einsum("kij,kj->ki", m[:, :3, :3], v) + m[:, :3, 3]
+    a, b, c = (w[base.faces[:, k]] for k in range(3))
+    e1, e2 = b - a, c - a
+    out = np.full(len(o), -1)
+    for i, (oi, di) in enumerate(zip(o.astype(np.float64), d.astype(np.float64))):
+        p = np.cross(di, e2)
+        det = np.einsum("ij,ij->i", e1, p)
+        tv = oi - a
+        q = np.cross(tv, e1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = np.einsum("ij,ij->i", tv, p) / det
+            v_ = (q @ di) / det
+            t = np.einsum("ij,ij->i", e2, q) / det
+        ok = (det != 0) & (u >= 0) & (v_ >= 0) & (u + v_ <= 1) & (t >= 0)
+        if ok.any():
+            out[i] = np.flatnonzero(ok)[np.argmin(t[ok])]
+    return out
+
+
+def test_a_far_translation_traces_the_exact_pose(scenes):
+    """1e5 away, float32 rounds the posed vertices by 0.008, a twentieth of a triangle: the flat
+    tree traces that rounded copy, the two-level tree the pose itself, and agrees with a
+    float64 trace of the exact pose at least as often."""
     base, _, _ = scenes
     far = np.array([np.eye(4) for _ in base.objects])
     far[:, :3, 3] = [1e5, -1e5, 1e5]
+    far[1] = far[1] @ _rotation([0, 1, 1], 0.8)
     posed = base.posed(far)
     flat = _flat(posed)
-    o, d = _rays(posed, 20_000, seed=5)
+    o, d = _rays(posed, 1500, seed=5)
     a, b = ss.cast_rays(posed, o, d), ss.cast_rays(flat, o, d)
     assert (a.triangle >= 0).mean() > 0.3
-    np.testing.assert_array_equal(a.triangle, b.triangle)
-    np.testing.assert_array_equal(a.t, b.t)
+    want = _exact_closest(base, far, o, d)
+    two, one = (a.triangle == want).sum(), (b.triangle == want).sum()
+    assert two >= one, (two, one)
+    assert two >= 0.995 * len(o), two
 
 
 def test_images_and_point_queries_match_flat(scenes):
@@ -307,13 +348,18 @@ def test_the_animation_experiment_runs_every_method_on_every_frame(tmp_path):
     assert len(rows) == 1 + 3 * 6
 
 
-def _same_arrays(a, b, what):
-    """Every array field of two results equal (timings aside); returns how many compared."""
+def _same_arrays(a, b, what, differ=0.0):
+    """Every array field of two results equal (timings aside), but for at most a fraction
+    ``differ`` of each one's entries; returns how many compared."""
     fields = {k: v for k, v in vars(a).items() if not k.startswith("_") and k != "timings"}
     n = 0
     for k, v in fields.items():
         if isinstance(v, np.ndarray):
-            np.testing.assert_array_equal(v, getattr(b, k), err_msg=f"{what}.{k}")
+            if differ == 0.0:
+                np.testing.assert_array_equal(v, getattr(b, k), err_msg=f"{what}.{k}")
+            else:
+                assert v.shape == getattr(b, k).shape, f"{what}.{k}"
+                assert (v != getattr(b, k)).mean() <= differ, f"{what}.{k}"
             n += 1
     return n
 
@@ -338,7 +384,8 @@ def test_peeling_the_field_impostors_and_epr_points_match_flat(scenes):
         ss.discretize(s, method="visibility_field", quality="fast", progress=False)
         for s in (posed, flat)
     ]
-    assert _same_arrays(*fields, "visibility_field") > 0
+    # The field's samples are rays: the same but within float32's rounding of an edge.
+    assert _same_arrays(*fields, "visibility_field", differ=1e-5) > 0
     views = [ss.reconstruct(f, cam, backend="cpu") for f in fields]
     np.testing.assert_array_equal(views[0].marked, views[1].marked)
     np.testing.assert_array_equal(views[0].image.triangle, views[1].image.triangle)

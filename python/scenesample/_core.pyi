@@ -426,6 +426,7 @@ class _BvhStatsDict(TypedDict):
     blocks: int
     bytes: int
     depth: int
+    instances: int
     sah: float
     build_seconds: float
     winding_bytes: int

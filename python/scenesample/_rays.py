@@ -287,8 +287,15 @@ def bvh_stats(scene: Scene) -> dict[str, Any]:
     dict
         ``triangles``, ``nodes`` (8-wide), ``blocks`` (leaf blocks of 4 triangles), ``bytes``
         (everything the queries read besides the rays: nodes, blocks and triangle ids),
-        ``depth``, ``sah`` (surface area heuristic cost relative to the root, Embree's measure),
-        ``build_seconds`` and ``winding_bytes`` (the per-node records of
+        ``depth``, ``instances``, ``sah`` (surface area heuristic cost relative to the root,
+        Embree's measure), ``build_seconds`` and ``winding_bytes`` (the per-node records of
         :func:`scenesample.winding_number`, 0 until it first runs on the scene).
+
+        A rigidly posed scene of two or more objects (:meth:`Scene.posed`, a clip's rigid
+        nodes) is traced on a two-level tree: each object's own tree, built once with the
+        scene as loaded and shared by its poses, under a top tree over the objects'
+        ``instances`` built for the pose (``build_seconds`` is then that top tree's, ``sah``
+        its cost, and ``bytes`` counts the objects' trees too). Other scenes have a flat tree
+        and ``instances`` 0.
     """
     return dict(_core.bvh_stats(core_of(scene)))

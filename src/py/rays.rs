@@ -160,6 +160,7 @@ pub fn bvh_stats<'py>(py: Python<'py>, scene: &PyScene) -> PyResult<Bound<'py, P
     d.set_item("blocks", st.blocks)?;
     d.set_item("bytes", st.bytes)?;
     d.set_item("depth", st.depth)?;
+    d.set_item("instances", st.instances)?;
     d.set_item("sah", st.sah)?;
     d.set_item("build_seconds", st.build_seconds)?;
     d.set_item("winding_bytes", trace::winding::winding_bytes(&s))?;

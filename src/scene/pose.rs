@@ -115,7 +115,7 @@ impl Rig {
 /// `p` moved by `m` (affine), in f64 and rounded once to f32: the one rounding a posed
 /// vertex goes through (the BVH's triangle corners are gathered from the posed vertices).
 #[inline(always)]
-fn transform_point(m: &DMat4, p: [f32; 3]) -> [f32; 3] {
+pub(crate) fn transform_point(m: &DMat4, p: [f32; 3]) -> [f32; 3] {
     let [x, y, z] = p.map(f64::from);
     let c = m.to_cols_array();
     std::array::from_fn(|a| (c[a] * x + c[4 + a] * y + c[8 + a] * z + c[12 + a]) as f32)

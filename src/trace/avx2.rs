@@ -20,16 +20,8 @@ use super::traverse::{Kernel, Lanes, PacketStack, Ray, Stack, Tri4Hit, WIDTH};
 impl Kernel for Avx2 {
     const PACKETS: bool = true;
 
-    type R = Ray;
     /// Entry distances and the lanes hit.
     type D = (__m256, __m256);
-
-    /// The ray itself: its constants are broadcast from memory where they are used (a
-    /// broadcast load costs what reloading a spilled register would).
-    #[inline(always)]
-    fn prepare(self, r: &Ray) -> Ray {
-        *r
-    }
 
     #[inline(always)]
     fn dist(self, (near, _): &Self::D, lane: u32) -> f32 {

@@ -115,6 +115,7 @@ pub fn build(tris: &[Tri], params: BuildParams) -> Bvh8 {
             nodes: vec![Node8::EMPTY],
             blocks: vec![],
             depth: 1,
+            inst: None,
         };
     }
     let parallel = params.parallel_min < tris.len();
@@ -123,17 +124,30 @@ pub fn build(tris: &[Tri], params: BuildParams) -> Bvh8 {
     } else {
         tris.iter().map(padded_box).collect()
     };
+    build_over(Some(tris), &boxes, params)
+}
+
+/// The tree over `boxes` (not empty), with leaves of [`Tri4`] blocks that hold only ids: each
+/// lane's id is its box's index, its corners NaN. The top tree of a two-level tree is built
+/// this way over its instances' boxes (`instances`), which then names them in its own leaves.
+pub fn build_boxes(boxes: &[Aabb], params: BuildParams) -> Bvh8 {
+    assert!(!boxes.is_empty());
+    build_over(None, boxes, params)
+}
+
+/// [`build`] over `boxes`, with the triangles `tris` (one per box) in the leaves if given.
+fn build_over(tris: Option<&[Tri]>, boxes: &[Aabb], params: BuildParams) -> Bvh8 {
     // Twice the centroid: one add, no multiply, and the same order.
     let centers: Vec<Vec3A> = boxes.iter().map(|b| b.lo + b.hi).collect();
-    let mut refs: Vec<u32> = (0..tris.len() as u32).collect();
+    let mut refs: Vec<u32> = (0..boxes.len() as u32).collect();
     let b = Builder {
         tris,
-        boxes: &boxes,
+        boxes,
         centers: &centers,
         p: params,
     };
     // Typical sizes (a node per ~16 triangles, a block per ~3.5), so the vectors rarely grow.
-    let n = tris.len();
+    let n = boxes.len();
     let mut out = Out {
         nodes: Vec::with_capacity(n / 12 + 1),
         blocks: Vec::with_capacity(n / 3 + 1),
@@ -147,6 +161,7 @@ pub fn build(tris: &[Tri], params: BuildParams) -> Bvh8 {
         nodes: out.nodes,
         blocks: out.blocks,
         depth: out.depth,
+        inst: None,
     }
 }
 
@@ -359,7 +374,8 @@ fn blocks(n: usize) -> f32 {
 }
 
 struct Builder<'a> {
-    tris: &'a [Tri],
+    /// The triangles, or `None` for leaves of ids only (`build_boxes`).
+    tris: Option<&'a [Tri]>,
     boxes: &'a [Aabb],
     centers: &'a [Vec3A],
     p: BuildParams,
@@ -653,7 +669,10 @@ impl Builder<'_> {
         for chunk in refs.chunks(4) {
             let mut block = Tri4::NONE;
             for (lane, &r) in chunk.iter().enumerate() {
-                block.set(lane, &self.tris[r as usize], r);
+                match self.tris {
+                    Some(tris) => block.set(lane, &tris[r as usize], r),
+                    None => block.id[lane] = r,
+                }
             }
             out.blocks.push(block);
         }

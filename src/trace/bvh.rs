@@ -4,14 +4,15 @@
 use std::sync::Arc;
 use std::time::Instant;
 
-use glam::{Vec3, Vec3A};
+use glam::{DMat4, Vec3, Vec3A};
 
 use super::node::{self, Bvh8};
 use super::query::Threads;
 use super::watertight::Tri;
-use super::{build, refit};
+use super::{build, instances, refit};
 use crate::error::Result;
 use crate::input_err;
+use crate::scene::pose::Pose;
 use crate::scene::Scene;
 
 pub const MAX_TRIANGLES: u32 = node::MAX_BLOCKS;
@@ -32,6 +33,9 @@ pub struct BvhStats {
     /// Bytes of nodes and triangle blocks: everything the queries read besides the rays.
     pub bytes: usize,
     pub depth: u32,
+    /// The instances of a two-level tree (`instances`: a rigidly posed scene's), 0 for a flat
+    /// tree.
+    pub instances: usize,
     pub build_seconds: f64,
     /// Surface area heuristic cost, Embree's measure: inner nodes' areas plus leaves' areas
     /// times their blocks, relative to the root's area.
@@ -65,6 +69,23 @@ impl Bvh {
 
     pub fn build_with(scene: &Scene, params: build::BuildParams) -> Self {
         let start = Instant::now();
+        if let Some(pose) = two_level(scene) {
+            let base = &pose.base;
+            let trees = base.derived(|| {
+                let objects = base.objects().len();
+                instances::ObjectTrees::of(&base.rig(), base.object_ids(), objects, params)
+            });
+            let tree = instances::pose(&trees, &pose.transforms);
+            return Self {
+                tree,
+                build_seconds: start.elapsed().as_secs_f64(),
+            };
+        }
+        Self::build_flat(scene, params, start)
+    }
+
+    /// The flat tree: built, or for a posed or deformed scene refit from its base's.
+    fn build_flat(scene: &Scene, params: build::BuildParams, start: Instant) -> Self {
         // A posed scene refits its base's object trees, a deformed one its source's; where
         // vertices moved other than rigidly (a deformation, a clip's skins or morph targets),
         // the scene is built afresh instead when the refit tree has lost its tightness
@@ -125,26 +146,75 @@ impl Bvh {
 
     pub fn stats(&self) -> BvhStats {
         let t = &self.tree;
+        let (blocks, nodes) = match &t.inst {
+            None => (&t.blocks, t.nodes.len()),
+            Some(i) => (&i.objects.blocks, t.nodes.len() + i.objects.nodes.len()),
+        };
         BvhStats {
-            triangles: t
-                .blocks
+            triangles: blocks
                 .iter()
                 .flat_map(|b| b.id)
                 .filter(|&i| i != u32::MAX)
                 .count(),
-            nodes: t.nodes.len(),
-            blocks: t.blocks.len(),
+            nodes,
+            blocks: blocks.len(),
             bytes: t.bytes(),
             depth: t.depth,
+            instances: t.inst.as_ref().map_or(0, |i| i.instances.len()),
             build_seconds: self.build_seconds,
             sah: t.sah(),
         }
     }
 }
 
+/// Whether the scene's ray queries run on a two-level tree (`instances`), and its pose if so:
+/// a pose that moves two or more objects rigidly, each by an invertible transform, and winds
+/// no face the other way (`Scene::at` rewinds mirrored objects' faces, which the objects'
+/// trees do not).
+pub fn two_level(scene: &Scene) -> Option<&Pose> {
+    let pose = scene.pose()?;
+    if pose.deforms || pose.base.objects().len() < 2 {
+        return None;
+    }
+    let mirrors = |m: &DMat4| pose.rewinds && m.determinant() < 0.0;
+    if pose
+        .transforms
+        .iter()
+        .any(|m| !instances::invertible(m) || mirrors(m))
+    {
+        return None;
+    }
+    Some(pose)
+}
+
+/// The flat tree of a scene whose ray queries run on a two-level tree, for the queries that
+/// walk a flat tree (points, winding numbers, crossings).
+struct Flat(Arc<Bvh>);
+
 /// The scene's BVH (built on `threads` if not cached yet) and the seconds spent building it now
-/// (0 when it was cached).
-pub(crate) fn bvh_for(scene: &Scene, threads: Threads) -> Result<(Arc<Bvh>, f64)> {
+/// (0 when it was cached). `flat`: a flat tree even where the ray queries take a two-level one.
+pub(crate) fn bvh_for_with(scene: &Scene, threads: Threads, flat: bool) -> Result<(Arc<Bvh>, f64)> {
+    if flat && two_level(scene).is_some() {
+        check_size(scene)?;
+        let had = scene.derived_if_built::<Flat>().is_some();
+        let bvh = scene
+            .derived(|| {
+                let params = build::BuildParams::standard();
+                let params = match threads {
+                    Threads::One => params.sequential(),
+                    _ => params,
+                };
+                Flat(Arc::new(Bvh::build_flat(scene, params, Instant::now())))
+            })
+            .0
+            .clone();
+        let built = if had { 0.0 } else { bvh.build_seconds };
+        return Ok((bvh, built));
+    }
+    bvh_for(scene, threads)
+}
+
+fn check_size(scene: &Scene) -> Result<()> {
     if scene.triangle_count() >= MAX_TRIANGLES as usize {
         return input_err!(
             "the ray and point queries handle scenes of fewer than {MAX_TRIANGLES} triangles; \
@@ -152,6 +222,13 @@ pub(crate) fn bvh_for(scene: &Scene, threads: Threads) -> Result<(Arc<Bvh>, f64)
             scene.triangle_count()
         );
     }
+    Ok(())
+}
+
+/// The scene's BVH (built on `threads` if not cached yet) and the seconds spent building it now
+/// (0 when it was cached).
+pub(crate) fn bvh_for(scene: &Scene, threads: Threads) -> Result<(Arc<Bvh>, f64)> {
+    check_size(scene)?;
     let had = scene.derived_if_built::<Bvh>().is_some();
     let bvh = Bvh::of_with(scene, threads);
     let built = if had { 0.0 } else { bvh.build_seconds };

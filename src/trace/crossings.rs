@@ -18,7 +18,7 @@
 use glam::{DVec3, Vec3A};
 
 use super::dispatch::{dispatch, Job};
-use super::driver::drive;
+use super::driver::drive_with;
 use super::node::Bvh8;
 use super::query::{Query, Threads};
 use super::rays::{Rays, Scratch};
@@ -49,7 +49,7 @@ pub fn crossings(
         threads,
         report: true,
     };
-    let (count, _) = drive(scene, origins, directions, &q, |bvh| {
+    let (count, _) = drive_with(scene, origins, directions, &q, true, |bvh| {
         let mut count = vec![0i32; origins.len()];
         let behind = Query { t_min: -back, ..q };
         let rays = Rays::new(bvh, origins, directions, &behind);

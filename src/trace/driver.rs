@@ -7,7 +7,7 @@ use std::time::Instant;
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::bvh::bvh_for;
+use super::bvh::bvh_for_with;
 use super::node::Bvh8;
 use super::query::{Query, Threads};
 use super::schedule::on_threads;
@@ -31,10 +31,23 @@ pub fn drive<R: Send>(
     q: &Query,
     body: impl FnOnce(&Bvh8) -> Result<R> + Send,
 ) -> Result<(R, Seconds)> {
+    drive_with(scene, origins, directions, q, false, body)
+}
+
+/// [`drive`], on the scene's flat tree where `flat` is set (for a sink that takes no instances:
+/// `crossings`).
+pub fn drive_with<R: Send>(
+    scene: &Scene,
+    origins: &[[f32; 3]],
+    directions: &[[f32; 3]],
+    q: &Query,
+    flat: bool,
+    body: impl FnOnce(&Bvh8) -> Result<R> + Send,
+) -> Result<(R, Seconds)> {
     on_threads(q.threads, || {
         check_rays(origins, directions, q.t_min, q.t_max, q.threads)?;
         crate::counters::add(crate::counters::Op::RaysCast, origins.len() as u64);
-        let (bvh, build) = bvh_for(scene, q.threads)?;
+        let (bvh, build) = bvh_for_with(scene, q.threads, flat)?;
         let start = Instant::now();
         let out = body(&bvh.tree)?;
         let trace = start.elapsed().as_secs_f64();

@@ -16,16 +16,17 @@
 //! query reports the same hits.
 
 use super::node::Bvh8;
-use super::traverse::{block_stops, visit, Kernel, Ray, Sink, Stack};
+use super::traverse::{block_stops, visit, visit_two, Kernel, Ray, Sink, Stack, TwoLevel};
 
 /// Rays in flight at once.
 pub const FLIGHTS: usize = 8;
 
 /// One ray in flight: its constants, its sink, the node it visits next and its stack's height
 /// and place in [`Flights::stacks`].
-pub struct Flight<K: Kernel, S> {
-    ray: Ray,
-    r: K::R,
+pub struct Flight<S> {
+    /// The ray and the kernel's constants (`world`, `r`), and on a two-level tree where its
+    /// traversal is (`traverse::visit_two`).
+    at: TwoLevel,
     sink: S,
     cur: u32,
     sp: usize,
@@ -37,12 +38,12 @@ pub struct Flight<K: Kernel, S> {
 /// Scratch space for [`traverse`], reused from call to call: the flights, and a stack for each
 /// (apart, so that a ray's flight is a few hundred bytes, not 4 KB more). Allocated on first
 /// use.
-pub struct Flights<K: Kernel, S> {
-    flights: Vec<Flight<K, S>>,
+pub struct Flights<S> {
+    flights: Vec<Flight<S>>,
     stacks: Vec<Stack>,
 }
 
-impl<K: Kernel, S> Default for Flights<K, S> {
+impl<S> Default for Flights<S> {
     fn default() -> Self {
         Self {
             flights: Vec::new(),
@@ -59,7 +60,23 @@ pub fn traverse<K: Kernel, S: Sink + Copy>(
     k: K,
     bvh: &Bvh8,
     range: std::ops::Range<usize>,
-    scratch: &mut Flights<K, S>,
+    scratch: &mut Flights<S>,
+    start: impl FnMut(usize) -> (Ray, S),
+    done: impl FnMut(usize, S),
+) {
+    match bvh.inst {
+        None => turns::<K, S, false>(k, bvh, range, scratch, start, done),
+        Some(_) => turns::<K, S, true>(k, bvh, range, scratch, start, done),
+    }
+}
+
+/// [`traverse`] on a flat tree, or on a two-level one (`TWO`).
+#[inline(always)]
+fn turns<K: Kernel, S: Sink + Copy, const TWO: bool>(
+    k: K,
+    bvh: &Bvh8,
+    range: std::ops::Range<usize>,
+    scratch: &mut Flights<S>,
     mut start: impl FnMut(usize) -> (Ray, S),
     mut done: impl FnMut(usize, S),
 ) {
@@ -74,10 +91,9 @@ pub fn traverse<K: Kernel, S: Sink + Copy>(
         stacks.resize_with(FLIGHTS, Stack::new);
     }
     while flights.len() < FLIGHTS {
-        match launch(k, bvh, &mut next, range.end, &mut start, &mut done) {
-            Some((ray, r, sink, j)) => flights.push(Flight {
-                ray,
-                r,
+        match launch::<K, S, TWO>(k, bvh, &mut next, range.end, &mut start, &mut done) {
+            Some((ray, sink, j)) => flights.push(Flight {
+                at: TwoLevel::new(&ray),
                 sink,
                 cur: 0,
                 sp: 0,
@@ -96,14 +112,19 @@ pub fn traverse<K: Kernel, S: Sink + Copy>(
         // index below FLIGHTS.
         let f = unsafe { flights.get_unchecked_mut(i) };
         let stack = unsafe { stacks.get_unchecked_mut(f.stack) };
-        if step(k, bvh, f, stack) {
+        if step::<K, S, TWO>(k, bvh, f, stack) {
             // Ended: hand over its sink, then launch the next ray in its place, with the same
             // stack. The flight is rewritten where it lies: moving it (some 400 bytes) cost a
             // call to memcpy per ray.
             done(f.j, f.sink);
-            match launch(k, bvh, &mut next, range.end, &mut start, &mut done) {
-                Some((ray, r, sink, j)) => {
-                    (f.ray, f.r, f.sink, f.cur, f.sp, f.j) = (ray, r, sink, 0, 0, j);
+            match launch::<K, S, TWO>(k, bvh, &mut next, range.end, &mut start, &mut done) {
+                Some((ray, sink, j)) => {
+                    if TWO {
+                        f.at = TwoLevel::new(&ray);
+                    } else {
+                        f.at.world = ray;
+                    }
+                    (f.sink, f.cur, f.sp, f.j) = (sink, 0, 0, j);
                 }
                 None => {
                     flights.swap_remove(i);
@@ -115,31 +136,32 @@ pub fn traverse<K: Kernel, S: Sink + Copy>(
     }
 }
 
-/// The next ray that needs a traversal, set up for it: its constants, the kernel's, its sink
-/// and its index. A ray whose sink's hint block stops it (`Sink::hint`) is done here, as
+/// The next ray that needs a traversal: its constants, its sink and its index. On a flat
+/// tree, a ray whose sink's hint block stops it (`Sink::hint`) is done here, as
 /// `traverse::traverse` would be. `None` when the rays up to `end` are spent.
 #[inline(always)]
-fn launch<K: Kernel, S: Sink>(
+fn launch<K: Kernel, S: Sink, const TWO: bool>(
     k: K,
     bvh: &Bvh8,
     next: &mut usize,
     end: usize,
     start: &mut impl FnMut(usize) -> (Ray, S),
     done: &mut impl FnMut(usize, S),
-) -> Option<(Ray, K::R, S, usize)> {
+) -> Option<(Ray, S, usize)> {
     while *next < end {
         let j = *next;
         *next += 1;
         let (ray, mut sink) = start(j);
-        let r = k.prepare(&ray);
         // No closure around the block test (see `traverse::traverse`).
-        if let Some(b) = sink.hint() {
-            if block_stops(k, bvh, b, &r, &ray, &mut sink) {
-                done(j, sink);
-                continue;
+        if !TWO {
+            if let Some(b) = sink.hint() {
+                if block_stops(k, bvh, b, &ray, &ray, &mut sink) {
+                    done(j, sink);
+                    continue;
+                }
             }
         }
-        return Some((ray, r, sink, j));
+        return Some((ray, sink, j));
     }
     None
 }
@@ -148,8 +170,35 @@ fn launch<K: Kernel, S: Sink>(
 /// were asked for when the ray entered it, in `descend`, and asking again as it is popped cost
 /// more than it found); true when the ray's traversal has ended.
 #[inline(always)]
-fn step<K: Kernel, S: Sink>(k: K, bvh: &Bvh8, f: &mut Flight<K, S>, stack: &mut Stack) -> bool {
-    match visit(k, bvh, f.cur, &f.r, &f.ray, &mut f.sink, stack, &mut f.sp) {
+fn step<K: Kernel, S: Sink, const TWO: bool>(
+    k: K,
+    bvh: &Bvh8,
+    f: &mut Flight<S>,
+    stack: &mut Stack,
+) -> bool {
+    let next = match (TWO, &bvh.inst) {
+        (true, Some(inst)) => visit_two(
+            k,
+            bvh,
+            inst,
+            f.cur,
+            &mut f.at,
+            &mut f.sink,
+            stack,
+            &mut f.sp,
+        ),
+        _ => visit(
+            k,
+            bvh,
+            f.cur,
+            &f.at.world,
+            &f.at.world,
+            &mut f.sink,
+            stack,
+            &mut f.sp,
+        ),
+    };
+    match next {
         Some(next) => {
             f.cur = next;
             false

@@ -9,7 +9,7 @@ use super::node::Bvh8;
 use super::rays::{Hit, Rays, Scratch, Traced};
 use super::refine::Pending;
 use super::schedule::HitSlices;
-use super::sinks::{AnyHit, BlockHit, Closest, ClosestKept, Counted};
+use super::sinks::{AnyHit, BlockHit, Closest, ClosestKept, Counted, WORLD};
 use super::traverse::{block_stops, traverse, Kernel, Sink, Stack, Tri4Hit, WIDEN};
 use crate::types::SAME_HIT;
 
@@ -67,6 +67,8 @@ impl<S: Best> Job for ClosestJob<'_, S> {
         let mut scratch = Scratch::new();
         let mut found = [0u32; BATCH];
         let mut pending = [Pending::default(); BATCH];
+        let mut shifts = [0.0f32; BATCH];
+        let mut hit = [None; BATCH];
         for start in (0..t.len()).step_by(BATCH) {
             let end = (start + BATCH).min(t.len());
             let mut hits = 0;
@@ -86,21 +88,17 @@ impl<S: Best> Job for ClosestJob<'_, S> {
                     if let Some(h) = sink.best() {
                         tri[j] = h.triangle as i32;
                         found[hits] = j as u32;
-                        pending[hits] = Pending {
-                            v: rays.bvh.blocks[h.block as usize].corners(h.lane as usize),
-                            o: rays.origins[base + j],
-                            d: rays.directions[base + j],
-                            t: h.t,
-                            bary: h.bary(),
-                        };
+                        (pending[hits], shifts[hits]) = rays.pending(base + j, &h);
+                        hit[hits] = Some(h);
                         hits += 1;
                     }
                 },
             );
-            k.refine(&mut pending[..hits], self.0.range);
-            for (&j, p) in found[..hits].iter().zip(&pending[..hits]) {
-                t[j as usize] = p.t;
-                bary[j as usize] = p.bary;
+            k.refine(&mut pending[..hits], rays.refine_range());
+            for i in 0..hits {
+                let h = hit[i].expect("a hit was kept");
+                let j = found[i] as usize;
+                (t[j], bary[j]) = rays.settle(&pending[i], shifts[i], &h);
             }
         }
     }
@@ -203,11 +201,10 @@ impl Job for ProbeJob<'_> {
                 traverse(k, rays.bvh, &ray, &mut any, &mut stack);
                 p.work[0] += u64::from(near.nodes + near.blocks);
                 p.work[1] += u64::from(any.nodes + any.blocks);
-                if let Some(b) = previous {
+                if let Some(b) = previous.filter(|_| rays.bvh.inst.is_none()) {
                     let mut tried = AnyHit::<false>::new(t_far, None);
-                    let r = k.prepare(&ray);
                     p.hinted[0] +=
-                        u64::from(block_stops(k, rays.bvh, b as usize, &r, &ray, &mut tried));
+                        u64::from(block_stops(k, rays.bvh, b as usize, &ray, &ray, &mut tried));
                     p.hinted[1] += 1;
                 }
                 previous = any.sink.hit;
@@ -308,6 +305,7 @@ fn nearest<K: Kernel>(
     found.clear();
     let mut sink = Nearest {
         rays,
+        i,
         r: &r,
         want,
         found,
@@ -321,6 +319,8 @@ fn nearest<K: Kernel>(
 /// first.
 struct Nearest<'a> {
     rays: &'a Rays<'a>,
+    /// The ray's index.
+    i: usize,
     r: &'a Traced,
     want: usize,
     found: &'a mut Vec<Hit>,
@@ -358,20 +358,23 @@ impl Sink for Nearest<'_> {
         self.t_far
     }
 
-    fn take(&mut self, _: &Bvh8, block: usize, h: &Tri4Hit) -> bool {
+    fn take(&mut self, bvh: &Bvh8, block: usize, h: &Tri4Hit) -> bool {
+        self.take_in(bvh, block, h, WORLD)
+    }
+
+    fn take_in(&mut self, bvh: &Bvh8, block: usize, h: &Tri4Hit, inst: u32) -> bool {
         let mut m = h.mask;
         while m != 0 {
             let lane = m.trailing_zeros() as usize;
             m &= m - 1;
+            let hit = BlockHit::of(bvh, block, lane, h, inst);
             if self.front_only {
-                let [a, b, c] = self.rays.bvh.blocks[block].corners(lane).map(Vec3::from);
+                let [a, b, c] = self.rays.corners(&hit).map(Vec3::from);
                 if (b - a).cross(c - a).dot(Vec3::from(self.r.d)) >= 0.0 {
                     continue;
                 }
             }
-            let hit = self
-                .rays
-                .report(self.r, &BlockHit::of(self.rays.bvh, block, lane, h));
+            let hit = self.rays.report(self.i, &hit);
             self.add(hit);
         }
         false

@@ -23,6 +23,7 @@ pub mod bvh;
 pub mod crossings;
 pub mod dispatch;
 pub mod driver;
+pub mod instances;
 pub mod interleave;
 pub mod jobs;
 pub mod node;

@@ -9,9 +9,12 @@
 
 use std::ops::Range;
 
-use glam::Vec3A;
+use std::sync::Arc;
+
+use glam::{DAffine3, DMat4, Mat3A, Vec3A};
 
 use super::watertight::Tri;
+use crate::scene::pose::transform_point;
 
 /// Child reference bit marking a leaf: `LEAF | (blocks − 1) << 28 | first block`. An inner
 /// child's reference is its node's offset in `Bvh8::nodes` in units of 32 bytes (a shift, not a
@@ -282,6 +285,10 @@ pub struct Bvh8 {
     pub blocks: Vec<Tri4>,
     /// Nodes on the longest root-to-leaf path.
     pub depth: u32,
+    /// For a two-level tree (`instances`): `nodes` is the top tree over the instances, whose
+    /// leaf references name runs of `Instanced::refs`, and `blocks` is empty. `None` for a
+    /// flat tree.
+    pub inst: Option<Box<Instanced>>,
 }
 
 impl Bvh8 {
@@ -344,9 +351,57 @@ impl Bvh8 {
         [inner, leaves, triangles]
     }
 
-    /// Bytes held by the tree (nodes and blocks).
+    /// Bytes held by the tree (nodes and blocks; for a two-level tree, its objects' trees and
+    /// instances too).
     pub fn bytes(&self) -> usize {
-        self.nodes.len() * size_of::<Node8>() + self.blocks.len() * size_of::<Tri4>()
+        let own = self.nodes.len() * size_of::<Node8>() + self.blocks.len() * size_of::<Tri4>();
+        own + self.inst.as_ref().map_or(0, |i| {
+            i.objects.bytes()
+                + i.refs.len() * size_of::<InstRef>()
+                + i.instances.len() * size_of::<Instance>()
+        })
+    }
+}
+
+/// What a top tree's leaf names: a subtree of an object's tree (`node`: an inner node's or a
+/// leaf's reference in [`Instanced::objects`]) seen through instance `inst`.
+#[derive(Clone, Copy, Debug)]
+pub struct InstRef {
+    pub node: u32,
+    pub inst: u32,
+}
+
+/// An object placed in the world, as its rays see it: the inverse of its transform (world to
+/// object) in f64, and its linear part rounded to f32; the object's world box. (The transform
+/// itself, which only reported hits need, is kept apart in `Instanced::to_world`.)
+#[derive(Clone, Copy, Debug)]
+pub struct Instance {
+    pub to_object: DAffine3,
+    pub linear: Mat3A,
+    pub lo: Vec3A,
+    pub hi: Vec3A,
+}
+
+/// The instance level of a two-level tree: the objects' trees, and what the top tree's leaves
+/// name. A [`Bvh8`] whose `inst` is set holds the top tree in its `nodes` (and no blocks); its
+/// leaf references name runs of [`Instanced::refs`].
+#[derive(Debug)]
+pub struct Instanced {
+    pub objects: Arc<Bvh8>,
+    pub refs: Vec<InstRef>,
+    pub instances: Vec<Instance>,
+    /// Each instance's transform, object to world, as the pose gave it.
+    pub to_world: Vec<DMat4>,
+}
+
+impl Instanced {
+    /// The world corners of lane `lane` of block `block` of the objects' tree, seen through
+    /// instance `inst`.
+    #[inline(always)]
+    pub fn world_corners(&self, block: u32, lane: u32, inst: u32) -> [[f32; 3]; 3] {
+        let c = self.objects.blocks[block as usize].corners(lane as usize);
+        let m = &self.to_world[inst as usize];
+        c.map(|p| transform_point(m, p))
     }
 }
 

@@ -51,7 +51,7 @@ pub fn closest_points(
     }
     check_points(points)?;
     on_threads(threads, || {
-        let (bvh, built) = super::bvh::bvh_for(scene, threads)?;
+        let (bvh, built) = super::bvh::bvh_for_with(scene, threads, true)?;
         let start = Instant::now();
         let limit = max_distance as f64;
         // Each answer packed as it is found (28 bytes, not the 72 of an `Option<Near>`).

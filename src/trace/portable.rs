@@ -10,13 +10,7 @@ use super::watertight;
 pub struct Portable;
 
 impl Kernel for Portable {
-    type R = Ray;
     type D = [f32; 8];
-
-    #[inline(always)]
-    fn prepare(self, r: &Ray) -> Ray {
-        *r
-    }
 
     #[inline(always)]
     fn node(self, n: &Node8, r: &Ray, t_far: f32) -> (u32, [f32; 8]) {

@@ -22,8 +22,11 @@ pub(crate) struct Rays<'a> {
     /// How far apart the origins of a packet's rays may lie (`traverse::coherent`).
     pub origin_extent: f32,
     /// Whether closest-hit rays that do not travel as packets are traced in turns
-    /// (`interleave`): where the tree is larger than [`INTERLEAVE_BYTES`].
+    /// (`interleave`): where the tree is larger than [`INTERLEAVE_BYTES`] and flat.
     pub interleave: bool,
+    /// Whether coherent rays may travel as packets: on a flat tree (a two-level tree's rays go
+    /// one by one).
+    pub packets: bool,
 }
 
 /// Trees larger than this trace their closest-hit rays in turns (`interleave`), on x86-64 (where
@@ -47,12 +50,13 @@ impl<'a> Rays<'a> {
             range: (q.t_min, q.t_max),
             origin_extent: 0.05 * bvh.diagonal(),
             interleave: cfg!(target_arch = "x86_64") && bvh.bytes() > INTERLEAVE_BYTES,
+            packets: bvh.inst.is_none(),
         }
     }
 }
 
 /// Traversal stacks and a group of rays, kept from ray to ray.
-pub(crate) struct Scratch<K: Kernel, S> {
+pub(crate) struct Scratch<S> {
     single: Stack,
     packet: PacketStack,
     /// The group of [`WIDTH`] rays being traced, and their directions as given.
@@ -60,10 +64,10 @@ pub(crate) struct Scratch<K: Kernel, S> {
     dirs: [Vec3A; WIDTH],
     /// Rays left to trace in turns (`Rays::trace`), and the flights that trace them.
     lone: Vec<u32>,
-    flights: Flights<K, S>,
+    flights: Flights<S>,
 }
 
-impl<K: Kernel, S> Scratch<K, S> {
+impl<S> Scratch<S> {
     pub fn new() -> Self {
         let none = Ray::new(Vec3A::ZERO, Vec3A::X, 0.0);
         Self {
@@ -79,7 +83,6 @@ impl<K: Kernel, S> Scratch<K, S> {
 
 /// One ray in traversal form.
 pub(crate) struct Traced {
-    pub o: Vec3A,
     pub d: Vec3A,
     pub ray: Ray,
     pub t_far: f32,
@@ -102,7 +105,7 @@ impl Rays<'_> {
         k: K,
         base: usize,
         range: Range<usize>,
-        scratch: &mut Scratch<K, S>,
+        scratch: &mut Scratch<S>,
         sink: impl Fn(usize) -> S,
         mut done: impl FnMut(usize, S),
     ) {
@@ -110,7 +113,7 @@ impl Rays<'_> {
         scratch.lone.clear();
         let mut j = range.start;
         while j < range.end {
-            if K::PACKETS && S::PACKETS && j + WIDTH <= range.end {
+            if K::PACKETS && S::PACKETS && self.packets && j + WIDTH <= range.end {
                 for i in 0..WIDTH {
                     (scratch.rays[i], scratch.dirs[i]) = self.traversal_ray(base + j + i);
                 }
@@ -191,28 +194,90 @@ impl Rays<'_> {
     pub fn ray(&self, i: usize) -> Traced {
         let (ray, d) = self.traversal_ray(i);
         Traced {
-            o: ray.o,
             d,
             ray,
             t_far: self.range.1,
         }
     }
 
+    /// The world corners of the triangle `h` hit: its block's, or in a two-level tree its
+    /// object's moved by its instance's transform.
+    #[inline(always)]
+    pub fn corners(&self, h: &BlockHit) -> [[f32; 3]; 3] {
+        match &self.bvh.inst {
+            None => self.bvh.blocks[h.block as usize].corners(h.lane as usize),
+            Some(inst) => inst.world_corners(h.block, h.lane, h.inst),
+        }
+    }
+
+    /// The range a batch of [`Rays::pending`] hits is refined with: the query's on a flat
+    /// tree; on a two-level tree none, each hit's own being checked by [`Rays::settle`].
+    #[inline(always)]
+    pub fn refine_range(&self) -> (f32, f32) {
+        match self.bvh.inst {
+            None => self.range,
+            Some(_) => (f32::NEG_INFINITY, f32::INFINITY),
+        }
+    }
+
+    /// Hit `h` of ray `i` ready for the f64 refinement, and the shift of its parameter: on a
+    /// flat tree the world triangle and the ray as given (shift 0); on a two-level tree the
+    /// object's own triangle and the ray in its instance's frame (`Instance::ray_in`), so that
+    /// a hit is refined on the exact pose, as it was found (the posed scene's f32 vertices are
+    /// that pose rounded).
+    #[inline(always)]
+    pub fn pending(&self, i: usize, h: &BlockHit) -> (Pending, f32) {
+        match &self.bvh.inst {
+            None => (
+                Pending {
+                    v: self.bvh.blocks[h.block as usize].corners(h.lane as usize),
+                    o: self.origins[i],
+                    d: self.directions[i],
+                    t: h.t,
+                    bary: h.bary(),
+                },
+                0.0,
+            ),
+            Some(inst) => {
+                let (ray, _) = self.traversal_ray(i);
+                let (frame, s) = inst.instances[h.inst as usize].ray_in(&ray);
+                let p = Pending {
+                    v: inst.objects.blocks[h.block as usize].corners(h.lane as usize),
+                    o: frame.o.to_array(),
+                    d: frame.d.to_array(),
+                    t: h.t - s,
+                    bary: h.bary(),
+                };
+                (p, s)
+            }
+        }
+    }
+
+    /// A refined hit `p` of [`Rays::pending`] (with its shift `s`) in the world: its `t`
+    /// shifted back, or, where that leaves the query's range, the hit as found (`h`).
+    #[inline(always)]
+    pub fn settle(&self, p: &Pending, s: f32, h: &BlockHit) -> (f32, [f32; 2]) {
+        if s == 0.0 && self.bvh.inst.is_none() {
+            return (p.t, p.bary);
+        }
+        let t = p.t + s;
+        if t >= self.range.0 && t < self.range.1 {
+            (t, p.bary)
+        } else {
+            (h.t, h.bary())
+        }
+    }
+
     /// The hit in the caller's units, refined in f64.
     #[inline(always)]
-    pub fn report(&self, r: &Traced, h: &BlockHit) -> Hit {
-        let mut p = Pending {
-            v: self.bvh.blocks[h.block as usize].corners(h.lane as usize),
-            o: r.o.to_array(),
-            d: r.d.to_array(),
-            t: h.t,
-            bary: h.bary(),
-        };
-        refine::refine_one(&mut p, self.range);
+    pub fn report(&self, i: usize, h: &BlockHit) -> Hit {
+        let (mut p, s) = self.pending(i, h);
+        refine::refine_one(&mut p, self.refine_range());
+        let (t, bary) = self.settle(&p, s, h);
         Hit {
-            t: p.t,
+            t,
             triangle: h.triangle,
-            bary: p.bary,
+            bary,
         }
     }
 }

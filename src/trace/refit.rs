@@ -189,6 +189,7 @@ impl ObjectTrees {
             nodes,
             blocks,
             depth: top_depth + self.depth,
+            inst: None,
         };
         (tree, triangles)
     }
@@ -261,7 +262,7 @@ fn set_box(n: &mut Node8, k: usize, b: &Aabb) {
 }
 
 /// Nodes on the longest path down from `i` through the top tree's own nodes.
-fn depth_of(nodes: &[Node8], i: usize) -> u32 {
+pub(super) fn depth_of(nodes: &[Node8], i: usize) -> u32 {
     let n = &nodes[i];
     1 + n
         .child
@@ -276,7 +277,7 @@ fn depth_of(nodes: &[Node8], i: usize) -> u32 {
 /// of their centres along the widest axis. Its slots that hold one object are left empty and
 /// listed in `patches` as (node, slot, object), and the nodes' orders are left to the caller,
 /// once those are filled; returns the root's index.
-fn top(
+pub(super) fn top(
     items: &mut [(Aabb, usize)],
     nodes: &mut Vec<Node8>,
     patches: &mut Vec<(usize, usize, usize)>,
@@ -332,94 +333,4 @@ fn split_at_median(items: &mut [(Aabb, usize)]) {
         2
     };
     items.sort_by(|(a, i), (b, j)| centre(a)[axis].total_cmp(&centre(b)[axis]).then(i.cmp(j)));
-}
-
-#[cfg(test)]
-mod tests {
-    use std::sync::Arc;
-
-    use glam::{DMat4, DQuat, DVec3};
-
-    use crate::scene::{Scene, SceneParts};
-    use crate::trace::testdata::icosphere;
-    use crate::trace::{cast_rays, Bvh};
-
-    /// `n` icospheres in a row, one object each.
-    fn spheres(n: usize) -> Arc<Scene> {
-        let (v, f) = icosphere(2);
-        let mut parts = SceneParts::default();
-        for k in 0..n {
-            let off = parts.vertices.len() as u32;
-            let x = 3.0 * k as f32;
-            parts
-                .vertices
-                .extend(v.iter().map(|p| [p[0] + x, p[1], p[2]]));
-            parts.faces.extend(f.iter().map(|t| t.map(|i| i + off)));
-            parts
-                .object_ids
-                .extend(std::iter::repeat_n(k as i32, f.len()));
-            parts.objects.push(format!("s{k}"));
-        }
-        parts.material_ids = vec![-1; parts.faces.len()];
-        Arc::new(Scene::new(parts).unwrap())
-    }
-
-    /// Rays from around the scene toward its vertices, give or take.
-    fn rays(n: usize, seed: u64, at: &[[f32; 3]]) -> (Vec<[f32; 3]>, Vec<[f32; 3]>) {
-        let mut s = seed;
-        let mut r = move || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((s >> 11) as f64 / (1u64 << 53) as f64) as f32
-        };
-        let o: Vec<[f32; 3]> = (0..n)
-            .map(|_| [r() * 80.0 - 60.0, r() * 40.0 - 20.0, r() * 40.0 - 20.0])
-            .collect();
-        let d = o
-            .iter()
-            .map(|p| {
-                let v = at[(r() * at.len() as f32) as usize % at.len()];
-                std::array::from_fn(|a| v[a] - p[a] + 0.3 * (r() - 0.5))
-            })
-            .collect();
-        (o, d)
-    }
-
-    #[test]
-    fn a_posed_tree_finds_what_a_fresh_build_finds() {
-        let base = spheres(23);
-        let transforms: Vec<DMat4> = (0..23)
-            .map(|k| {
-                let t = k as f64;
-                let rot = DQuat::from_euler(glam::EulerRot::XYZ, 0.3 * t, 0.7 * t, 0.1 * t);
-                let scale = DVec3::new(1.0 + 0.1 * t, 1.0, if k % 3 == 0 { -1.0 } else { 0.5 });
-                let shift = DVec3::new(-2.0 * t, (t * 0.9).sin() * 4.0, 1e5 * f64::from(k == 5));
-                DMat4::from_scale_rotation_translation(scale, rot, shift)
-            })
-            .collect();
-        let posed = base.posed(&transforms).unwrap();
-        let flat = Scene::from_arrays(
-            posed.vertices().to_vec(),
-            posed.faces().to_vec(),
-            None,
-            None,
-        )
-        .unwrap();
-        let tree = Bvh::of(&posed);
-        assert!(tree.stats().triangles == posed.triangle_count());
-        let (o, d) = rays(20_000, 7, posed.vertices());
-        let (a, b) = (
-            cast_rays(&posed, &o, &d, 0.0, f32::INFINITY).unwrap(),
-            cast_rays(&flat, &o, &d, 0.0, f32::INFINITY).unwrap(),
-        );
-        let hits = |h: &crate::trace::RayHits| h.triangle.iter().filter(|&&t| t >= 0).count();
-        assert!(hits(&b) > 10_000, "{} {}", hits(&a), hits(&b));
-        assert_eq!(a.triangle, b.triangle);
-        assert_eq!(a.t, b.t);
-        // The same poses again: the same tree, bit for bit.
-        let again = base.posed(&transforms).unwrap();
-        let c = cast_rays(&again, &o, &d, 0.0, f32::INFINITY).unwrap();
-        assert_eq!(a.barycentric, c.barycentric);
-    }
 }

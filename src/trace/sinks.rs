@@ -4,12 +4,17 @@
 use super::node::Bvh8;
 use super::traverse::{Sink, Tri4Hit};
 
-/// A hit in a leaf block: block, lane, triangle, `t` and the barycentrics' numerators and
-/// denominator (divided only when reported).
+/// No instance: a hit in a flat tree, whose blocks hold world corners.
+pub const WORLD: u32 = u32::MAX;
+
+/// A hit in a leaf block: block, lane, the instance it was found through (`WORLD` in a flat
+/// tree), triangle, `t` and the barycentrics' numerators and denominator (divided only when
+/// reported).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BlockHit {
     pub block: u32,
     pub lane: u32,
+    pub inst: u32,
     pub triangle: u32,
     pub t: f32,
     pub bu: f32,
@@ -19,10 +24,11 @@ pub struct BlockHit {
 
 impl BlockHit {
     #[inline(always)]
-    pub fn of(bvh: &Bvh8, block: usize, lane: usize, h: &Tri4Hit) -> Self {
+    pub fn of(bvh: &Bvh8, block: usize, lane: usize, h: &Tri4Hit, inst: u32) -> Self {
         Self {
             block: block as u32,
             lane: lane as u32,
+            inst,
             triangle: bvh.blocks[block].id[lane],
             t: h.t[lane],
             bu: h.bu[lane],
@@ -80,11 +86,16 @@ impl Sink for Closest {
 
     #[inline(always)]
     fn take(&mut self, bvh: &Bvh8, block: usize, h: &Tri4Hit) -> bool {
+        self.take_in(bvh, block, h, WORLD)
+    }
+
+    #[inline(always)]
+    fn take_in(&mut self, bvh: &Bvh8, block: usize, h: &Tri4Hit, inst: u32) -> bool {
         let mut m = h.mask;
         while m != 0 {
             let lane = m.trailing_zeros() as usize;
             m &= m - 1;
-            let hit = BlockHit::of(bvh, block, lane, h);
+            let hit = BlockHit::of(bvh, block, lane, h, inst);
             if self.best.is_none_or(|b| hit.before(&b)) {
                 self.best = Some(hit);
                 self.t_far = above(hit.t);
@@ -112,6 +123,11 @@ impl Sink for ClosestKept<'_> {
 
     #[inline(always)]
     fn take(&mut self, bvh: &Bvh8, block: usize, h: &Tri4Hit) -> bool {
+        self.take_in(bvh, block, h, WORLD)
+    }
+
+    #[inline(always)]
+    fn take_in(&mut self, bvh: &Bvh8, block: usize, h: &Tri4Hit, inst: u32) -> bool {
         let mut kept = *h;
         let mut m = h.mask;
         while m != 0 {
@@ -122,7 +138,7 @@ impl Sink for ClosestKept<'_> {
                 kept.mask &= !(1 << lane);
             }
         }
-        self.closest.take(bvh, block, &kept)
+        self.closest.take_in(bvh, block, &kept, inst)
     }
 }
 
@@ -213,6 +229,11 @@ impl<S: Sink> Sink for Counted<S> {
     #[inline(always)]
     fn take(&mut self, bvh: &Bvh8, block: usize, h: &Tri4Hit) -> bool {
         self.sink.take(bvh, block, h)
+    }
+
+    #[inline(always)]
+    fn take_in(&mut self, bvh: &Bvh8, block: usize, h: &Tri4Hit, inst: u32) -> bool {
+        self.sink.take_in(bvh, block, h, inst)
     }
 
     #[inline(always)]

@@ -1,6 +1,12 @@
 //! Test data that the tests of several `trace` files share: an icosphere and a seeded generator.
 
-use glam::Vec3;
+use std::sync::Arc;
+
+use glam::{DMat4, DQuat, DVec3, Vec3};
+
+use super::node::Bvh8;
+use super::query::Query;
+use crate::scene::{Scene, SceneParts};
 
 /// An icosphere subdivided `n` times: a closed mesh with shared edges and vertices.
 pub(crate) fn icosphere(n: u32) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
@@ -45,4 +51,72 @@ impl Rng {
     pub fn point(&mut self, lo: f32, hi: f32) -> [f32; 3] {
         [0; 3].map(|_| lo + (hi - lo) * self.next())
     }
+}
+
+/// `n` icospheres (`icosphere(2)`) in a row, one object each.
+pub(crate) fn spheres(n: usize) -> Arc<Scene> {
+    let (v, f) = icosphere(2);
+    let mut parts = SceneParts::default();
+    for k in 0..n {
+        let off = parts.vertices.len() as u32;
+        let x = 3.0 * k as f32;
+        parts
+            .vertices
+            .extend(v.iter().map(|p| [p[0] + x, p[1], p[2]]));
+        parts.faces.extend(f.iter().map(|t| t.map(|i| i + off)));
+        parts
+            .object_ids
+            .extend(std::iter::repeat_n(k as i32, f.len()));
+        parts.objects.push(format!("s{k}"));
+    }
+    parts.material_ids = vec![-1; parts.faces.len()];
+    Arc::new(Scene::new(parts).unwrap())
+}
+
+/// A pose of `n` objects: each turned, scaled (mirrored where `k % 3 == 0`) and moved, one of
+/// them far away.
+pub(crate) fn poses(n: usize) -> Vec<DMat4> {
+    (0..n)
+        .map(|k| {
+            let t = k as f64;
+            let rot = DQuat::from_euler(glam::EulerRot::XYZ, 0.3 * t, 0.7 * t, 0.1 * t);
+            let scale = DVec3::new(1.0 + 0.1 * t, 1.0, if k % 3 == 0 { -1.0 } else { 0.5 });
+            let shift = DVec3::new(-2.0 * t, (t * 0.9).sin() * 4.0, 1e5 * f64::from(k == 5));
+            DMat4::from_scale_rotation_translation(scale, rot, shift)
+        })
+        .collect()
+}
+
+/// Rays from around the scene toward points of `at`, give or take.
+pub(crate) fn rays_toward(n: usize, seed: u64, at: &[[f32; 3]]) -> (Vec<[f32; 3]>, Vec<[f32; 3]>) {
+    let mut r = Rng(seed);
+    let o: Vec<[f32; 3]> = (0..n)
+        .map(|_| {
+            let p = r.point(0.0, 1.0);
+            [p[0] * 80.0 - 60.0, p[1] * 40.0 - 20.0, p[2] * 40.0 - 20.0]
+        })
+        .collect();
+    let d = o
+        .iter()
+        .map(|p| {
+            let v = at[(r.next() * at.len() as f32) as usize % at.len()];
+            std::array::from_fn(|a| v[a] - p[a] + 0.3 * (r.next() - 0.5))
+        })
+        .collect();
+    (o, d)
+}
+
+/// Closest hits on `tree` itself (`t`, triangle), with the portable kernel.
+pub(crate) fn closest_on(tree: &Bvh8, o: &[[f32; 3]], d: &[[f32; 3]]) -> (Vec<f32>, Vec<i32>) {
+    use super::dispatch::Job;
+    let q = Query::new(0.0, f32::INFINITY);
+    let rays = super::rays::Rays::new(tree, o, d, &q);
+    let n = o.len();
+    let mut p = (vec![f32::INFINITY; n], vec![-1; n], vec![[0.0; 2]; n]);
+    super::jobs::ClosestJob::new(&rays).chunk(
+        super::portable::Portable,
+        0,
+        (&mut p.0, &mut p.1, &mut p.2),
+    );
+    (p.0, p.1)
 }

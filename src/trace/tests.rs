@@ -7,14 +7,14 @@ use glam::Vec3;
 use super::api::{
     all_hits, cast_rays, cast_rays_kept, cast_rays_with, nearest_hits, occluded, RayHits,
 };
-use super::bvh::Bvh;
+use super::bvh::{bvh_for_with, Bvh};
 use super::dispatch::{dispatch, Job};
 use super::jobs::{any_plan, plan_of, AnyJob, AnyPlan, ClosestJob, Probe, ProbeJob};
 use super::portable::Portable;
 use super::query::{Query, Threads};
 use super::rays::Rays;
 use super::refine;
-use super::testdata::{icosphere, Rng};
+use super::testdata::{closest_on, icosphere, poses, rays_toward, spheres, Rng};
 use crate::scene::Scene;
 
 /// A cloud of random triangles of every size, with duplicated and coplanar ones mixed in.
@@ -500,4 +500,33 @@ fn the_any_hit_probe_is_a_count() {
             hint: true
         }
     );
+}
+
+#[test]
+fn a_posed_flat_tree_finds_what_a_fresh_build_finds() {
+    // The flat tree of a rigid pose (the point queries', winding numbers' and crossings'):
+    // its base's object trees refit, bit for bit a fresh build's hits.
+    let base = spheres(23);
+    let posed = base.posed(&poses(23)).unwrap();
+    let flat = Scene::from_arrays(
+        posed.vertices().to_vec(),
+        posed.faces().to_vec(),
+        None,
+        None,
+    )
+    .unwrap();
+    let (tree, _) = bvh_for_with(&posed, Threads::All, true).unwrap();
+    assert!(tree.tree.inst.is_none());
+    assert!(tree.stats().triangles == posed.triangle_count());
+    let (o, d) = rays_toward(20_000, 7, posed.vertices());
+    let (a, b) = (
+        closest_on(&tree.tree, &o, &d),
+        closest_on(&Bvh::of(&flat).tree, &o, &d),
+    );
+    assert!(b.1.iter().filter(|&&t| t >= 0).count() > 10_000);
+    assert_eq!(a, b);
+    // The same poses again: the same tree, bit for bit.
+    let again = base.posed(&poses(23)).unwrap();
+    let (tree, _) = bvh_for_with(&again, Threads::One, true).unwrap();
+    assert_eq!(closest_on(&tree.tree, &o, &d), a);
 }

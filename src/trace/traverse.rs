@@ -13,7 +13,8 @@ use std::mem::MaybeUninit;
 use glam::Vec3A;
 
 use super::node::{
-    leaf_blocks, leaf_first, node_at, node_offset, Bvh8, Node8, Tri4, LEAF, ROW_BYTES, STACK,
+    leaf_blocks, leaf_first, node_at, node_offset, Bvh8, Instanced, Node8, Tri4, LEAF, ROW_BYTES,
+    STACK,
 };
 use super::watertight::RayShear;
 
@@ -21,6 +22,8 @@ use super::watertight::RayShear;
 #[derive(Clone, Copy, Debug)]
 pub struct Ray {
     pub o: Vec3A,
+    /// The direction as given (a two-level tree moves it into each object's frame).
+    pub d: Vec3A,
     pub inv: Vec3A,
     /// `inv` widened by [`WIDEN`]: exit distances computed with it come out a few ulps long.
     pub inv_far: Vec3A,
@@ -52,6 +55,7 @@ impl Ray {
         let shear = RayShear::with_inverse(d, inv);
         Self {
             o,
+            d,
             inv,
             inv_far: inv * WIDEN,
             near,
@@ -98,15 +102,14 @@ impl Tri4Hit {
 pub trait Kernel: Copy {
     /// Whether [`Kernel::packet`] traces packets.
     const PACKETS: bool = false;
-    /// A ray's constants in this kernel's registers.
-    type R: Copy;
-    /// What a node test leaves for ordering the children it hit.
+    /// What a node test leaves for ordering the children it hit. (A ray's constants are read
+    /// from its [`Ray`] where they are used: a broadcast load costs what reloading a spilled
+    /// register would.)
     type D: Copy;
-    fn prepare(self, r: &Ray) -> Self::R;
     /// The entry distance of child `lane` left by `node`.
     fn dist(self, d: &Self::D, lane: u32) -> f32;
     /// The children of `n` whose boxes the ray enters before `t_far`, as a bit mask.
-    fn node(self, n: &Node8, r: &Self::R, t_far: f32) -> (u32, Self::D);
+    fn node(self, n: &Node8, r: &Ray, t_far: f32) -> (u32, Self::D);
     /// Push the children in `mask` (three or more) onto `s` above `sp`, farthest first (by
     /// entry distance); return the nearest, unpushed.
     fn push_sorted(self, n: &Node8, mask: u32, d: Self::D, s: &mut Stack, sp: &mut usize) -> u32;
@@ -126,7 +129,7 @@ pub trait Kernel: Copy {
         sp: &mut usize,
     ) -> u32;
     /// The watertight test of a block's four triangles.
-    fn tri4(self, b: &Tri4, r: &Self::R, ray: &Ray, t_far: f32) -> Tri4Hit;
+    fn tri4(self, b: &Tri4, r: &Ray, ray: &Ray, t_far: f32) -> Tri4Hit;
     /// Refine hits in f64 (`refine`), as `refine::refine_one` does one by one.
     fn refine(self, p: &mut [super::refine::Pending], range: (f32, f32));
     /// Trace eight coherent rays as one packet (lanes not in `active` are ignored), if this
@@ -195,6 +198,38 @@ impl Stack {
             }
         }
         None
+    }
+}
+
+/// How far before the object's box a moved origin stays (`Instance::ray_in`), relative to
+/// the parameter where the ray enters the box: a few ulps of it, for the rounding of that
+/// parameter.
+const ENTRY_MARGIN: f32 = 1e-5;
+
+impl super::node::Instance {
+    /// The world ray `w` in this instance's frame, and the shift `s` of its parameter: the
+    /// object-space ray `o' + u·d'` (`u >= 0`) meets what the world ray meets at `t = s + u`.
+    ///
+    /// The origin is first moved along the ray to where it enters the object's world box (a
+    /// hair before: [`ENTRY_MARGIN`]; not back before `t_min`), then mapped by the f64 inverse
+    /// and rounded once to f32; the direction is mapped by the f32 linear part. An origin far
+    /// from the object (by `D`) would otherwise be rounded in the object's frame by ulps of `D`
+    /// across the ray, not only along it as the world's watertight test rounds it: a mesh 1e5
+    /// away missed 3% of the rays a flat tree of its posed corners found. Now the origin's error
+    /// is a few ulps of the object's size, the direction's `2^-24·3·|M⁻¹|·|d|` (an f32 product
+    /// of three terms), both relative to the object, as a flat tree's corners are rounded. Each
+    /// reported hit is refined in f64 in the same frame (`Rays::pending`), so reported `t` and
+    /// barycentrics are the exact pose's. Nothing of the object lies
+    /// before its box, so `u` starts at 0 (distances in a frame are never negative, as the
+    /// traversal's sort keys need).
+    #[inline(always)]
+    pub fn ray_in(&self, w: &Ray) -> (Ray, f32) {
+        let (t0, t1) = ((self.lo - w.o) * w.inv, (self.hi - w.o) * w.inv);
+        let entry = t0.min(t1).max_element();
+        let s = (entry - ENTRY_MARGIN * entry.abs()).max(w.t_min);
+        let near = w.o.as_dvec3() + f64::from(s) * w.d.as_dvec3();
+        let o = self.to_object.transform_point3(near).as_vec3a();
+        (Ray::new(o, self.linear * w.d, 0.0), s)
     }
 }
 
@@ -283,6 +318,14 @@ pub trait Sink {
     fn t_far(&self) -> f32;
     /// Take block `block`'s hits; return true to stop the traversal.
     fn take(&mut self, bvh: &Bvh8, block: usize, h: &Tri4Hit) -> bool;
+    /// Take the hits of block `block` of a two-level tree's objects (`bvh`), found through
+    /// instance `inst` (`instances`): their `t` is the world ray's. Sinks that report where a
+    /// hit lies or which triangle it is record the instance; the others take it as `take`.
+    #[inline(always)]
+    fn take_in(&mut self, bvh: &Bvh8, block: usize, h: &Tri4Hit, inst: u32) -> bool {
+        let _ = inst;
+        self.take(bvh, block, h)
+    }
     /// A block worth testing before the traversal starts (see `sinks::AnyHit::hint`).
     #[inline(always)]
     fn hint(&self) -> Option<usize> {
@@ -300,18 +343,164 @@ pub trait Sink {
 /// space, reused from ray to ray.
 #[inline(always)]
 pub fn traverse<K: Kernel, S: Sink>(k: K, bvh: &Bvh8, ray: &Ray, sink: &mut S, stack: &mut Stack) {
-    let r = k.prepare(ray);
+    if let Some(inst) = &bvh.inst {
+        return traverse_top(k, bvh, inst, ray, sink, stack);
+    }
+    let r = ray;
     // Not `Option::is_some_and` with a closure: a closure does not inherit the caller's target
     // features, and the block test's AVX2 intrinsics would become calls.
     if let Some(b) = sink.hint() {
-        if block_stops(k, bvh, b, &r, ray, sink) {
+        if block_stops(k, bvh, b, r, ray, sink) {
             return;
         }
     }
     let (mut cur, mut sp) = (0u32, 0usize);
-    while let Some(next) = visit(k, bvh, cur, &r, ray, sink, stack, &mut sp) {
+    while let Some(next) = visit(k, bvh, cur, r, ray, sink, stack, &mut sp) {
         cur = next;
     }
+}
+
+/// [`traverse`] on a two-level tree (`instances`), step by step ([`visit_two`]). Hints
+/// (`Sink::hint`) name blocks of one frame and are not taken here.
+#[inline(always)]
+fn traverse_top<K: Kernel, S: Sink>(
+    k: K,
+    top: &Bvh8,
+    inst: &Instanced,
+    ray: &Ray,
+    sink: &mut S,
+    stack: &mut Stack,
+) {
+    let mut at = TwoLevel::new(ray);
+    let (mut cur, mut sp) = (0u32, 0usize);
+    while let Some(next) = visit_two(k, top, inst, cur, &mut at, sink, stack, &mut sp) {
+        cur = next;
+    }
+}
+
+/// Where a ray's traversal of a two-level tree is: in the top tree with the world ray, or in
+/// an instance's subtree with the ray moved into that instance's frame. One stack serves both:
+/// the entries at and above `base` are the instance's, those below the top tree's (entry
+/// distances are `t`, the same in every frame, so both cull alike).
+pub struct TwoLevel {
+    pub world: Ray,
+    /// The instance of `frame` (`u32::MAX` before any).
+    pub inst: u32,
+    /// The ray in `inst`'s frame (written when the first instance is entered), whose parameter
+    /// is the world's less `shift` (`Instance::ray_in`).
+    pub frame: MaybeUninit<Ray>,
+    pub shift: f32,
+    /// The stack height where the current instance's entries begin; `usize::MAX` in the top tree.
+    pub base: usize,
+}
+
+impl TwoLevel {
+    #[inline(always)]
+    pub fn new(ray: &Ray) -> Self {
+        Self {
+            world: *ray,
+            inst: u32::MAX,
+            frame: MaybeUninit::uninit(),
+            shift: 0.0,
+            base: usize::MAX,
+        }
+    }
+}
+
+/// One step of a traversal of a two-level tree, as [`visit`] is of a flat one: a node of the
+/// top tree (world ray), the entry into an instance (the ray moved into its frame, kept while
+/// the next leaves are the same instance's: re-braided leaves of one instance often follow each
+/// other), or a node or leaf of an instance's subtree (its blocks' hits go to
+/// [`Sink::take_in`] with the instance).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub(crate) fn visit_two<K: Kernel, S: Sink>(
+    k: K,
+    top: &Bvh8,
+    inst: &Instanced,
+    cur: u32,
+    at: &mut TwoLevel,
+    sink: &mut S,
+    stack: &mut Stack,
+    sp: &mut usize,
+) -> Option<u32> {
+    let objects = &*inst.objects;
+    let mut cur = cur;
+    loop {
+        // The tree and the ray of where the traversal is, by selects rather than a branch: a
+        // ray that leaves and enters instances would make it a coin toss at every node.
+        let inside = at.base != usize::MAX;
+        // SAFETY: `base` is set (below) only once an instance was entered and `frame` written.
+        let ray = if inside {
+            unsafe { at.frame.assume_init_ref() }
+        } else {
+            &at.world
+        };
+        let tree = if inside { objects } else { top };
+        // Distances in the instance's frame are the world's less its shift.
+        let shift = if inside { at.shift } else { 0.0 };
+        let t_far = sink.t_far() - shift;
+        if cur & LEAF == 0 {
+            sink.count(1, 0);
+            let n = node_at(&tree.nodes, cur);
+            let (mask, d) = k.node(n, ray, t_far);
+            if mask != 0 {
+                return Some(descend::<K, S>(k, tree, n, mask, d, ray, stack, sp));
+            }
+        } else if inside {
+            for b in leaf_blocks(cur) {
+                sink.count(0, 1);
+                debug_assert!(b < objects.blocks.len());
+                // SAFETY: leaf references of the objects' tree index its blocks.
+                let block = unsafe { objects.blocks.get_unchecked(b) };
+                let mut h = k.tri4(block, ray, ray, sink.t_far() - shift);
+                if h.mask != 0 {
+                    for t in &mut h.t {
+                        *t += shift;
+                    }
+                    if sink.take_in(objects, b, &h, at.inst) {
+                        return None;
+                    }
+                }
+            }
+        } else {
+            // Enter the instance, and visit its subtree's first node in the same step.
+            // SAFETY: top leaves name one entry of `refs` each (`instances::pose`).
+            let to = unsafe { *inst.refs.get_unchecked(leaf_first(cur)) };
+            if to.inst != at.inst {
+                at.inst = to.inst;
+                let (frame, shift) = inst.instances[to.inst as usize].ray_in(&at.world);
+                at.frame.write(frame);
+                at.shift = shift;
+            }
+            at.base = *sp;
+            cur = to.node;
+            continue;
+        }
+        break;
+    }
+    // The next entry whose box starts no farther than the sink's bound, each entry's distance
+    // in its own frame: the instance's above `base`, the world's below (where the traversal
+    // returns to the top tree).
+    let t_far = sink.t_far();
+    while *sp > 0 {
+        *sp -= 1;
+        let inside = *sp >= at.base;
+        // SAFETY: entries below `sp` were written by `push` or a kernel's push.
+        let (node, dist) = unsafe {
+            (
+                stack.node.get_unchecked(*sp).assume_init(),
+                stack.dist.get_unchecked(*sp).assume_init(),
+            )
+        };
+        if !inside {
+            at.base = usize::MAX;
+        }
+        if dist <= t_far - if inside { at.shift } else { 0.0 } {
+            return Some(node);
+        }
+    }
+    None
 }
 
 /// One step of a traversal: visit node or leaf `cur` and return the next to visit (a child
@@ -323,7 +512,7 @@ pub(crate) fn visit<K: Kernel, S: Sink>(
     k: K,
     bvh: &Bvh8,
     cur: u32,
-    r: &K::R,
+    r: &Ray,
     ray: &Ray,
     sink: &mut S,
     stack: &mut Stack,
@@ -363,7 +552,10 @@ pub(crate) fn descend<K: Kernel, S: Sink>(
     stack: &mut Stack,
     sp: &mut usize,
 ) -> u32 {
-    if S::PREFETCH {
+    // Not in a two-level tree's top tree: it is small (it stays in the cache), and its leaves
+    // name no blocks of its own, so their addresses would be wild (a prefetch of an unmapped
+    // address never faults, but waits for the page walk: 20% of a trace's time).
+    if S::PREFETCH && bvh.inst.is_none() {
         prefetch_children(bvh, n, mask);
     }
     let first = mask.trailing_zeros();
@@ -412,7 +604,7 @@ pub(crate) fn block_stops<K: Kernel, S: Sink>(
     k: K,
     bvh: &Bvh8,
     b: usize,
-    r: &K::R,
+    r: &Ray,
     ray: &Ray,
     sink: &mut S,
 ) -> bool {
@@ -434,29 +626,36 @@ pub(crate) fn block_stops<K: Kernel, S: Sink>(
 /// shadow rays of a light), and it lets them go in turns on large trees.
 #[inline(always)]
 fn prefetch_children(bvh: &Bvh8, n: &Node8, mask: u32) {
+    let mut m = mask;
+    while m != 0 {
+        let c = n.child[m.trailing_zeros() as usize];
+        m &= m - 1;
+        prefetch(bvh, c);
+    }
+}
+
+/// Ask the cache for what visiting `c` (a reference of `bvh`, a flat tree or a two-level tree's
+/// objects) will read first: an inner node's four lines, or its first block's.
+#[inline(always)]
+fn prefetch(bvh: &Bvh8, c: u32) {
     #[cfg(target_arch = "x86_64")]
     {
         use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
         let nodes = bvh.nodes.as_ptr() as usize;
         let blocks = bvh.blocks.as_ptr() as usize;
-        let mut m = mask;
-        while m != 0 {
-            let c = n.child[m.trailing_zeros() as usize];
-            m &= m - 1;
-            // Both addresses, then a select by mask arithmetic: a branch on inner or leaf
-            // would be a coin toss for the predictor at every child.
-            let inner = nodes.wrapping_add(node_offset(c));
-            let leaf = blocks.wrapping_add(leaf_first(c) * size_of::<Tri4>());
-            let is_leaf = ((c >> 31) as usize).wrapping_neg();
-            let p = (inner ^ ((inner ^ leaf) & is_leaf)) as *const i8;
-            for l in 0..4 {
-                // SAFETY: a prefetch is only a hint: it never faults, whatever the address.
-                unsafe { _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(64 * l)) };
-            }
+        // Both addresses, then a select by mask arithmetic: a branch on inner or leaf would be
+        // a coin toss for the predictor at every child.
+        let inner = nodes.wrapping_add(node_offset(c));
+        let leaf = blocks.wrapping_add(leaf_first(c) * size_of::<Tri4>());
+        let is_leaf = ((c >> 31) as usize).wrapping_neg();
+        let p = (inner ^ ((inner ^ leaf) & is_leaf)) as *const i8;
+        for l in 0..4 {
+            // SAFETY: a prefetch is only a hint: it never faults, whatever the address.
+            unsafe { _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(64 * l)) };
         }
     }
     #[cfg(not(target_arch = "x86_64"))]
-    let _ = (bvh, n, mask);
+    let _ = (bvh, c);
 }
 
 /// A child's sort key: its entry distance's bits with the sign cleared (distances are never

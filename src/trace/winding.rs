@@ -48,7 +48,7 @@ pub const REFINE: f64 = 0.1;
 pub fn winding_numbers(scene: &Scene, points: &[[f32; 3]], threads: Threads) -> Result<Vec<f64>> {
     check_points(points)?;
     on_threads(threads, || {
-        let (bvh, _) = super::bvh::bvh_for(scene, threads)?;
+        let (bvh, _) = super::bvh::bvh_for_with(scene, threads, true)?;
         let closure = Closure::of(scene);
         // (Point indices are u32 there.)
         if points.len() < u32::MAX as usize {
