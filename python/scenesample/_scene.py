@@ -297,12 +297,21 @@ class Scene:
         -------
         Scene
             A scene whose every query and method works as on any other. Triangle ids are the
-            faces' indices, the same in every pose. The first pose of a scene builds one BVH
-            per object; later poses move and refit those and rebuild only a small tree over
-            the objects. A vertex that faces of two objects share is split (one copy per
-            object, appended), so :attr:`vertices` may have more rows than this scene's.
-            Lights and cameras stay where the scene as loaded has them (:meth:`at` moves those
-            on animated nodes).
+            faces' indices, the same in every pose. A vertex that faces of two objects share is
+            split (one copy per object, appended), so :attr:`vertices` may have more rows than
+            this scene's. Lights and cameras stay where the scene as loaded has them
+            (:meth:`at` moves those on animated nodes).
+
+            A pose costs O(objects). The first pose of a scene builds one BVH per object, in
+            the coordinates as loaded, and every pose shares them: rays run on a two-level
+            tree, a small tree over the objects' instances built for the pose, each ray moved
+            into an object's frame as it enters it (:func:`bvh_stats` reports ``instances``).
+            :attr:`vertices`, :attr:`normals` and :attr:`bounds` are made on first use (each
+            vertex moved in float64 and rounded once to float32). Rays trace the exact pose:
+            they agree with the same :attr:`vertices` built flat but where a ray passes within
+            that rounding of an edge (none of 40,000 rays in the tests), and ``t`` to a few
+            ulps. Point queries (closest points, signed distance, winding numbers) run on a
+            flat tree of the pose, refit from the objects' trees on first use.
         """
         objects = self.objects
         current = self.transforms

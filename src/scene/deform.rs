@@ -20,7 +20,7 @@ impl Scene {
         vertices: Vec<[f32; 3]>,
         normals: Option<Vec<[f32; 3]>>,
     ) -> Result<Scene> {
-        let n = self.parts.vertices.len();
+        let n = self.vertices().len();
         if vertices.len() != n {
             return input_err!(
                 "deformed needs one position per vertex of the scene: {n}, got {}",

@@ -133,9 +133,10 @@ pub struct Scene {
     parts: SceneParts,
     /// What a scene shares with the scenes posed from it ([`pose`]).
     shared: Arc<Shared>,
-    bounds: [[f32; 3]; 2],
-    degenerate: Vec<bool>,
-    degenerate_count: usize,
+    /// The vertices, their normals and what is derived from them: made with the scene, or for
+    /// a rigid pose on first use, from `make` ([`Scene::posed`]: a pose is O(objects)).
+    world: OnceLock<World>,
+    make: Option<MakeWorld>,
     /// The scene this one was posed from and each object's transform ([`Scene::posed`]).
     pose: Option<pose::Pose>,
     /// The scene whose object trees this one's BVH is refit from ([`Scene::deformed`]).
@@ -155,6 +156,43 @@ pub(crate) struct Shared {
     colors: Vec<[f32; 3]>,
     texcoords: Option<Vec<[f32; 2]>>,
     textures: Vec<Arc<texture::Texture>>,
+}
+
+/// A scene's vertices, their normals, the bounds of the vertices that triangles use and which
+/// triangles are degenerate.
+#[derive(Debug)]
+struct World {
+    vertices: Vec<[f32; 3]>,
+    normals: Option<Vec<[f32; 3]>>,
+    bounds: [[f32; 3]; 2],
+    degenerate: Vec<bool>,
+    degenerate_count: usize,
+}
+
+impl World {
+    fn of(vertices: Vec<[f32; 3]>, normals: Option<Vec<[f32; 3]>>, faces: &[[u32; 3]]) -> Self {
+        let (bounds, degenerate) = bounds_and_degenerate(&vertices, faces);
+        let degenerate_count = degenerate.iter().filter(|d| **d).count();
+        Self {
+            vertices,
+            normals,
+            bounds,
+            degenerate,
+            degenerate_count,
+        }
+    }
+}
+
+/// How a scene makes its vertices and normals on first use.
+pub(crate) struct MakeWorld(pub Box<dyn Fn() -> VerticesAndNormals + Send + Sync>);
+
+/// A scene's vertices, and its normals when it has them.
+pub(crate) type VerticesAndNormals = (Vec<[f32; 3]>, Option<Vec<[f32; 3]>>);
+
+impl std::fmt::Debug for MakeWorld {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "MakeWorld")
+    }
 }
 
 /// One cached value per type, each built once.
@@ -200,19 +238,54 @@ impl Scene {
     }
 
     /// The scene of checked `parts` (whose faces, ids and colours are `shared`'s).
-    fn assemble(parts: SceneParts, shared: Arc<Shared>, pose: Option<pose::Pose>) -> Self {
-        let (bounds, degenerate) = bounds_and_degenerate(&parts.vertices, &shared.faces);
-        let degenerate_count = degenerate.iter().filter(|d| **d).count();
+    fn assemble(mut parts: SceneParts, shared: Arc<Shared>, pose: Option<pose::Pose>) -> Self {
+        let vertices = std::mem::take(&mut parts.vertices);
+        let normals = parts.normals.take();
+        let world = OnceLock::from(World::of(vertices, normals, &shared.faces));
         Self {
             parts,
             shared,
-            bounds,
-            degenerate,
-            degenerate_count,
+            world,
+            make: None,
             pose,
             refit_from: None,
             derived: Derived::default(),
         }
+    }
+
+    /// The scene of checked `parts` (whose faces, ids and colours are `shared`'s) whose
+    /// vertices and normals `make` makes on first use, checked finite beforehand.
+    fn assemble_lazy(
+        parts: SceneParts,
+        shared: Arc<Shared>,
+        pose: Option<pose::Pose>,
+        make: MakeWorld,
+    ) -> Self {
+        Self {
+            parts,
+            shared,
+            world: OnceLock::new(),
+            make: Some(make),
+            pose,
+            refit_from: None,
+            derived: Derived::default(),
+        }
+    }
+
+    /// Whether the vertices are made (always but for a rigid pose not yet asked for them).
+    pub fn has_vertices(&self) -> bool {
+        self.world.get().is_some()
+    }
+
+    fn world(&self) -> &World {
+        self.world.get_or_init(|| {
+            let make = self
+                .make
+                .as_ref()
+                .expect("a scene without vertices makes them");
+            let (vertices, normals) = (make.0)();
+            World::of(vertices, normals, &self.shared.faces)
+        })
     }
 
     /// The scene's `T`, built by `make` on first use and kept for the scene's lifetime (the
@@ -248,6 +321,8 @@ impl Scene {
         }
         let pick = |v: &[i32]| order.iter().map(|&i| v[i as usize]).collect::<Vec<_>>();
         let mut parts = self.parts.clone();
+        parts.vertices = self.vertices().to_vec();
+        parts.normals = self.normals().map(<[_]>::to_vec);
         parts.faces = order.iter().map(|&i| self.faces()[i as usize]).collect();
         parts.material_ids = pick(self.material_ids());
         parts.object_ids = pick(self.object_ids());
@@ -278,14 +353,15 @@ impl Scene {
         })
     }
 
+    /// The vertices (a rigid pose makes them on first use: [`Scene::posed`]).
     pub fn vertices(&self) -> &[[f32; 3]] {
-        &self.parts.vertices
+        &self.world().vertices
     }
     pub fn faces(&self) -> &[[u32; 3]] {
         &self.shared.faces
     }
     pub fn normals(&self) -> Option<&[[f32; 3]]> {
-        self.parts.normals.as_deref()
+        self.world().normals.as_deref()
     }
     pub fn colors(&self) -> &[[f32; 3]] {
         &self.shared.colors
@@ -322,10 +398,10 @@ impl Scene {
     }
     /// Axis-aligned bounds of the vertices that triangles use: `[min, max]`.
     pub fn bounds(&self) -> [[f32; 3]; 2] {
-        self.bounds
+        self.world().bounds
     }
     pub fn degenerate_count(&self) -> usize {
-        self.degenerate_count
+        self.world().degenerate_count
     }
     /// Whether triangle `i`'s back face may be seen: its material's `double_sided` (glTF's
     /// `doubleSided`). A triangle without a material (id −1, as in scenes built from bare
@@ -339,12 +415,12 @@ impl Scene {
     }
     /// Whether triangle `i` has (numerically) zero area.
     pub fn is_degenerate(&self, i: usize) -> bool {
-        self.degenerate[i]
+        self.world().degenerate[i]
     }
 
     /// [`Scene::bounds`] in f64: `[min, max]`.
     pub fn bounds_f64(&self) -> [DVec3; 2] {
-        self.bounds.map(|b| Vec3::from(b).as_dvec3())
+        self.bounds().map(|b| Vec3::from(b).as_dvec3())
     }
 
     /// Centre of the bounds in f64: the origin of the camera-relative frame used on the GPU.
@@ -365,7 +441,7 @@ impl Scene {
         let [a, b, c] = self.triangle(i);
         let n = (b - a).cross(c - a);
         let len = n.length();
-        if self.degenerate[i] || len == 0.0 || !len.is_finite() {
+        if self.is_degenerate(i) || len == 0.0 || !len.is_finite() {
             DVec3::ZERO
         } else {
             n / len
@@ -375,7 +451,7 @@ impl Scene {
     /// The three world-space corners of triangle `i`, widened to f64.
     pub fn triangle(&self, i: usize) -> [DVec3; 3] {
         let f = self.shared.faces[i];
-        let v = &self.parts.vertices;
+        let v = self.vertices();
         [0, 1, 2].map(|k| Vec3::from(v[f[k] as usize]).as_dvec3())
     }
 }

@@ -14,7 +14,7 @@ use rayon::prelude::*;
 
 use super::animation::ClipKey;
 use super::skin::{normal_map, Posed};
-use super::{Scene, SceneParts, Shared};
+use super::{MakeWorld, Scene, SceneParts, Shared, VerticesAndNormals};
 use crate::error::Result;
 use crate::input_err;
 
@@ -61,9 +61,9 @@ pub struct Rig {
 
 impl Rig {
     fn of(scene: &Scene) -> Self {
-        let n = scene.parts.vertices.len();
-        let mut vertices = scene.parts.vertices.clone();
-        let mut normals = scene.parts.normals.clone();
+        let n = scene.vertices().len();
+        let mut vertices = scene.vertices().to_vec();
+        let mut normals = scene.normals().map(<[_]>::to_vec);
         let mut colors = scene.colors().to_vec();
         let mut texcoords = scene.texcoords().map(<[_]>::to_vec);
         let mut vertex_object = vec![u32::MAX; n];
@@ -243,6 +243,9 @@ impl Scene {
     /// `transforms[o]` (one per object, finite, affine and non-singular). Normals follow by the
     /// inverse transpose. The faces, ids, colours, materials and lights are shared with the
     /// scene as loaded; a vertex that faces of two objects share is split into one per object.
+    /// The pose is O(objects): its vertices, normals, bounds and degenerate triangles are made
+    /// on first use (its rays need none of them: they run on a two-level tree, `trace::instances`),
+    /// once each objects' box is checked to stay within float32's range.
     pub fn posed(self: &Arc<Self>, transforms: &[DMat4]) -> Result<Scene> {
         self.posed_with(transforms, false, None, Moved::Rigid, |_| {})
     }
@@ -308,17 +311,25 @@ impl Scene {
             Moved::Objects(objects) => !objects.is_empty(),
             Moved::All(..) => true,
         };
-        let (vertices, normals) = moved_vertices(&rig, transforms, moved, after.as_deref())?;
-        if let Some(i) = vertices
-            .iter()
-            .position(|v| v.iter().any(|x| !x.is_finite()))
-        {
-            let o = rig.vertex_object[i];
-            return input_err!(
-                "the transform of object '{}' moves vertex {i} out of float32's range",
-                objects[o as usize]
-            );
-        }
+        // A rigid pose whose objects' boxes stay in float32's range makes its vertices on
+        // first use: the pose itself is O(objects), and its rays need no world vertices.
+        let lazy = !deforms && !matches!(moved, Moved::All(..)) && in_range(&base, transforms);
+        let (vertices, normals) = if lazy {
+            (Vec::new(), None)
+        } else {
+            let (vertices, normals) = moved_vertices(&rig, transforms, moved, after.as_deref())?;
+            if let Some(i) = vertices
+                .iter()
+                .position(|v| v.iter().any(|x| !x.is_finite()))
+            {
+                let o = rig.vertex_object[i];
+                return input_err!(
+                    "the transform of object '{}' moves vertex {i} out of float32's range",
+                    objects[o as usize]
+                );
+            }
+            (vertices, normals)
+        };
         let mut parts = SceneParts {
             vertices,
             normals,
@@ -354,8 +365,47 @@ impl Scene {
         } else {
             rig.shared.clone()
         };
-        Ok(Scene::assemble(parts, shared, Some(pose)))
+        if !lazy {
+            return Ok(Scene::assemble(parts, shared, Some(pose)));
+        }
+        let moves = pose.transforms.clone();
+        let make = MakeWorld(Box::new(move || {
+            moved_vertices(&rig, &moves, Moved::Rigid, None).expect("a rigid pose's vertices")
+        }));
+        Ok(Scene::assemble_lazy(parts, shared, Some(pose), make))
     }
+}
+
+/// Each object's box (of its vertices as loaded, in f64; empty for an object without any),
+/// made once per scene as loaded.
+struct ObjectBoxes(Vec<[DVec3; 2]>);
+
+/// Whether every object's box, moved by its transform, stays within float32's range: then so
+/// does every vertex (each lies in its object's box, whose image holds the vertex's).
+fn in_range(base: &Scene, transforms: &[DMat4]) -> bool {
+    let boxes = base.derived(|| {
+        let rig = base.rig();
+        let mut b = vec![[DVec3::INFINITY, DVec3::NEG_INFINITY]; transforms.len()];
+        for (v, &o) in rig.vertices.iter().zip(&rig.vertex_object) {
+            if let Some(bx) = b.get_mut(o as usize) {
+                let p = DVec3::from(v.map(f64::from));
+                *bx = [bx[0].min(p), bx[1].max(p)];
+            }
+        }
+        ObjectBoxes(b)
+    });
+    let limit = f64::from(f32::MAX) * 0.5;
+    boxes.0.iter().zip(transforms).all(|([lo, hi], m)| {
+        lo.x > hi.x
+            || (0..8).all(|k| {
+                let c = DVec3::new(
+                    if k & 1 == 0 { lo.x } else { hi.x },
+                    if k & 2 == 0 { lo.y } else { hi.y },
+                    if k & 4 == 0 { lo.z } else { hi.z },
+                );
+                m.transform_point3(c).abs().max_element() < limit
+            })
+    })
 }
 
 /// The vertices and normals of a pose: each of `rig`'s moved by its object's transform
@@ -428,9 +478,6 @@ fn moved_vertices(
     }
     Ok((vertices, normals))
 }
-
-/// A pose's vertices, and its normals when it has them.
-type VerticesAndNormals = (Vec<[f32; 3]>, Option<Vec<[f32; 3]>>);
 
 /// `v` normalized (a zero vector stays zero), in f32.
 fn unit(v: DVec3) -> [f32; 3] {

@@ -150,12 +150,17 @@ impl Bvh {
             None => (&t.blocks, t.nodes.len()),
             Some(i) => (&i.objects.blocks, t.nodes.len() + i.objects.nodes.len()),
         };
-        BvhStats {
-            triangles: blocks
+        let triangles = match &t.inst {
+            None => blocks
                 .iter()
                 .flat_map(|b| b.id)
                 .filter(|&i| i != u32::MAX)
                 .count(),
+            // Counted once, when the objects' trees were built (a pose's stats stay O(objects)).
+            Some(i) => i.triangles,
+        };
+        BvhStats {
+            triangles,
             nodes,
             blocks: blocks.len(),
             bytes: t.bytes(),

@@ -53,6 +53,7 @@ pub struct ObjectTrees {
     pub tree: Arc<Bvh8>,
     /// Each object that has triangles: its index and its tree's root node.
     roots: Vec<(u32, u32)>,
+    triangles: usize,
 }
 
 impl ObjectTrees {
@@ -100,6 +101,7 @@ impl ObjectTrees {
             out.nodes.push(Node8::EMPTY);
         }
         ObjectTrees {
+            triangles: object_ids.len(),
             tree: Arc::new(Bvh8 {
                 nodes: out.nodes,
                 blocks: out.blocks,
@@ -246,6 +248,7 @@ pub fn pose(trees: &ObjectTrees, transforms: &[DMat4]) -> Bvh8 {
             refs,
             instances,
             to_world,
+            triangles: trees.triangles,
         })),
     }
 }
@@ -411,6 +414,15 @@ mod tests {
         assert!(Arc::ptr_eq(&inst.objects, objects));
         assert!(base.derived_if_built::<ObjectTrees>().is_some());
 
+        // The pose and its rays need no world vertices: the pose makes them on first use.
+        let lazy = base.posed(&poses(23)).unwrap();
+        assert!(!lazy.has_vertices());
+        let (o, d) = rays_toward(100, 1, posed.vertices());
+        let early = cast_rays(&lazy, &o, &d, 0.0, f32::INFINITY).unwrap();
+        assert!(!lazy.has_vertices() && Bvh::of(&lazy).tree.inst.is_some());
+        assert!(early.triangle.iter().filter(|&&t| t >= 0).count() > 50);
+        assert_eq!(lazy.vertices(), posed.vertices());
+        assert_eq!(lazy.normals(), posed.normals());
         let (o, d) = rays_toward(20_000, 7, posed.vertices());
         let inf = f32::INFINITY;
         let (a, b) = (

@@ -392,6 +392,8 @@ pub struct Instanced {
     pub instances: Vec<Instance>,
     /// Each instance's transform, object to world, as the pose gave it.
     pub to_world: Vec<DMat4>,
+    /// Triangles in the objects' trees.
+    pub triangles: usize,
 }
 
 impl Instanced {
