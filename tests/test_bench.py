@@ -45,8 +45,8 @@ def test_bench_all_quick_writes_a_summary_and_every_methods_row(tmp_path, capsys
 
 def test_bench_scenes_quick_poses_a_tiling_and_reports_every_target(tmp_path):
     """`bench scenes` tiles a shared scene into objects, poses it, and reports the pose against
-    a build, posed rays against flat ones and a frame against fcpw and Open3D, and a skinned
-    frame against the same peers."""
+    a build, posed incoherent and primary rays against flat ones and a frame against fcpw and
+    Open3D, and a skinned frame against the same peers."""
     pytest.importorskip("fcpw")
     pytest.importorskip("open3d")
     from scenesample.tools import bench
@@ -55,7 +55,13 @@ def test_bench_scenes_quick_poses_a_tiling_and_reports_every_target(tmp_path):
     bench.main(["scenes", "--quick", "--rounds", "1", "--scenes", "bunny", "--out", str(out)])
     md = out.read_text()
     assert "| stanford_bunny |" in md
-    for target in ("a new pose <= 2% of a build", "posed rays >= 0.8x flat", "frame >= 3x fcpw"):
+    targets = (
+        "a new pose <= 1% of a build",
+        "posed incoherent rays >= 0.9x flat",
+        "posed primary rays >= 0.9x flat",
+        "frame >= 3x fcpw",
+    )
+    for target in targets:
         assert target in md
     skinned = md.split("Skinned frame (", 1)[1]
     assert re.match(r"10,240 triangles, 8 joints; (refit|built afresh)\)", skinned)

@@ -22,7 +22,8 @@ pub(crate) struct Rays<'a> {
     /// How far apart the origins of a packet's rays may lie (`traverse::coherent`).
     pub origin_extent: f32,
     /// Whether closest-hit rays that do not travel as packets are traced in turns
-    /// (`interleave`): where the tree is larger than [`INTERLEAVE_BYTES`] and flat.
+    /// (`interleave`): where the tree (a two-level tree's objects' trees included) is larger
+    /// than [`INTERLEAVE_BYTES`].
     pub interleave: bool,
     /// Whether coherent rays may travel as packets: on a flat tree (a two-level tree's rays go
     /// one by one).

@@ -380,8 +380,9 @@ fn traverse_top<K: Kernel, S: Sink>(
 
 /// Where a ray's traversal of a two-level tree is: in the top tree with the world ray, or in
 /// an instance's subtree with the ray moved into that instance's frame. One stack serves both:
-/// the entries at and above `base` are the instance's, those below the top tree's (entry
-/// distances are `t`, the same in every frame, so both cull alike).
+/// the entries at and above `base` are the instance's (their distances in its frame, the
+/// world's less `shift`), those below the top tree's (world distances); `visit_two` culls each
+/// by its own.
 pub struct TwoLevel {
     pub world: Ray,
     /// The instance of `frame` (`u32::MAX` before any).
