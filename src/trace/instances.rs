@@ -68,33 +68,7 @@ impl ObjectTrees {
     /// The trees of the objects of a scene as loaded (its `rig`: vertices split so that no two
     /// objects share one), over `objects` objects.
     pub fn of(rig: &Rig, object_ids: &[i32], objects: usize, params: BuildParams) -> Self {
-        let mut faces_of: Vec<Vec<u32>> = vec![Vec::new(); objects];
-        for (i, &o) in object_ids.iter().enumerate() {
-            faces_of[o as usize].push(i as u32);
-        }
-        let v = &rig.vertices;
-        let corner = |k: u32| Vec3A::from(Vec3::from(v[k as usize]));
-        let trees: Vec<(u32, Bvh8)> = faces_of
-            .into_par_iter()
-            .enumerate()
-            .filter(|(_, faces)| !faces.is_empty())
-            .map(|(o, faces)| {
-                let tris: Vec<Tri> = faces
-                    .iter()
-                    .map(|&f| Tri {
-                        v: rig.faces()[f as usize].map(corner),
-                    })
-                    .collect();
-                let mut tree = build::build(&tris, params);
-                // The builder numbers triangles by their place in `tris`: name them by face.
-                for b in &mut tree.blocks {
-                    for id in b.id.iter_mut().filter(|id| **id != u32::MAX) {
-                        *id = faces[*id as usize];
-                    }
-                }
-                (o as u32, tree)
-            })
-            .collect();
+        let trees = per_object(rig, object_ids, objects, params);
         let mut out = Out::default();
         let mut roots = Vec::with_capacity(trees.len());
         for (o, tree) in trees {
@@ -128,6 +102,44 @@ impl ObjectTrees {
     pub fn is_empty(&self) -> bool {
         self.roots.is_empty()
     }
+}
+
+/// Each object's own tree over its triangles as loaded (`rig`'s corners; ids the scene's face
+/// indices), for the objects that have triangles, with the object's index; built in parallel.
+/// Both the two-level tree (here) and the flat tree of a pose (`refit`) are made of them.
+pub(super) fn per_object(
+    rig: &Rig,
+    object_ids: &[i32],
+    objects: usize,
+    params: BuildParams,
+) -> Vec<(u32, Bvh8)> {
+    let mut faces_of: Vec<Vec<u32>> = vec![Vec::new(); objects];
+    for (i, &o) in object_ids.iter().enumerate() {
+        faces_of[o as usize].push(i as u32);
+    }
+    let v = &rig.vertices;
+    let corner = |k: u32| Vec3A::from(Vec3::from(v[k as usize]));
+    faces_of
+        .into_par_iter()
+        .enumerate()
+        .filter(|(_, faces)| !faces.is_empty())
+        .map(|(o, faces)| {
+            let tris: Vec<Tri> = faces
+                .iter()
+                .map(|&f| Tri {
+                    v: rig.faces()[f as usize].map(corner),
+                })
+                .collect();
+            let mut tree = build::build(&tris, params);
+            // The builder numbers triangles by their place in `tris`: name them by face.
+            for b in &mut tree.blocks {
+                for id in b.id.iter_mut().filter(|id| **id != u32::MAX) {
+                    *id = faces[*id as usize];
+                }
+            }
+            (o as u32, tree)
+        })
+        .collect()
 }
 
 /// The world box around the object-space box `b` under `to_world` (the box of its eight
@@ -402,22 +414,8 @@ mod tests {
     use crate::scene::Scene;
     use crate::trace::build::BuildParams;
     use crate::trace::refine::moller_trumbore;
-    use crate::trace::testdata::{closest_on, poses, rays_toward, spheres};
+    use crate::trace::testdata::{closest_on, posed_and_flat, poses, rays_toward, spheres};
     use crate::trace::{all_hits, cast_rays, count_hits, occluded, Bvh, Query, Threads};
-
-    /// The posed scene of `n` spheres and a fresh scene of its world vertices.
-    fn posed_and_flat(n: usize) -> (Arc<Scene>, Scene, Scene) {
-        let base = spheres(n);
-        let posed = base.posed(&poses(n)).unwrap();
-        let flat = Scene::from_arrays(
-            posed.vertices().to_vec(),
-            posed.faces().to_vec(),
-            None,
-            None,
-        )
-        .unwrap();
-        (base, posed, flat)
-    }
 
     #[test]
     fn a_rigid_pose_traces_its_objects_trees_through_their_instances() {

@@ -48,33 +48,14 @@ struct Object {
 impl ObjectTrees {
     /// The subtrees of the objects of a scene as loaded (its `rig`), over `objects` objects.
     pub fn of(rig: &Rig, object_ids: &[i32], objects: usize, params: BuildParams) -> Self {
-        let mut faces_of: Vec<Vec<u32>> = vec![Vec::new(); objects];
-        for (i, &o) in object_ids.iter().enumerate() {
-            faces_of[o as usize].push(i as u32);
-        }
-        let v = &rig.vertices;
-        let corner = |k: u32| Vec3A::from(v[k as usize]);
-        let trees: Vec<(Bvh8, (f64, f64))> = faces_of
-            .into_par_iter()
-            .filter(|faces| !faces.is_empty())
-            .map(|faces| {
-                let tris: Vec<Tri> = faces
-                    .iter()
-                    .map(|&f| Tri {
-                        v: rig.faces()[f as usize].map(corner),
-                    })
-                    .collect();
-                let mut tree = build::build(&tris, params);
-                // The builder numbers triangles by their place in `tris`: name them by face.
-                for b in &mut tree.blocks {
-                    for id in b.id.iter_mut().filter(|id| **id != u32::MAX) {
-                        *id = faces[*id as usize];
-                    }
-                }
-                let stats = build::rank_for_any_hit(&mut tree.nodes, &tree.blocks);
-                (tree, stats)
-            })
-            .collect();
+        let trees: Vec<(Bvh8, (f64, f64))> =
+            super::instances::per_object(rig, object_ids, objects, params)
+                .into_par_iter()
+                .map(|(_, mut tree)| {
+                    let stats = build::rank_for_any_hit(&mut tree.nodes, &tree.blocks);
+                    (tree, stats)
+                })
+                .collect();
         let top_count = top_node_count(trees.len());
         let mut out = Out {
             nodes: vec![Node8::EMPTY; top_count],

@@ -73,6 +73,20 @@ pub(crate) fn spheres(n: usize) -> Arc<Scene> {
     Arc::new(Scene::new(parts).unwrap())
 }
 
+/// The scene of `n` spheres, posed by [`poses`], and a fresh scene of the posed vertices.
+pub(crate) fn posed_and_flat(n: usize) -> (Arc<Scene>, Scene, Scene) {
+    let base = spheres(n);
+    let posed = base.posed(&poses(n)).unwrap();
+    let flat = Scene::from_arrays(
+        posed.vertices().to_vec(),
+        posed.faces().to_vec(),
+        None,
+        None,
+    )
+    .unwrap();
+    (base, posed, flat)
+}
+
 /// A pose of `n` objects: each turned, scaled (mirrored where `k % 3 == 0`) and moved, one of
 /// them far away.
 pub(crate) fn poses(n: usize) -> Vec<DMat4> {

@@ -14,7 +14,7 @@ use super::portable::Portable;
 use super::query::{Query, Threads};
 use super::rays::Rays;
 use super::refine;
-use super::testdata::{closest_on, icosphere, poses, rays_toward, spheres, Rng};
+use super::testdata::{closest_on, icosphere, posed_and_flat, poses, rays_toward, Rng};
 use crate::scene::Scene;
 
 /// A cloud of random triangles of every size, with duplicated and coplanar ones mixed in.
@@ -506,15 +506,7 @@ fn the_any_hit_probe_is_a_count() {
 fn a_posed_flat_tree_finds_what_a_fresh_build_finds() {
     // The flat tree of a rigid pose (the point queries', winding numbers' and crossings'):
     // its base's object trees refit, bit for bit a fresh build's hits.
-    let base = spheres(23);
-    let posed = base.posed(&poses(23)).unwrap();
-    let flat = Scene::from_arrays(
-        posed.vertices().to_vec(),
-        posed.faces().to_vec(),
-        None,
-        None,
-    )
-    .unwrap();
+    let (base, posed, flat) = posed_and_flat(23);
     let (tree, _) = bvh_for_with(&posed, Threads::All, true).unwrap();
     assert!(tree.tree.inst.is_none());
     assert!(tree.stats().triangles == posed.triangle_count());
