@@ -135,18 +135,23 @@ pub fn check_affine(m: &DMat4, what: &str) -> Result<()> {
     Ok(())
 }
 
-/// Check that `m` is a finite, non-singular affine transform (its last row 0, 0, 0, 1).
-pub fn check_transform(m: &DMat4, what: &str) -> Result<()> {
-    check_affine(m, what)?;
+/// Whether `m`'s linear part is singular: its determinant within 1e-12 of the product of its
+/// columns' lengths, or NaN or infinite, or a column zero.
+pub(crate) fn singular(m: &DMat4) -> bool {
     let l = DMat3::from_mat4(*m);
     let scale = l.x_axis.length() * l.y_axis.length() * l.z_axis.length();
     let det = l.determinant();
-    // Also refuses a NaN or infinite determinant.
-    if !matches!(
+    !matches!(
         det.abs().partial_cmp(&(1e-12 * scale)),
         Some(std::cmp::Ordering::Greater)
     ) || scale == 0.0
-    {
+}
+
+/// Check that `m` is a finite, non-singular affine transform (its last row 0, 0, 0, 1).
+pub fn check_transform(m: &DMat4, what: &str) -> Result<()> {
+    check_affine(m, what)?;
+    if singular(m) {
+        let l = DMat3::from_mat4(*m);
         return input_err!(
             "the transform of {what} is singular (determinant {})",
             l.determinant()

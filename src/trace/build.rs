@@ -82,6 +82,23 @@ impl Aabb {
         self
     }
 
+    /// The box around node `n`'s occupied children ([`Node8::bounds`]).
+    pub fn of_node(n: &Node8) -> Aabb {
+        let (lo, hi) = n.bounds();
+        Aabb {
+            lo: Vec3A::from(lo),
+            hi: Vec3A::from(hi),
+        }
+    }
+
+    /// Write this box as child slot `k`'s of node `n`.
+    pub fn set_child(&self, n: &mut Node8, k: usize) {
+        for a in 0..3 {
+            n.b[a][k] = self.lo[a];
+            n.b[3 + a][k] = self.hi[a];
+        }
+    }
+
     /// Half the surface area (0 for an empty box).
     #[inline(always)]
     fn half_area(&self) -> f32 {

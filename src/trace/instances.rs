@@ -193,10 +193,7 @@ fn up(v: DVec3) -> Vec3A {
 /// `Scene::posed` puts every user's transform to (a clip may flatten an object to a plane,
 /// which only the flat tree can trace).
 pub fn invertible(m: &DMat4) -> bool {
-    let l = DMat3::from_mat4(*m);
-    let scale = l.x_axis.length() * l.y_axis.length() * l.z_axis.length();
-    let det = l.determinant();
-    scale > 0.0 && det.abs() > 1e-12 * scale && m.inverse().is_finite()
+    !crate::scene::pose::singular(m) && m.inverse().is_finite()
 }
 
 /// An item of the top build: a world box, the subtree it bounds and its instance.
@@ -280,11 +277,7 @@ pub fn pose_with(trees: &ObjectTrees, transforms: &[DMat4], open_per_instance: u
 
 /// The box of node `r` of `tree`.
 fn node_box(tree: &Bvh8, r: u32) -> Aabb {
-    let (lo, hi) = tree.nodes[node_index(r)].bounds();
-    Aabb {
-        lo: Vec3A::from(lo),
-        hi: Vec3A::from(hi),
-    }
+    Aabb::of_node(&tree.nodes[node_index(r)])
 }
 
 /// Partial re-braiding (Benthin et al. 2017, §3): the instances' roots in the world, with the
@@ -379,10 +372,7 @@ fn top_tree(items: &[Item]) -> (Vec<Node8>, Vec<InstRef>, u32) {
             } else {
                 let mut n = Node8::EMPTY;
                 for (k, &id) in ids.iter().enumerate() {
-                    let b = &items[id as usize].bounds;
-                    for a in 0..3 {
-                        (n.b[a][k], n.b[3 + a][k]) = (b.lo[a], b.hi[a]);
-                    }
+                    items[id as usize].bounds.set_child(&mut n, k);
                     n.child[k] = one(id, &mut refs);
                 }
                 n.set_order();

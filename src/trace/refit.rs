@@ -148,7 +148,7 @@ impl ObjectTrees {
             .objects
             .iter()
             .enumerate()
-            .map(|(k, o)| (box_of(&nodes[o.nodes.start]), k))
+            .map(|(k, o)| (Aabb::of_node(&nodes[o.nodes.start]), k))
             .collect();
         let (mut top_nodes, mut patches) = (Vec::with_capacity(self.top_count), Vec::new());
         top(&mut items, &mut top_nodes, &mut patches);
@@ -200,9 +200,9 @@ fn refit_node(mut n: Node8, nodes: &[Node8], blocks: &[(Aabb, f64)]) -> Node8 {
             }
             bx
         } else {
-            box_of(&nodes[node_index(c)])
+            Aabb::of_node(&nodes[node_index(c)])
         };
-        set_box(&mut n, k, &bx);
+        bx.set_child(&mut n, k);
     }
     n.set_order();
     n
@@ -225,21 +225,6 @@ fn levels_of(nodes: &[Node8], objects: &[Object]) -> Vec<Vec<u32>> {
         levels.push(std::mem::replace(&mut frontier, next));
     }
     levels
-}
-
-fn box_of(n: &Node8) -> Aabb {
-    let (lo, hi) = n.bounds();
-    Aabb {
-        lo: Vec3A::from(lo),
-        hi: Vec3A::from(hi),
-    }
-}
-
-fn set_box(n: &mut Node8, k: usize, b: &Aabb) {
-    for a in 0..3 {
-        n.b[a][k] = b.lo[a];
-        n.b[3 + a][k] = b.hi[a];
-    }
 }
 
 /// Nodes on the longest path down from `i` through the top tree's own nodes.
@@ -292,7 +277,7 @@ pub(super) fn top(
             let child = top(&mut items[a..b], nodes, patches);
             nodes[me].child[slot] = node_ref(child);
         }
-        set_box(&mut nodes[me], slot, &bx);
+        bx.set_child(&mut nodes[me], slot);
     }
     me
 }
