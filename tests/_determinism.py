@@ -45,6 +45,20 @@ def _cameras(scene: ss.Scene, n: int = 3) -> list[ss.Camera]:
     ]
 
 
+def _moved(scene: ss.Scene) -> tuple[np.ndarray, np.ndarray]:
+    """Per object a small turn and lift (a rigid pose: a two-level tree), and every vertex
+    lifted by a wave (a deformation: a refit tree)."""
+    lo, hi = (np.asarray(b, np.float64) for b in scene.bounds)
+    n = len(scene.objects)
+    a = np.linspace(-0.2, 0.2, n)
+    m = np.array([np.eye(4) for _ in range(n)])
+    m[:, 0, 0], m[:, 0, 1], m[:, 1, 0], m[:, 1, 1] = np.cos(a), -np.sin(a), np.sin(a), np.cos(a)
+    m[:, 2, 3] = np.linspace(0, 0.05, n) * (hi - lo)[2]
+    v = scene.vertices.astype(np.float64)
+    v[:, 1] += 0.03 * (hi - lo)[1] * np.sin(6.0 * (v[:, 0] - lo[0]) / max(hi[0] - lo[0], 1e-9))
+    return m, v.astype(np.float32)
+
+
 def _skip(key: str) -> bool:
     """Fields that measure the run rather than its answer."""
     k = key.lower()
@@ -108,8 +122,11 @@ def calls(name: str) -> list[tuple[str, Callable[[], Any]]]:
         pts = ss.discretize(scene, method="epr", eye=eye, resolution=32)
         return {"points": pts, "splat": ss.splat(pts, resolution=32)}
 
+    poses, wave = _moved(scene)
     out = [
         ("cast_rays", lambda: ss.cast_rays(scene, o, d)),
+        ("posed_rays", lambda: ss.cast_rays(scene.posed(poses), o, d)),
+        ("deformed_rays", lambda: ss.cast_rays(scene.deformed(wave), o, d)),
         ("cast_rays_k3", lambda: ss.cast_rays(scene, o, d, max_hits=3)),
         ("occluded", lambda: ss.occluded(scene, o, d, t_max=0.5)),
         ("conventional", lambda: ss.discretize(scene, cams)),

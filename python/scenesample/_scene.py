@@ -368,7 +368,7 @@ class Scene:
         """
         v = _float_array(vertices, "vertices", np.float32)
         n = None if normals is None else _float_array(normals, "normals", np.float32)
-        count = len(self.vertices)
+        count = self._core.vertex_count
         for name, a in (("vertices", v), ("normals", n)):
             if a is not None and a.shape != (count, 3):
                 raise InputError(

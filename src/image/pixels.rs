@@ -15,6 +15,7 @@ use rayon::prelude::*;
 
 use crate::camera::Camera;
 use crate::error::{Error, Result};
+use crate::limits::huge_pages;
 use crate::scene::Scene;
 use crate::trace::Query;
 use crate::types::{DepthImages, Timings};
@@ -274,31 +275,6 @@ impl DepthImages {
             huge_pages(field);
         }
         Ok(img)
-    }
-}
-
-/// Ask the kernel to back `v`'s memory with transparent huge pages where it can (Linux's
-/// `MADV_HUGEPAGE`; a hint, ignored elsewhere or when refused): the resolve is the first writer
-/// of every pixel of freshly mapped, zeroed images, and one fault per 2 MiB instead of one per
-/// 4 KiB takes most of what the first write cost. What the buffers hold is the same either way.
-fn huge_pages<T>(v: &[T]) {
-    #[cfg(target_os = "linux")]
-    {
-        const HUGE: usize = 2 << 20;
-        let (start, len) = (v.as_ptr() as usize, std::mem::size_of_val(v));
-        let first = start.next_multiple_of(HUGE);
-        let last = (start + len) / HUGE * HUGE;
-        if last > first {
-            // SAFETY: the range lies inside `v`'s allocation, and MADV_HUGEPAGE changes how
-            // the kernel backs it, never its contents.
-            unsafe {
-                libc::madvise(
-                    first as *mut libc::c_void,
-                    last - first,
-                    libc::MADV_HUGEPAGE,
-                );
-            }
-        }
     }
 }
 

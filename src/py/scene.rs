@@ -349,6 +349,10 @@ impl PyScene {
         self.inner.triangle_count()
     }
     #[getter]
+    fn vertex_count(&self) -> usize {
+        self.inner.vertices().len()
+    }
+    #[getter]
     fn degenerate_count(&self) -> usize {
         self.inner.degenerate_count()
     }

@@ -6,6 +6,8 @@
 
 use std::sync::Arc;
 
+use rayon::prelude::*;
+
 use super::{Scene, SceneParts};
 use crate::error::Result;
 use crate::input_err;
@@ -27,10 +29,7 @@ impl Scene {
                 vertices.len()
             );
         }
-        if let Some(i) = vertices
-            .iter()
-            .position(|v| v.iter().any(|x| !x.is_finite()))
-        {
+        if let Some(i) = first_not_finite(&vertices) {
             return input_err!("deformed vertex {i} is not finite: {:?}", vertices[i]);
         }
         if let Some(ns) = &normals {
@@ -40,7 +39,7 @@ impl Scene {
                     ns.len()
                 );
             }
-            if let Some(i) = ns.iter().position(|v| v.iter().any(|x| !x.is_finite())) {
+            if let Some(i) = first_not_finite(ns) {
                 return input_err!("deformed normal {i} is not finite: {:?}", ns[i]);
             }
             // A zero normal has no direction to shade with.
@@ -76,4 +75,25 @@ impl Scene {
     pub fn refit_from(&self) -> Option<&Arc<Scene>> {
         self.refit_from.as_ref()
     }
+}
+
+/// The first row of `rows` with a coordinate that is not finite: chunks checked in parallel,
+/// each with a loop the compiler vectorises, and the first bad chunk searched row by row.
+fn first_not_finite(rows: &[[f32; 3]]) -> Option<usize> {
+    const CHUNK: usize = 1 << 15;
+    let bad = rows
+        .par_chunks(CHUNK)
+        .map(|c| {
+            !c.as_flattened()
+                .iter()
+                .fold(true, |ok, x| ok & x.is_finite())
+        })
+        .collect::<Vec<bool>>()
+        .iter()
+        .position(|&b| b)?;
+    let at = bad * CHUNK;
+    rows[at..]
+        .iter()
+        .position(|v| v.iter().any(|x| !x.is_finite()))
+        .map(|i| at + i)
 }

@@ -156,30 +156,42 @@ pub(crate) struct Shared {
     colors: Vec<[f32; 3]>,
     texcoords: Option<Vec<[f32; 2]>>,
     textures: Vec<Arc<texture::Texture>>,
+    /// How many distinct vertices the faces use, counted on first need (`bounds`).
+    used: OnceLock<usize>,
 }
 
 /// A scene's vertices, their normals, the bounds of the vertices that triangles use and which
-/// triangles are degenerate.
+/// triangles are degenerate (found on first use: a deformation or a pose pays only for what it
+/// is asked).
 #[derive(Debug)]
 struct World {
     vertices: Vec<[f32; 3]>,
     normals: Option<Vec<[f32; 3]>>,
     bounds: [[f32; 3]; 2],
-    degenerate: Vec<bool>,
-    degenerate_count: usize,
+    degenerate: OnceLock<(Vec<bool>, usize)>,
 }
 
 impl World {
-    fn of(vertices: Vec<[f32; 3]>, normals: Option<Vec<[f32; 3]>>, faces: &[[u32; 3]]) -> Self {
-        let (bounds, degenerate) = bounds_and_degenerate(&vertices, faces);
-        let degenerate_count = degenerate.iter().filter(|d| **d).count();
+    fn of(vertices: Vec<[f32; 3]>, normals: Option<Vec<[f32; 3]>>, shared: &Shared) -> Self {
         Self {
+            bounds: bounds(&vertices, shared),
             vertices,
             normals,
-            bounds,
-            degenerate,
-            degenerate_count,
+            degenerate: OnceLock::new(),
         }
+    }
+
+    /// Per triangle whether it is degenerate, and how many are.
+    fn degenerate(&self, faces: &[[u32; 3]]) -> &(Vec<bool>, usize) {
+        self.degenerate.get_or_init(|| {
+            let flags: Vec<bool> = faces
+                .par_iter()
+                .with_min_len(1 << 14)
+                .map(|f| is_degenerate(&self.vertices, f))
+                .collect();
+            let count = flags.iter().filter(|d| **d).count();
+            (flags, count)
+        })
     }
 }
 
@@ -233,6 +245,7 @@ impl Scene {
             colors,
             texcoords: parts.texcoords.take(),
             textures: std::mem::take(&mut parts.textures),
+            used: OnceLock::new(),
         });
         Ok(Self::assemble(parts, shared, None))
     }
@@ -241,7 +254,7 @@ impl Scene {
     fn assemble(mut parts: SceneParts, shared: Arc<Shared>, pose: Option<pose::Pose>) -> Self {
         let vertices = std::mem::take(&mut parts.vertices);
         let normals = parts.normals.take();
-        let world = OnceLock::from(World::of(vertices, normals, &shared.faces));
+        let world = OnceLock::from(World::of(vertices, normals, &shared));
         Self {
             parts,
             shared,
@@ -284,7 +297,7 @@ impl Scene {
                 .as_ref()
                 .expect("a scene without vertices makes them");
             let (vertices, normals) = (make.0)();
-            World::of(vertices, normals, &self.shared.faces)
+            World::of(vertices, normals, &self.shared)
         })
     }
 
@@ -360,6 +373,16 @@ impl Scene {
     pub fn faces(&self) -> &[[u32; 3]] {
         &self.shared.faces
     }
+
+    /// What the scene shares with the scenes posed or deformed from it (faces, ids, colours).
+    pub(crate) fn shared(&self) -> &Arc<Shared> {
+        &self.shared
+    }
+
+    /// Whether the scene's faces are `shared`'s (the same storage, not equal copies).
+    pub(crate) fn shares_faces(&self, shared: &Arc<Shared>) -> bool {
+        Arc::ptr_eq(&self.shared, shared)
+    }
     pub fn normals(&self) -> Option<&[[f32; 3]]> {
         self.world().normals.as_deref()
     }
@@ -401,7 +424,7 @@ impl Scene {
         self.world().bounds
     }
     pub fn degenerate_count(&self) -> usize {
-        self.world().degenerate_count
+        self.world().degenerate(&self.shared.faces).1
     }
     /// Whether triangle `i`'s back face may be seen: its material's `double_sided` (glTF's
     /// `doubleSided`). A triangle without a material (id −1, as in scenes built from bare
@@ -415,7 +438,7 @@ impl Scene {
     }
     /// Whether triangle `i` has (numerically) zero area.
     pub fn is_degenerate(&self, i: usize) -> bool {
-        self.world().degenerate[i]
+        self.world().degenerate(&self.shared.faces).0[i]
     }
 
     /// [`Scene::bounds`] in f64: `[min, max]`.
@@ -554,32 +577,41 @@ fn check_len(name: &str, got: Option<usize>, want: usize, of: &str) -> Result<()
 
 /// The box around the faces' corners (unreferenced vertices left out), and which faces are
 /// degenerate ([`is_degenerate`]).
-fn bounds_and_degenerate(vertices: &[[f32; 3]], faces: &[[u32; 3]]) -> ([[f32; 3]; 2], Vec<bool>) {
+/// The bounds of the vertices that `shared`'s faces use: of all of them, read in order, where
+/// the faces use every one (the usual case, and a deformation's every frame), else of the
+/// faces' corners.
+fn bounds(vertices: &[[f32; 3]], shared: &Shared) -> [[f32; 3]; 2] {
     let empty = || (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-    // One pass over the faces' corners for both (a pose pays it every frame). Minima and
-    // maxima do not depend on the order they are taken in.
-    let chunks: Vec<((Vec3, Vec3), Vec<bool>)> = faces
-        .par_chunks(1 << 14)
-        .map(|chunk| {
-            let mut bx = empty();
-            let flags = chunk
-                .iter()
-                .map(|f| {
-                    for &k in f {
-                        let v = Vec3::from(vertices[k as usize]);
-                        bx = (bx.0.min(v), bx.1.max(v));
-                    }
-                    is_degenerate(vertices, f)
-                })
-                .collect();
-            (bx, flags)
-        })
-        .collect();
-    let (lo, hi) = chunks
-        .iter()
-        .fold(empty(), |(a, b), ((c, d), _)| (a.min(*c), b.max(*d)));
-    let degenerate = chunks.into_iter().flat_map(|(_, f)| f).collect();
-    ([lo.to_array(), hi.to_array()], degenerate)
+    let faces = &shared.faces;
+    let used = *shared.used.get_or_init(|| {
+        let n = faces.iter().flatten().max().map_or(0, |&k| k as usize + 1);
+        let mut seen = vec![false; n];
+        for &k in faces.iter().flatten() {
+            seen[k as usize] = true;
+        }
+        seen.iter().filter(|&&s| s).count()
+    });
+    let grow = |(lo, hi): (Vec3, Vec3), v: &[f32; 3]| {
+        let v = Vec3::from(*v);
+        (lo.min(v), hi.max(v))
+    };
+    // Minima and maxima do not depend on the order they are taken in.
+    let (lo, hi) = if used == vertices.len() {
+        vertices
+            .par_chunks(1 << 15)
+            .map(|c| c.iter().fold(empty(), grow))
+            .reduce(empty, |(a, b), (c, d)| (a.min(c), b.max(d)))
+    } else {
+        faces
+            .par_chunks(1 << 14)
+            .map(|c| {
+                c.iter()
+                    .flatten()
+                    .fold(empty(), |bx, &k| grow(bx, &vertices[k as usize]))
+            })
+            .reduce(empty, |(a, b), (c, d)| (a.min(c), b.max(d)))
+    };
+    [lo.to_array(), hi.to_array()]
 }
 
 /// Zero area up to f64 rounding of the cross product: |e1 × e2| ≤ 1e-12·|e1|·|e2|, or a

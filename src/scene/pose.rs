@@ -100,6 +100,7 @@ impl Rig {
                 colors,
                 texcoords,
                 textures: scene.textures().to_vec(),
+                used: Default::default(),
             }),
             vertices,
             normals,

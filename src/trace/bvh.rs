@@ -22,6 +22,8 @@ pub const MAX_TRIANGLES: u32 = node::MAX_BLOCKS;
 pub struct Bvh {
     pub(crate) tree: Bvh8,
     pub build_seconds: f64,
+    /// The tree's surface-area cost ([`Bvh8::sah`]), taken once (a refit takes it to decide).
+    sah: std::sync::OnceLock<f64>,
 }
 
 /// What a BVH holds and what it cost.
@@ -76,10 +78,7 @@ impl Bvh {
                 instances::ObjectTrees::of(&base.rig(), base.object_ids(), objects, params)
             });
             let tree = instances::pose(&trees, &pose.transforms);
-            return Self {
-                tree,
-                build_seconds: start.elapsed().as_secs_f64(),
-            };
+            return Self::made(tree, start, None);
         }
         Self::build_flat(scene, params, start)
     }
@@ -100,16 +99,30 @@ impl Bvh {
                 let objects = source.objects().len();
                 refit::ObjectTrees::of(&source.rig(), source.object_ids(), objects, params)
             });
-            let (tree, triangles) = trees.posed(scene.vertices(), scene.faces());
-            let keeps = || {
-                let (sah, rest) = trees.rest_cost(&source.rig());
-                refit_keeps(tree.sah(), sah, tree.area_parts(triangles), rest)
+            // The blocks' corners as vertex indices, kept on the source for the faces of its
+            // rig (poses) and its own (deformations); a pose that rewinds faces makes its own.
+            let rig = source.rig();
+            let corners = if scene.shares_faces(&rig.shared) {
+                source
+                    .derived(|| RigCorners(Arc::new(trees.corners(rig.faces()))))
+                    .0
+                    .clone()
+            } else if scene.shares_faces(source.shared()) {
+                source
+                    .derived(|| OwnCorners(Arc::new(trees.corners(source.faces()))))
+                    .0
+                    .clone()
+            } else {
+                Arc::new(trees.corners(scene.faces()))
             };
-            if !deforms || keeps() {
-                return Self {
-                    tree,
-                    build_seconds: start.elapsed().as_secs_f64(),
-                };
+            let (tree, triangles) = trees.posed(scene.vertices(), &corners);
+            if !deforms {
+                return Self::made(tree, start, None);
+            }
+            let (rest_sah, rest) = trees.rest_cost(&source.rig());
+            let sah = tree.sah();
+            if refit_keeps(sah, rest_sah, tree.area_parts(triangles), rest) {
+                return Self::made(tree, start, Some(sah));
             }
         }
         let v = scene.vertices();
@@ -120,10 +133,15 @@ impl Bvh {
                 v: f.map(|k| Vec3A::from(Vec3::from(v[k as usize]))),
             })
             .collect();
-        let tree = build::build(&tris, params);
+        Self::made(build::build(&tris, params), start, None)
+    }
+
+    /// The BVH of `tree`, made since `start`, with its surface-area cost where known.
+    fn made(tree: Bvh8, start: Instant, sah: Option<f64>) -> Self {
         Self {
             tree,
             build_seconds: start.elapsed().as_secs_f64(),
+            sah: sah.map_or_else(std::sync::OnceLock::new, std::sync::OnceLock::from),
         }
     }
 
@@ -167,10 +185,15 @@ impl Bvh {
             depth: t.depth,
             instances: t.inst.as_ref().map_or(0, |i| i.instances.len()),
             build_seconds: self.build_seconds,
-            sah: t.sah(),
+            sah: *self.sah.get_or_init(|| t.sah()),
         }
     }
 }
+
+/// A refit tree's corners for the faces of its source's rig, and for the source's own faces
+/// (`refit::ObjectTrees::corners`).
+struct RigCorners(Arc<refit::Corners>);
+struct OwnCorners(Arc<refit::Corners>);
 
 /// Whether the scene's ray queries run on a two-level tree (`instances`), and its pose if so:
 /// a pose that moves two or more objects rigidly, each by an invertible transform, and winds
