@@ -137,7 +137,8 @@ impl Bvh {
     }
 
     /// The BVH of `tree`, made since `start`, with its surface-area cost where known.
-    fn made(tree: Bvh8, start: Instant, sah: Option<f64>) -> Self {
+    fn made(mut tree: Bvh8, start: Instant, sah: Option<f64>) -> Self {
+        tree.move_to_huge_pages();
         Self {
             tree,
             build_seconds: start.elapsed().as_secs_f64(),

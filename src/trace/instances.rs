@@ -82,14 +82,16 @@ impl ObjectTrees {
         if out.nodes.is_empty() {
             out.nodes.push(Node8::EMPTY);
         }
+        let mut tree = Bvh8 {
+            nodes: out.nodes,
+            blocks: out.blocks,
+            depth: out.depth,
+            inst: None,
+        };
+        tree.move_to_huge_pages();
         ObjectTrees {
             triangles: object_ids.len(),
-            tree: Arc::new(Bvh8 {
-                nodes: out.nodes,
-                blocks: out.blocks,
-                depth: out.depth,
-                inst: None,
-            }),
+            tree: Arc::new(tree),
             roots,
         }
     }

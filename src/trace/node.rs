@@ -302,6 +302,26 @@ impl Bvh8 {
         }
     }
 
+    /// Move a large tree's nodes and blocks into memory backed by huge pages (where the
+    /// kernel grants them, `limits::huge_pages`): rays visit nodes and blocks all over a tree
+    /// of hundreds of megabytes, and with 4 KiB pages most visits also miss the TLB (measured
+    /// on 100 tiles of `stanford_bunny`, 375 MB: 262,144 incoherent rays 17% faster; `balloon`
+    /// and `khr_specular_test` 6%). The copy costs about 2% of the build; trees under 4 MiB
+    /// stay where they are.
+    pub fn move_to_huge_pages(&mut self) {
+        fn moved<T: Copy>(v: &mut Vec<T>) {
+            if std::mem::size_of_val(v.as_slice()) < 4 << 20 {
+                return;
+            }
+            let mut out: Vec<T> = Vec::with_capacity(v.len());
+            crate::limits::huge_pages(out.spare_capacity_mut());
+            out.extend_from_slice(v);
+            *v = out;
+        }
+        moved(&mut self.nodes);
+        moved(&mut self.blocks);
+    }
+
     /// See `BvhStats::sah`.
     pub fn sah(&self) -> f64 {
         let (lo, hi) = self.nodes[0].bounds();
