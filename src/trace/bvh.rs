@@ -133,12 +133,15 @@ impl Bvh {
                 v: f.map(|k| Vec3A::from(Vec3::from(v[k as usize]))),
             })
             .collect();
-        Self::made(build::build(&tris, params), start, None)
+        // A refit writes into huge pages already, a two-level tree's objects are moved there
+        // once (`instances::ObjectTrees`); a fresh build is moved now.
+        let mut tree = build::build(&tris, params);
+        tree.move_to_huge_pages();
+        Self::made(tree, start, None)
     }
 
     /// The BVH of `tree`, made since `start`, with its surface-area cost where known.
-    fn made(mut tree: Bvh8, start: Instant, sah: Option<f64>) -> Self {
-        tree.move_to_huge_pages();
+    fn made(tree: Bvh8, start: Instant, sah: Option<f64>) -> Self {
         Self {
             tree,
             build_seconds: start.elapsed().as_secs_f64(),
