@@ -135,7 +135,7 @@ impl Bvh {
             .collect();
         // A refit writes into huge pages already, a two-level tree's objects are moved there
         // once (`instances::ObjectTrees`); a fresh build is moved now.
-        let mut tree = build::build(&tris, params);
+        let tree = build::build(&tris, params);
         tree.move_to_huge_pages();
         Self::made(tree, start, None)
     }

@@ -82,7 +82,7 @@ impl ObjectTrees {
         if out.nodes.is_empty() {
             out.nodes.push(Node8::EMPTY);
         }
-        let mut tree = Bvh8 {
+        let tree = Bvh8 {
             nodes: out.nodes,
             blocks: out.blocks,
             depth: out.depth,
