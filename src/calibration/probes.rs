@@ -11,7 +11,6 @@ use crate::error::Result;
 use crate::gpu;
 use crate::image::conventional::{discretize_conventional, discretize_traced};
 use crate::scene::Scene;
-use crate::types::DepthImages;
 
 /// What the probes' time over the shape's prediction comes to on the kind of machine the
 /// shapes were fitted on (the ray caster's, lavapipe's): the tori are not the shared scenes, so
@@ -107,19 +106,110 @@ impl ProbeViews {
     }
 }
 
-/// The best of three warm calls of `call` on each probe view of each torus, summed.
-fn probe_seconds(
-    scenes: &[Scene; 2],
-    views: &ProbeViews,
-    call: impl Fn(&Scene, &[Camera]) -> Result<DepthImages>,
-) -> Result<f64> {
-    let mut sum = 0.0;
-    for scene in scenes {
-        for i in 0..views.cams.len() {
-            sum += best_of_three(|| call(scene, views.one(i)).map(|_| ()))?;
+/// Rounds of probes every calibration measures ([`rounds`]), and the most it measures while
+/// they disagree ([`settled`]).
+const ROUNDS: usize = 2;
+const MAX_ROUNDS: usize = 4;
+
+/// How far (relative) a round's time may lie above a backend's best round and still confirm
+/// it ([`settled`]).
+const AGREE: f64 = 0.15;
+
+/// One round of the probes: view by view (each probe view of each torus), the ray caster's
+/// best of three warm calls and, where there is a raster backend, the raster's, the two side by
+/// side (which goes first alternates from view to view and round to round), so that load
+/// passing through the machine meets both backends within a view's time, not one backend's
+/// whole share of the probes. Returns each view's best seconds, the ray caster's and the
+/// raster's. `time(raster, scene, view)` makes one call and times it.
+fn round(
+    n_scenes: usize,
+    n_views: usize,
+    raster: bool,
+    k: usize,
+    time: &mut impl FnMut(bool, usize, usize) -> Result<f64>,
+) -> Result<Round> {
+    let mut out = Round {
+        cpu: Vec::new(),
+        gpu: raster.then(Vec::new),
+    };
+    for scene in 0..n_scenes {
+        for view in 0..n_views {
+            let order: &[bool] = match (raster, (scene * n_views + view + k).is_multiple_of(2)) {
+                (false, _) => &[false],
+                (true, true) => &[false, true],
+                (true, false) => &[true, false],
+            };
+            for &r in order {
+                // One warm call, then the best of three (caches and threads as a run of the
+                // backend's own calls leaves them, as the calls `auto` predicts find them).
+                time(r, scene, view)?;
+                let mut best = f64::INFINITY;
+                for _ in 0..3 {
+                    best = best.min(time(r, scene, view)?);
+                }
+                match (r, out.gpu.as_mut()) {
+                    (true, Some(gpu)) => gpu.push(best),
+                    _ => out.cpu.push(best),
+                }
+            }
         }
     }
-    Ok(sum)
+    Ok(out)
+}
+
+/// A round's best seconds per view: the ray caster's, and the raster's where there is one.
+#[derive(Debug, Clone)]
+struct Round {
+    cpu: Vec<f64>,
+    gpu: Option<Vec<f64>>,
+}
+
+/// The probes' rounds: [`ROUNDS`] of them, and more (up to [`MAX_ROUNDS`]) until each
+/// backend's best round is confirmed by another ([`settled`]).
+fn rounds(
+    n_scenes: usize,
+    n_views: usize,
+    raster: bool,
+    mut time: impl FnMut(bool, usize, usize) -> Result<f64>,
+) -> Result<Vec<Round>> {
+    let mut out = Vec::with_capacity(MAX_ROUNDS);
+    while out.len() < ROUNDS || (out.len() < MAX_ROUNDS && !settled(&out)) {
+        out.push(round(n_scenes, n_views, raster, out.len(), &mut time)?);
+    }
+    Ok(out)
+}
+
+/// Whether each backend's best round (its views' seconds summed) is confirmed: another round
+/// within [`AGREE`] of it. A round that load hit, on one backend or both, stands apart, and
+/// one more round is measured instead of trusting the best of the rest.
+fn settled(rounds: &[Round]) -> bool {
+    let sum = |v: &[f64]| v.iter().sum::<f64>();
+    let confirmed = |sums: Vec<f64>| {
+        let best = sums.iter().copied().fold(f64::INFINITY, f64::min);
+        sums.iter().filter(|&&s| s <= best * (1.0 + AGREE)).count() >= 2
+    };
+    let gpu: Vec<f64> = rounds
+        .iter()
+        .filter_map(|r| r.gpu.as_deref())
+        .map(sum)
+        .collect();
+    confirmed(rounds.iter().map(|r| sum(&r.cpu)).collect()) && (gpu.is_empty() || confirmed(gpu))
+}
+
+/// The two factors (this machine's time over the shape's prediction, `shape`: the ray
+/// caster's, and the raster's where there is one): each view's best over the rounds, summed.
+/// Load that passes through some rounds, on one backend or both, moves neither factor while
+/// each view has a clear round; the rounds go on until a second round confirms the best.
+fn factors(rounds: &[Round], shape: (f64, f64)) -> (f64, Option<f64>) {
+    let best = |views: Vec<&Vec<f64>>| -> f64 {
+        let n = views.first().map_or(0, |v| v.len());
+        (0..n)
+            .map(|i| views.iter().map(|v| v[i]).fold(f64::INFINITY, f64::min))
+            .sum()
+    };
+    let cpu = best(rounds.iter().map(|r| &r.cpu).collect()) / shape.0;
+    let gpu: Vec<&Vec<f64>> = rounds.iter().filter_map(|r| r.gpu.as_ref()).collect();
+    (cpu, (!gpu.is_empty()).then(|| best(gpu) / shape.1))
 }
 
 /// What the probes would take on the machine a shape was fitted on: `model`'s predictions
@@ -149,9 +239,14 @@ fn probe_shape_seconds(
 /// probes' measured time over the time the shape predicts for them. One factor from the sum
 /// of six calls is steady where six coefficients fitted to the differences between them are
 /// not: on a shared 2-core machine the best of three runs of one call still varies by 10-20%,
-/// and the differences by far more. The BVH build is timed as it is. A hardware GPU, whose
-/// costs have another shape (a fixed cost per call, little per pixel), gets lines through
-/// its near views: per call and per triangle from the two tori, per pixel from the two sizes.
+/// and the differences by far more. `auto` decides by the two factors' ratio, so the probes
+/// measure it robustly ([`rounds`], [`factors`]): the two backends in turn, view by view, so
+/// that passing load meets both; the median of the rounds' ratios; and more rounds while they
+/// disagree. (The calibration of a fresh-clone `make test` once ran beside cargo and came out
+/// 2.2 times too slow for the ray caster alone, when its probes ran before the raster's.) The
+/// BVH build is timed as it is. A hardware GPU, whose costs have another shape (a fixed cost
+/// per call, little per pixel), gets lines through its near views: per call and per triangle
+/// from the two tori, per pixel from the two sizes.
 pub(super) fn calibrate() -> Result<CostModel> {
     let start = Instant::now();
     let scenes = [probe_scene(PROBE_K[0])?, probe_scene(PROBE_K[1])?];
@@ -164,37 +259,48 @@ pub(super) fn calibrate() -> Result<CostModel> {
         source: "shape".into(),
     };
 
-    // CPU: the large probe's BVH build (timed by the ray caster), then warm traces.
+    // The large probe's BVH build (timed by the ray caster) and its upload (by the raster).
     let built = discretize_traced(&scenes[1], views.one(0), false)?;
     let build_per_triangle = built.timings.get("bvh").unwrap_or(0.0) / t[1];
-    let traced = probe_seconds(&scenes, &views, |s, c| discretize_traced(s, c, false))?;
-    let k = traced
-        / probe_shape_seconds(&scenes, &views, &shape, true)
-        / PROBE_FACTOR_ON_SHAPE_MACHINE.0;
+    let ctx = gpu::context();
+    let uploaded = match &ctx {
+        Ok(_) => Ok(discretize_conventional(&scenes[1], views.one(0), false)?),
+        Err(e) => Err(e.to_string()),
+    };
+    // A software rasterizer shares the CPU with the ray caster: the two are probed in turn, and
+    // its factor comes with the ray caster's. A hardware GPU gets lines of its own (below).
+    let software = matches!(&ctx, Ok(c) if c.info.device_type == wgpu::DeviceType::Cpu);
+    let predicted = (
+        probe_shape_seconds(&scenes, &views, &shape, true),
+        probe_shape_seconds(&scenes, &views, &shape, false),
+    );
+    let measured = rounds(scenes.len(), views.cams.len(), software, |raster, s, v| {
+        let (scene, cams) = (&scenes[s], views.one(v));
+        let start = Instant::now();
+        if raster {
+            discretize_conventional(scene, cams, false)?;
+        } else {
+            discretize_traced(scene, cams, false)?;
+        }
+        Ok(start.elapsed().as_secs_f64())
+    })?;
+    let (k_cpu, k_gpu) = factors(&measured, predicted);
     let cpu = CpuCosts {
         build_per_triangle,
-        ..CPU_SHAPE.scaled(k)
+        ..CPU_SHAPE.scaled(k_cpu / PROBE_FACTOR_ON_SHAPE_MACHINE.0)
     };
 
-    let gpu = match gpu::context() {
-        Err(e) => Err(e.to_string()),
-        Ok(ctx) => {
-            let first = discretize_conventional(&scenes[1], views.one(0), false)?;
-            let upload_per_triangle = first.timings.get("upload").unwrap_or(0.0) / t[1];
-            let costs = if ctx.info.device_type == wgpu::DeviceType::Cpu {
-                let drawn =
-                    probe_seconds(&scenes, &views, |s, c| discretize_conventional(s, c, false))?;
-                let shaped = probe_shape_seconds(&scenes, &views, &shape, false);
-                LAVAPIPE_SHAPE.scaled(drawn / shaped / PROBE_FACTOR_ON_SHAPE_MACHINE.1)
-            } else {
-                hardware_lines(&scenes, &views, t)?
-            };
-            Ok(GpuCosts {
-                upload_per_triangle,
-                ..costs
-            })
-        }
-    };
+    let gpu = uploaded.and_then(|first| {
+        let upload_per_triangle = first.timings.get("upload").unwrap_or(0.0) / t[1];
+        let costs = match k_gpu {
+            Some(k) => LAVAPIPE_SHAPE.scaled(k / PROBE_FACTOR_ON_SHAPE_MACHINE.1),
+            None => hardware_lines(&scenes, &views, t).map_err(|e| e.to_string())?,
+        };
+        Ok(GpuCosts {
+            upload_per_triangle,
+            ..costs
+        })
+    });
     Ok(CostModel {
         gpu,
         cpu,
@@ -224,4 +330,116 @@ fn hardware_lines(scenes: &[Scene; 2], views: &ProbeViews, t: [f64; 2]) -> Resul
         per_box_pixel: 0.0,
         upload_per_triangle: 0.0,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calibration::{Backend, Workload};
+
+    /// Probe calls per round: two tori, three views, two backends, four calls each.
+    const CALLS: usize = 48;
+
+    const SHAPE: (f64, f64) = (6.0, 3.0);
+
+    /// The rounds of the probes on a machine whose every call takes 1 s on the ray caster and
+    /// 0.5 s on the raster (factors 1 against `SHAPE`), times `load(call, raster)` (calls
+    /// counted from 0 in the order they are made).
+    fn probed(load: impl Fn(usize, bool) -> f64) -> Vec<Round> {
+        let mut calls = 0;
+        rounds(2, 3, true, |raster, _, _| {
+            calls += 1;
+            Ok(if raster { 0.5 } else { 1.0 } * load(calls - 1, raster))
+        })
+        .unwrap()
+    }
+
+    /// What `auto` picks with these factors, over workloads either side of the crossover.
+    fn choices((k_cpu, k_gpu): (f64, Option<f64>)) -> Vec<Backend> {
+        let model = CostModel {
+            gpu: Ok(LAVAPIPE_SHAPE.scaled(k_gpu.unwrap())),
+            cpu: CPU_SHAPE.scaled(k_cpu),
+            calibration_seconds: 0.0,
+            source: "test".into(),
+        };
+        [1_000u64, 30_000, 100_000, 300_000, 1_000_000, 4_000_000]
+            .into_iter()
+            .map(|triangles| {
+                let w = Workload {
+                    triangles,
+                    pixels: 1 << 20,
+                    images: 1,
+                    bvh_built: true,
+                    uploaded: true,
+                    fits_gpu: true,
+                    box_fraction: 0.6,
+                };
+                model.decide(&w).backend
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_quiet_machine_settles_in_two_rounds() {
+        let r = probed(|_, _| 1.0);
+        assert_eq!(r.len(), ROUNDS);
+        assert_eq!(factors(&r, SHAPE), (1.0, Some(1.0)));
+    }
+
+    #[test]
+    fn load_on_one_backend_does_not_change_the_choice() {
+        let quiet = choices(factors(&probed(|_, _| 1.0), SHAPE));
+        // Both kinds of choice occur, so a wrong factor would show.
+        assert!(
+            quiet.contains(&Backend::Cpu) && quiet.contains(&Backend::Gpu),
+            "{quiet:?}"
+        );
+        let round = |call: usize| call / CALLS;
+        let loads: [&dyn Fn(usize, bool) -> f64; 5] = [
+            // The ray caster's calls slowed 2.2x in the first round, in every other call.
+            &|c, raster| if round(c) == 0 && !raster { 2.2 } else { 1.0 },
+            &|c, raster| if c % 2 == 0 && !raster { 2.2 } else { 1.0 },
+            // The raster's slowed 3x in the second round.
+            &|c, raster| if round(c) == 1 && raster { 3.0 } else { 1.0 },
+            // Both in the first round.
+            &|c, _| if round(c) == 0 { 1.7 } else { 1.0 },
+            // The machine busy (2.2x) for the first 60 calls, whichever backend makes them:
+            // the probes once ran all the ray caster's calls first, and cargo compiling
+            // beside them slowed those alone.
+            &|c, _| if c < 60 { 2.2 } else { 1.0 },
+        ];
+        for (i, load) in loads.iter().enumerate() {
+            let r = probed(load);
+            assert!(r.len() <= MAX_ROUNDS);
+            let f = factors(&r, SHAPE);
+            assert_eq!(f, (1.0, Some(1.0)), "load {i}: {} rounds", r.len());
+            assert_eq!(choices(f), quiet, "load {i}");
+        }
+    }
+
+    #[test]
+    fn a_round_that_load_hit_is_measured_again() {
+        let r = probed(|c, raster| if c / CALLS == 0 && !raster { 2.2 } else { 1.0 });
+        assert_eq!(r.len(), ROUNDS + 1);
+        // A machine that never settles stops at the cap, each view at its best round.
+        let r = probed(|c, raster| {
+            if raster {
+                1.0
+            } else {
+                1.0 + 0.3 * (c / CALLS + 1) as f64
+            }
+        });
+        assert_eq!(r.len(), MAX_ROUNDS);
+        assert_eq!(factors(&r, SHAPE).1, Some(1.0));
+        assert!((factors(&r, SHAPE).0 - 1.3).abs() < 1e-12);
+        // Without a raster, the ray caster's rounds alone.
+        let mut calls = 0;
+        let alone = rounds(2, 3, false, |_, _, _| {
+            calls += 1;
+            Ok(if calls <= 24 { 2.0 } else { 1.0 })
+        })
+        .unwrap();
+        assert_eq!(alone.len(), ROUNDS + 1);
+        assert_eq!(factors(&alone, SHAPE), (1.0, None));
+    }
 }
