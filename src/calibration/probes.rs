@@ -14,13 +14,13 @@ use crate::scene::Scene;
 
 /// What the probes' time over the shape's prediction comes to on the kind of machine the
 /// shapes were fitted on (the ray caster's, lavapipe's): the tori are not the shared scenes, so
-/// a factor is divided by these to be 1 there. Refitted when issue 72 made the resolve (shared
-/// by both backends) sample textures and normals, which the untextured tori feel otherwise
-/// than the shared scenes: the mean over two runs of `bench backends` (64 rows each, 2-core
-/// AMD EPYC, lavapipe) of the constants that make the median of measured over predicted time
-/// 1 (1.89 and 1.51 for the ray caster, 1.17 and 1.20 for lavapipe: the probes' factor itself
-/// varies by about 25% between processes on that machine). Before: 1.12, 1.21.
-const PROBE_FACTOR_ON_SHAPE_MACHINE: (f64, f64) = (1.70, 1.18);
+/// a factor is divided by these to be 1 there. Refitted when the probes began to run the two
+/// backends side by side (`round`): the mean over two runs of `bench backends` (64 rows each,
+/// 2-core AMD EPYC, lavapipe, each run calibrating afresh) of the constants that make the
+/// median of measured over predicted time 1: 1.29 and 0.99 for the ray caster, 0.98 and 1.07
+/// for lavapipe. The ratio of the two factors still moved by about 30% between those two
+/// runs' calibrations. Before: 1.70, 1.18 (issue 72); 1.12, 1.21.
+const PROBE_FACTOR_ON_SHAPE_MACHINE: (f64, f64) = (1.14, 1.03);
 
 /// The probe tori: `2·k²` triangles each.
 pub(super) const PROBE_K: [u32; 2] = [48, 256];
