@@ -17,14 +17,14 @@
 //!
 //! The shape of each model (the ratios between its coefficients) was fitted to `bench
 //! backends`' real scenes on a 2-core AMD EPYC with lavapipe ([`CPU_SHAPE`],
-//! [`LAVAPIPE_SHAPE`]). Probes (one to two seconds, up to three times that on a busy machine:
+//! [`LAVAPIPE_SHAPE`]). Probes (two to three seconds, up to twice that on a busy machine:
 //! two procedural tori of ~5K and ~130K triangles, closed and bumpy like a scanned or modelled
 //! object, seen from near at 384² and 768² and from far at 768²) measure how fast this machine
 //! is: one factor per backend, the probes' time over the time the shape predicts for them
 //! ([`calibrate`]; a hardware GPU gets lines through its probe times instead). Load that passes
 //! while they run must not tilt `auto` (the ratio of the two factors decides): the two backends
-//! are probed in turn, view by view, in rounds; the ratio is the median of the rounds', and
-//! rounds that disagree are measured again (`probes`). The probes run
+//! are probed in turn, view by view, in rounds, until a second round confirms each backend's
+//! best, and each view counts at its best round (`probes`). The probes run
 //! once per machine: their result is kept in a small calibration file ([`cache`]), keyed by the
 //! package version and build, the CPU, the worker threads and the adapter, and every process
 //! reads it (a millisecond) instead.
