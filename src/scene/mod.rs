@@ -575,8 +575,6 @@ fn check_len(name: &str, got: Option<usize>, want: usize, of: &str) -> Result<()
     }
 }
 
-/// The box around the faces' corners (unreferenced vertices left out), and which faces are
-/// degenerate ([`is_degenerate`]).
 /// The bounds of the vertices that `shared`'s faces use: of all of them, read in order, where
 /// the faces use every one (the usual case, and a deformation's every frame), else of the
 /// faces' corners.
@@ -595,12 +593,13 @@ fn bounds(vertices: &[[f32; 3]], shared: &Shared) -> [[f32; 3]; 2] {
         let v = Vec3::from(*v);
         (lo.min(v), hi.max(v))
     };
-    // Minima and maxima do not depend on the order they are taken in.
-    let (lo, hi) = if used == vertices.len() {
+    // Chunks in parallel, joined in their order: which of -0 and +0 a tie keeps must not
+    // depend on how the work was split.
+    let chunks: Vec<(Vec3, Vec3)> = if used == vertices.len() {
         vertices
             .par_chunks(1 << 15)
             .map(|c| c.iter().fold(empty(), grow))
-            .reduce(empty, |(a, b), (c, d)| (a.min(c), b.max(d)))
+            .collect()
     } else {
         faces
             .par_chunks(1 << 14)
@@ -609,8 +608,11 @@ fn bounds(vertices: &[[f32; 3]], shared: &Shared) -> [[f32; 3]; 2] {
                     .flatten()
                     .fold(empty(), |bx, &k| grow(bx, &vertices[k as usize]))
             })
-            .reduce(empty, |(a, b), (c, d)| (a.min(c), b.max(d)))
+            .collect()
     };
+    let (lo, hi) = chunks
+        .into_iter()
+        .fold(empty(), |(a, b), (c, d)| (a.min(c), b.max(d)));
     [lo.to_array(), hi.to_array()]
 }
 

@@ -241,11 +241,11 @@ impl Rays<'_> {
             ),
             Some(inst) => {
                 let (ray, _) = self.traversal_ray(i);
-                let (frame, s) = inst.instances[h.inst as usize].ray_in(&ray);
+                let (o, d, s) = inst.instances[h.inst as usize].frame_of(&ray);
                 let p = Pending {
                     v: inst.objects.blocks[h.block as usize].corners(h.lane as usize),
-                    o: frame.o.to_array(),
-                    d: frame.d.to_array(),
+                    o: o.to_array(),
+                    d: d.to_array(),
                     t: h.t - s,
                     bary: h.bary(),
                 };

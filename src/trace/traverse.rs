@@ -224,12 +224,20 @@ impl super::node::Instance {
     /// traversal's sort keys need).
     #[inline(always)]
     pub fn ray_in(&self, w: &Ray) -> (Ray, f32) {
+        let (o, d, s) = self.frame_of(w);
+        (Ray::new(o, d, 0.0), s)
+    }
+
+    /// [`Instance::ray_in`]'s origin, direction and shift, without the traversal's set-up of
+    /// the ray (what a hit's refinement needs, `Rays::pending`).
+    #[inline(always)]
+    pub fn frame_of(&self, w: &Ray) -> (Vec3A, Vec3A, f32) {
         let (t0, t1) = ((self.lo - w.o) * w.inv, (self.hi - w.o) * w.inv);
         let entry = t0.min(t1).max_element();
         let s = (entry - ENTRY_MARGIN * entry.abs()).max(w.t_min);
         let near = w.o.as_dvec3() + f64::from(s) * w.d.as_dvec3();
         let o = self.to_object.transform_point3(near).as_vec3a();
-        (Ray::new(o, self.linear * w.d, 0.0), s)
+        (o, self.linear * w.d, s)
     }
 }
 
