@@ -64,16 +64,21 @@ fn probe_camera(side: u32, distance: f64) -> Result<Camera> {
     )
 }
 
-/// The best of three timed runs of `f`, after one that warms caches.
-fn best_of_three(mut f: impl FnMut() -> Result<()>) -> Result<f64> {
-    f()?;
+/// The best of three runs of `run` (each returns its seconds), after one that warms caches.
+fn best_of_three(mut run: impl FnMut() -> Result<f64>) -> Result<f64> {
+    run()?;
     let mut best = f64::INFINITY;
     for _ in 0..3 {
-        let start = Instant::now();
-        f()?;
-        best = best.min(start.elapsed().as_secs_f64());
+        best = best.min(run()?);
     }
     Ok(best)
+}
+
+/// The seconds `f` takes.
+fn seconds<T>(f: impl FnOnce() -> Result<T>) -> Result<f64> {
+    let start = Instant::now();
+    f()?;
+    Ok(start.elapsed().as_secs_f64())
 }
 
 /// `(a, b)` of `y = a + b·x` through two points, `b` at least 0.
@@ -140,13 +145,9 @@ fn round(
                 (true, false) => &[true, false],
             };
             for &r in order {
-                // One warm call, then the best of three (caches and threads as a run of the
-                // backend's own calls leaves them, as the calls `auto` predicts find them).
-                time(r, scene, view)?;
-                let mut best = f64::INFINITY;
-                for _ in 0..3 {
-                    best = best.min(time(r, scene, view)?);
-                }
+                // After a warm call: caches and threads as a run of the backend's own calls
+                // leaves them, as the calls `auto` predicts find them.
+                let best = best_of_three(|| time(r, scene, view))?;
                 match (r, out.gpu.as_mut()) {
                     (true, Some(gpu)) => gpu.push(best),
                     _ => out.cpu.push(best),
@@ -276,13 +277,13 @@ pub(super) fn calibrate() -> Result<CostModel> {
     );
     let measured = rounds(scenes.len(), views.cams.len(), software, |raster, s, v| {
         let (scene, cams) = (&scenes[s], views.one(v));
-        let start = Instant::now();
-        if raster {
-            discretize_conventional(scene, cams, false)?;
-        } else {
-            discretize_traced(scene, cams, false)?;
-        }
-        Ok(start.elapsed().as_secs_f64())
+        seconds(|| {
+            if raster {
+                discretize_conventional(scene, cams, false)
+            } else {
+                discretize_traced(scene, cams, false)
+            }
+        })
     })?;
     let (k_cpu, k_gpu) = factors(&measured, predicted);
     let cpu = CpuCosts {
@@ -316,7 +317,7 @@ fn hardware_lines(scenes: &[Scene; 2], views: &ProbeViews, t: [f64; 2]) -> Resul
     for scene in scenes {
         let mut y = [0.0; 2];
         for (i, y) in y.iter_mut().enumerate() {
-            *y = best_of_three(|| discretize_conventional(scene, views.one(i), false).map(|_| ()))?;
+            *y = best_of_three(|| seconds(|| discretize_conventional(scene, views.one(i), false)))?;
         }
         let p = [views.pixels[0], views.pixels[1]];
         let slope = (y[1] - y[0]) / (p[1] - p[0]);
