@@ -14,6 +14,7 @@ use rayon::prelude::*;
 
 use super::build::{self, padded_box, Aabb, BuildParams, Out};
 use super::node::{leaf_blocks, node_index, node_ref, Bvh8, Node8, Tri4, EMPTY, LEAF};
+use super::traverse::prefetch_line;
 use super::watertight::Tri;
 use crate::scene::pose::Rig;
 
@@ -75,9 +76,14 @@ impl ObjectTrees {
                 stats,
             });
         }
+        // `posed` writes into unfilled memory: the objects must tile the nodes after the top
+        // tree's, and each object's subtrees its own nodes and blocks.
         let mut ext = vec![Extent::default(); out.nodes.len()];
         let mut next_block = 0;
+        let mut next_node = top_count;
         for o in &parts {
+            assert_eq!(o.nodes.start, next_node, "objects' nodes out of order");
+            next_node = o.nodes.end;
             let e = extents(&out.nodes, o.nodes.start, next_block, &mut ext);
             assert_eq!(
                 e.nodes_end as usize, o.nodes.end,
@@ -85,6 +91,7 @@ impl ObjectTrees {
             );
             next_block = e.blocks_end;
         }
+        assert_eq!(next_node, out.nodes.len(), "nodes no object holds");
         assert_eq!(
             next_block as usize,
             out.blocks.len(),
@@ -272,19 +279,6 @@ struct Refit<'a> {
 /// How many blocks ahead a refit asks for the vertices it will gather.
 const PREFETCH_BLOCKS: usize = 4;
 
-/// Ask the cache for the line at `p` (a hint: it never faults, whatever the address).
-#[inline(always)]
-fn prefetch<T>(p: *const T) {
-    #[cfg(target_arch = "x86_64")]
-    // SAFETY: a prefetch reads nothing and never faults.
-    unsafe {
-        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-        _mm_prefetch::<_MM_HINT_T0>(p as *const i8);
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = p;
-}
-
 /// Subtrees of at least this many blocks refit their inner children in parallel.
 const PARALLEL_BLOCKS: usize = 1 << 11;
 
@@ -360,7 +354,7 @@ impl Refit<'_> {
             // a few ahead (in this leaf or the next) while this one's are read.
             if let Some(ahead) = self.corners.get(first + b + PREFETCH_BLOCKS) {
                 for k in ahead.as_flattened() {
-                    prefetch(v.as_ptr().wrapping_add(*k as usize));
+                    prefetch_line(v.as_ptr().wrapping_add(*k as usize));
                 }
             }
             let (id, corners) = (self.ids[first + b], &self.corners[first + b]);

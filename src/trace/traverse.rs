@@ -652,24 +652,31 @@ fn prefetch_children(bvh: &Bvh8, n: &Node8, mask: u32) {
 /// objects) will read first: an inner node's four lines, or its first block's.
 #[inline(always)]
 fn prefetch(bvh: &Bvh8, c: u32) {
+    let nodes = bvh.nodes.as_ptr() as usize;
+    let blocks = bvh.blocks.as_ptr() as usize;
+    // Both addresses, then a select by mask arithmetic: a branch on inner or leaf would be a
+    // coin toss for the predictor at every child.
+    let inner = nodes.wrapping_add(node_offset(c));
+    let leaf = blocks.wrapping_add(leaf_first(c) * size_of::<Tri4>());
+    let is_leaf = ((c >> 31) as usize).wrapping_neg();
+    let p = (inner ^ ((inner ^ leaf) & is_leaf)) as *const u8;
+    for l in 0..4 {
+        prefetch_line(p.wrapping_add(64 * l));
+    }
+}
+
+/// Ask the cache for the line at `p`: a hint, which never faults, whatever the address (a
+/// no-op off x86-64).
+#[inline(always)]
+pub(crate) fn prefetch_line<T>(p: *const T) {
     #[cfg(target_arch = "x86_64")]
-    {
+    // SAFETY: a prefetch reads nothing and never faults.
+    unsafe {
         use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-        let nodes = bvh.nodes.as_ptr() as usize;
-        let blocks = bvh.blocks.as_ptr() as usize;
-        // Both addresses, then a select by mask arithmetic: a branch on inner or leaf would be
-        // a coin toss for the predictor at every child.
-        let inner = nodes.wrapping_add(node_offset(c));
-        let leaf = blocks.wrapping_add(leaf_first(c) * size_of::<Tri4>());
-        let is_leaf = ((c >> 31) as usize).wrapping_neg();
-        let p = (inner ^ ((inner ^ leaf) & is_leaf)) as *const i8;
-        for l in 0..4 {
-            // SAFETY: a prefetch is only a hint: it never faults, whatever the address.
-            unsafe { _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(64 * l)) };
-        }
+        _mm_prefetch::<_MM_HINT_T0>(p as *const i8);
     }
     #[cfg(not(target_arch = "x86_64"))]
-    let _ = (bvh, c);
+    let _ = p;
 }
 
 /// A child's sort key: its entry distance's bits with the sign cleared (distances are never
