@@ -6,6 +6,7 @@ from __future__ import annotations
 import re
 
 import pytest
+import scenesample as ss
 
 
 def test_bench_all_quick_writes_a_summary_and_every_methods_row(tmp_path, capsys, gpu):
@@ -79,19 +80,21 @@ def test_bench_rays_quick_measures_scenes_and_tilings_on_one_core_and_every_core
     out = tmp_path / "rays.md"
     bench.main(["rays", "--quick", "--scenes", "bunny", "--out", str(out)])
     md = out.read_text()
-    for section in ("## primary", "## incoherent", "## shadow", "## segments", "## BVH build"):
+    sections = ("## primary", "## incoherent", "## camera", "## shadow", "## segments", "## BVH")
+    for section in sections:
         assert section in md
     for name in ("| stanford_bunny |", "| stanford_bunny x2 (tiled) |"):
         rows = [line for line in md.splitlines() if line.startswith(name)]
-        assert len(rows) == 5, name  # one row per table
+        assert len(rows) == 6, name  # one row per table
     rows = _bench_rays.summary_rows(_bench_rays.run(True, 1, ["cornell"]))
-    # Two per ray set against Open3D, occluded against the closest hit on two sets on one and
+    # Two per ray set against Open3D, occluded against the closest hit on three sets on one and
     # every core, scaling and agreement per set, count (two) and list of hits, build, memory.
-    assert len(rows) == 8 + 4 + 4 + 3 + 4 + 2 and all(r[2] > 0 for r in rows)
+    assert len(rows) == 10 + 6 + 5 + 3 + 5 + 2 and all(r[2] > 0 for r in rows)
     # The cornell box (3,968 triangles) is only measured tiled.
     assert {r[3] for r in rows} == {"cornell_box x26 (tiled)"}
     assert "count_hits vs Open3D's count_intersections (one core)" in md
     assert "pinned with `os.sched_setaffinity`" in md
+    assert f"kernel {ss.ray_kernel()}" in md
 
 
 def test_bench_backends_quick_compares_gpu_cpu_and_auto(tmp_path, gpu):

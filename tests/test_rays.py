@@ -365,3 +365,59 @@ def test_one_origin_broadcasts_against_a_camera_s_pixel_rays() -> None:
     down = ss.cast_rays(s, origins.reshape(-1, 3), [0.0, -1.0, 0.0])
     assert down.t.shape == (1200,)
     assert ss.occluded(s, origins[0, 0], dirs, t_max=1e9).shape == (30, 40)
+
+
+def _kernel_answers(scene: ss.Scene) -> list[np.ndarray]:
+    """Every answer of the ray queries on rays that take each path of the traversal: camera rays
+    in pixel order (packets, where the kernel has them), the same with a ``t`` window, shadow
+    rays from their hits toward one light, rays from inside the scene along the axes, and a
+    batch that mixes coherent runs with incoherent rays."""
+    (cam,) = orbit_cameras(scene, 1, 64, 48, seed=3)
+    o, d = (a.reshape(-1, 3) for a in cam.pixel_rays())
+    hits = ss.cast_rays(scene, o, d)
+    lo, hi = scene.bounds.astype(np.float64)
+    seen = np.flatnonzero(hits.hit)
+    points = o[seen] + d[seen] * hits.t[seen, None]
+    light = np.array([(lo[0] + hi[0]) / 2, hi[1] + 0.2 * (hi[1] - lo[1]), (lo[2] + hi[2]) / 2])
+    ro, rd = random_rays(scene, 1000, seed=5)
+    inside = (lo + (hi - lo) * np.random.default_rng(9).uniform(0.2, 0.8, (300, 3))).repeat(6, 0)
+    axes = np.tile(np.vstack([np.eye(3), -np.eye(3)]), (300, 1))
+    mixed_o = np.concatenate([o[:800].reshape(100, 8, 3), ro[:800].reshape(100, 8, 3)], 1)
+    mixed_d = np.concatenate([d[:800].reshape(100, 8, 3), rd[:800].reshape(100, 8, 3)], 1)
+    mixed = (mixed_o.reshape(-1, 3), mixed_d.reshape(-1, 3))
+    span = float(np.median(hits.t[seen])) if len(seen) else 1.0
+    out = []
+    for ro_, rd_, window in [
+        (o, d, {}),
+        (o, d, {"t_min": 0.9 * span, "t_max": 1.1 * span}),
+        (points + 1e-4 * (light - points), (light - points) * (1 - 2e-4), {"t_max": 1.0}),
+        (inside, axes, {}),
+        (*mixed, {}),
+    ]:
+        h = ss.cast_rays(scene, ro_, rd_, **window)
+        out += [h.t, h.triangle, h.barycentric, ss.occluded(scene, ro_, rd_, **window)]
+    return out
+
+
+def _bits(a: np.ndarray) -> np.ndarray:
+    a = np.ascontiguousarray(a)
+    return a.view(np.uint32) if a.dtype == np.float32 else a
+
+
+@pytest.mark.parametrize("name", sorted(SHARED))
+def test_every_kernel_gives_the_same_answers_on_shared_scenes(name: str) -> None:
+    # The vector kernel traces coherent runs as packets and the portable one ray by ray: the
+    # answers must agree bit for bit all the same.
+    if ss.ray_kernel() == "portable":
+        pytest.skip("the CPU has only the portable kernel")
+    scene = load_quiet(SHARED[name])
+    vector = _kernel_answers(scene)
+    try:
+        assert ss.ray_kernel("portable") == "portable"
+        portable = _kernel_answers(scene)
+    finally:
+        assert ss.ray_kernel("best") != "portable"
+    for a, b in zip(vector, portable):
+        np.testing.assert_array_equal(_bits(a), _bits(b))
+    with pytest.raises(ValueError, match="ray_kernel"):
+        ss.ray_kernel("avx512-please")

@@ -20,7 +20,7 @@ from ._core import __version__ as __version__
 from ._evaluate import evaluate, intermediate_cameras
 from ._plan import Effect, Frame, plan, render
 from ._points import closest_points, occupancy, signed_distance, winding_number
-from ._rays import all_hits, bvh_stats, cast_rays, count_hits, occluded
+from ._rays import all_hits, bvh_stats, cast_rays, count_hits, occluded, ray_kernel
 from ._scene import Scene
 from ._tradeoff import tradeoff
 from .epr.omni import OmniShadowResult, omni_shadows
@@ -93,6 +93,7 @@ __all__ = [
     "omni_shadows",
     "plan",
     "plot",
+    "ray_kernel",
     "reconstruct",
     "references",
     "reflection_reference",

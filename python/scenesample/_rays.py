@@ -15,7 +15,7 @@ from ._scene import Scene, core_of
 from .errors import InputError, check_integer
 from .results import AllHits, RayHits
 
-__all__ = ["cast_rays", "occluded", "all_hits", "count_hits", "bvh_stats"]
+__all__ = ["cast_rays", "occluded", "all_hits", "count_hits", "bvh_stats", "ray_kernel"]
 
 
 def _rays(origins: Any, directions: Any) -> tuple[np.ndarray, np.ndarray, tuple[int, ...]]:
@@ -299,3 +299,29 @@ def bvh_stats(scene: Scene) -> dict[str, Any]:
         and ``instances`` 0.
     """
     return dict(_core.bvh_stats(core_of(scene)))
+
+
+def ray_kernel(use: Optional[str] = None) -> str:
+    """The instruction set that CPU ray and point queries run on: ``"avx2"`` or ``"portable"``.
+
+    Every query gives bit-identical answers on every kernel (the same ``t``, triangle ids and
+    barycentrics), so the kernel changes only speed. The best kernel the CPU has is chosen at run
+    time; ``use="portable"`` forces the portable one for the whole process (so that one machine
+    can check the portable code against its vector code), and ``use="best"`` goes back to the
+    best. Queries already running keep their kernel.
+
+    Parameters
+    ----------
+    use : {"best", "portable"}, optional
+        Change the kernel first; ``None`` (the default) only reports it.
+
+    Returns
+    -------
+    str
+        The kernel the next query runs on.
+    """
+    if use is None:
+        return str(_core.ray_kernel())
+    if use not in ("best", "portable"):
+        raise ValueError(f"ray_kernel: use must be 'best' or 'portable', not {use!r}")
+    return str(_core.ray_kernel(use == "portable"))

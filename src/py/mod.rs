@@ -170,6 +170,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(rays::cast_rays, m)?)?;
     m.add_function(wrap_pyfunction!(rays::occluded, m)?)?;
     m.add_function(wrap_pyfunction!(rays::bvh_stats, m)?)?;
+    m.add_function(wrap_pyfunction!(rays::ray_kernel, m)?)?;
     m.add_function(wrap_pyfunction!(rays::all_hits, m)?)?;
     m.add_function(wrap_pyfunction!(rays::count_hits, m)?)?;
     m.add_function(wrap_pyfunction!(points::closest_points, m)?)?;

@@ -166,3 +166,14 @@ pub fn bvh_stats<'py>(py: Python<'py>, scene: &PyScene) -> PyResult<Bound<'py, P
     d.set_item("winding_bytes", trace::winding::winding_bytes(&s))?;
     Ok(d)
 }
+
+/// The kernel CPU queries run on (`"avx2"` or `"portable"`), after forcing the portable one
+/// (`portable=True`) or releasing it (`False`) where asked.
+#[pyfunction]
+#[pyo3(signature = (portable=None))]
+pub fn ray_kernel(portable: Option<bool>) -> &'static str {
+    if let Some(p) = portable {
+        trace::token::force_portable(p);
+    }
+    trace::token::kernel_name()
+}

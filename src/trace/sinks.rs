@@ -176,7 +176,7 @@ impl<const NEAREST: bool> AnyHit<NEAREST> {
 impl<const NEAREST: bool> Sink for AnyHit<NEAREST> {
     const ORDERED: bool = NEAREST;
     const PREFETCH: bool = true;
-    const PACKETS: bool = false;
+    const PACKETS: bool = NEAREST;
     const INTERLEAVE: bool = true;
 
     #[inline(always)]
