@@ -191,6 +191,11 @@ impl<const NEAREST: bool> Sink for AnyHit<NEAREST> {
     }
 
     #[inline(always)]
+    fn done(&self) -> bool {
+        self.hit.is_some()
+    }
+
+    #[inline(always)]
     fn hint(&self) -> Option<usize> {
         self.hint.map(|b| b as usize)
     }

@@ -250,6 +250,17 @@ pub trait Lanes {
     fn t_far(&self, lane: usize) -> f32;
     /// Lane `lane`'s hits in a block; true when the lane needs no more (an any-hit query).
     fn take(&mut self, bvh: &Bvh8, lane: usize, block: usize, h: &Tri4Hit) -> bool;
+    /// Trace lane `lane`'s `ray` alone through the subtree at `root` (a packet's hybrid switch);
+    /// true when the lane needs no more.
+    fn subtree<K: Kernel>(
+        &mut self,
+        k: K,
+        bvh: &Bvh8,
+        lane: usize,
+        ray: &Ray,
+        root: u32,
+        stack: &mut Stack,
+    ) -> bool;
 }
 
 impl<S: Sink> Lanes for [S; WIDTH] {
@@ -261,6 +272,24 @@ impl<S: Sink> Lanes for [S; WIDTH] {
     #[inline(always)]
     fn take(&mut self, bvh: &Bvh8, lane: usize, block: usize, h: &Tri4Hit) -> bool {
         self[lane].take(bvh, block, h)
+    }
+
+    #[inline(always)]
+    fn subtree<K: Kernel>(
+        &mut self,
+        k: K,
+        bvh: &Bvh8,
+        lane: usize,
+        ray: &Ray,
+        root: u32,
+        stack: &mut Stack,
+    ) -> bool {
+        let sink = &mut self[lane];
+        let (mut cur, mut sp) = (root, 0usize);
+        while let Some(next) = visit(k, bvh, cur, ray, ray, sink, stack, &mut sp) {
+            cur = next;
+        }
+        sink.done()
     }
 }
 
@@ -289,10 +318,12 @@ pub fn coherent(rays: &[Ray; WIDTH], d: &[Vec3A; WIDTH], origin_extent: f32) -> 
     (hi - lo).max_element() <= origin_extent && (dhi - dlo).max_element() <= 0.25
 }
 
-/// A packet's stack: node references with the lanes that entered them.
+/// A packet's stack: node references with the lanes that entered them; and a single ray's, for
+/// the lanes that leave the packet (`Lanes::subtree`).
 pub struct PacketStack {
     pub node: [MaybeUninit<u32>; STACK],
     pub lanes: [MaybeUninit<u32>; STACK],
+    pub single: Stack,
 }
 
 impl Default for PacketStack {
@@ -307,6 +338,7 @@ impl PacketStack {
         Self {
             node: [MaybeUninit::uninit(); STACK],
             lanes: [MaybeUninit::uninit(); STACK],
+            single: Stack::new(),
         }
     }
 }
@@ -333,6 +365,11 @@ pub trait Sink {
     fn take_in(&mut self, bvh: &Bvh8, block: usize, h: &Tri4Hit, inst: u32) -> bool {
         let _ = inst;
         self.take(bvh, block, h)
+    }
+    /// Whether the sink wants no more hits (an any-hit query that has one).
+    #[inline(always)]
+    fn done(&self) -> bool {
+        false
     }
     /// A block worth testing before the traversal starts (see `sinks::AnyHit::hint`).
     #[inline(always)]
