@@ -27,6 +27,7 @@ __all__ = [
     "__version__",
     "all_hits",
     "bvh_stats",
+    "ray_kernel",
     "cast_rays",
     "check_memory",
     "choose_backend",

@@ -103,11 +103,13 @@ def cast_rays(
 ) -> RayHits:
     """Closest hit of each ray, or its ``max_hits`` nearest hits, on the CPU.
 
-    The scene's BVH (8-wide, built on first use and cached with the scene) is traversed ray by
-    ray with AVX2 where the CPU has it; the GIL is released, and float32 C-contiguous inputs are
-    read in place, without a copy. The triangle test is watertight (Woop, Benthin and Wald
-    2013): a ray through a shared edge or vertex of a closed mesh never slips through. Both
-    faces of a triangle count. Each reported hit's ``t`` and barycentrics are recomputed in
+    The scene's BVH (8-wide, built on first use and cached with the scene) is traversed with
+    AVX2 where the CPU has it (:func:`ray_kernel`), eight neighbouring rays at a time where they
+    share an octant and nearly a direction (camera rays in pixel order do), else ray by ray; the
+    answers are the same either way, bit for bit. The GIL is released, and float32 C-contiguous
+    inputs are read in place, without a copy. The triangle test is watertight (Woop, Benthin
+    and Wald 2013): a ray through a shared edge or vertex of a closed mesh never slips through.
+    Both faces of a triangle count. Each reported hit's ``t`` and barycentrics are recomputed in
     float64 from the given direction.
 
     Parameters

@@ -38,7 +38,7 @@ pub mod refit;
 pub mod schedule;
 pub mod sinks;
 #[cfg(test)]
-mod testdata;
+pub(crate) mod testdata;
 #[cfg(test)]
 mod tests;
 pub mod token;

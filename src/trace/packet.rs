@@ -55,31 +55,25 @@ pub fn traverse<S: Lanes>(
         let t_min = lanes!(t_min);
         let (near, far, shift) = (rays[0].near, rays[0].far, rays[0].octant_shift);
         let frustum = Frustum::of(o, inv, inv_far, t_min);
-        let mut t_far = [0.0f32; WIDTH];
-        for (lane, t) in t_far.iter_mut().enumerate() {
-            *t = sinks.t_far(lane);
-        }
+        let mut t_far: [f32; WIDTH] = std::array::from_fn(|lane| sinks.t_far(lane));
         let mut sp = 0usize;
         let (mut cur, mut mask) = (0u32, active);
         'visit: loop {
             if cur & LEAF == 0 && mask.count_ones() <= SWITCH {
                 // Too few lanes left for a packet to pay: each goes on alone below this node.
-                let mut m = mask;
-                while m != 0 {
-                    let lane = m.trailing_zeros() as usize;
-                    m &= m - 1;
-                    if sinks.subtree(k, bvh, lane, &rays[lane], cur, &mut stack.single) {
-                        active &= !(1 << lane);
-                    }
-                    t_far[lane] = sinks.t_far(lane);
-                }
+                alone(
+                    k,
+                    bvh,
+                    rays,
+                    (cur, mask),
+                    &mut active,
+                    sinks,
+                    &mut t_far,
+                    stack,
+                );
             } else if cur & LEAF == 0 {
                 let n = node_at(&bvh.nodes, cur);
                 let t_far_v = _mm256_loadu_ps(t_far.as_ptr());
-                // The children some lane may enter, all eight at once: a slab test of the
-                // packet's bounds, whose entry distances are at most each lane's and exits at
-                // least each lane's (rounding is monotonic, so this holds in f32 too). Only
-                // those get the lane-by-lane test below.
                 // The children some lane may enter; only those get the lane-by-lane test below.
                 let candidates = match &frustum {
                     Some(f) => f.children(n, near, far, t_far_v),
@@ -132,20 +126,27 @@ pub fn traverse<S: Lanes>(
             } else {
                 leaf(k, bvh, rays, (cur, mask), &mut active, sinks, &mut t_far);
             }
-            // Pop the next entry some active lane still needs.
-            loop {
-                if sp == 0 || active == 0 {
-                    return;
-                }
-                sp -= 1;
-                let m = stack.lanes.get_unchecked(sp).assume_init() & active;
-                if m != 0 {
-                    (cur, mask) = (stack.node.get_unchecked(sp).assume_init(), m);
-                    continue 'visit;
-                }
+            match pop(stack, &mut sp, active) {
+                Some(next) => (cur, mask) = next,
+                None => return,
             }
         }
     }
+}
+
+/// Pop the next entry of `stack` (height `sp`) that some lane of `active` still needs, with those
+/// lanes; none when the stack is spent or every lane is done.
+#[inline(always)]
+fn pop(stack: &PacketStack, sp: &mut usize, active: u32) -> Option<(u32, u32)> {
+    while *sp > 0 && active != 0 {
+        *sp -= 1;
+        // SAFETY: entries below the height were written by `traverse`.
+        let m = unsafe { stack.lanes.get_unchecked(*sp).assume_init() } & active;
+        if m != 0 {
+            return Some((unsafe { stack.node.get_unchecked(*sp).assume_init() }, m));
+        }
+    }
+    None
 }
 
 /// A packet's interval bounds (Overbeck, Ramamoorthi and Mark 2008, "Large Ray Packets for
@@ -262,6 +263,31 @@ unsafe fn spread<const MAX: bool>(v: __m256) -> __m256 {
         let v = pick!(v, _mm256_permute2f128_ps::<1>(v, v));
         let v = pick!(v, _mm256_shuffle_ps::<0b01_00_11_10>(v, v));
         pick!(v, _mm256_shuffle_ps::<0b10_11_00_01>(v, v))
+    }
+}
+
+/// Trace each lane of `mask` alone through the subtree at `cur` ([`Lanes::subtree`]); a lane
+/// whose sink is done leaves `active`, and each lane's `t_far` follows its sink.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn alone<S: Lanes>(
+    k: Avx2,
+    bvh: &Bvh8,
+    rays: &[Ray; WIDTH],
+    (cur, mask): (u32, u32),
+    active: &mut u32,
+    sinks: &mut S,
+    t_far: &mut [f32; WIDTH],
+    stack: &mut PacketStack,
+) {
+    let mut m = mask;
+    while m != 0 {
+        let lane = m.trailing_zeros() as usize;
+        m &= m - 1;
+        if sinks.subtree(k, bvh, lane, &rays[lane], cur, &mut stack.single) {
+            *active &= !(1 << lane);
+        }
+        t_far[lane] = sinks.t_far(lane);
     }
 }
 
