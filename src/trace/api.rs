@@ -8,7 +8,7 @@ use super::driver::{drive, Seconds};
 use super::jobs::{any_plan, AllJob, AnyJob, AnyPlan, ClosestJob, CountJob, NearestJob};
 use super::query::Query;
 use super::rays::{Hit, Rays};
-use super::schedule::{collect, run, HitSlices, CHUNK};
+use super::schedule::{collect, run, FreshHits, CHUNK};
 use super::sinks::{Closest, ClosestKept};
 use crate::error::Result;
 use crate::input_err;
@@ -29,20 +29,47 @@ pub struct RayHits {
 }
 
 impl RayHits {
-    /// `n` rays of `k` entries, zeroed (allocated lazily by the system): every job marks its
-    /// chunk's entries "no hit" before it writes the hits (`jobs::no_hits`), on its own thread.
-    fn zeroed(n: usize, k: usize) -> Self {
+    /// `n` rays of `k` entries, not yet written: no zeroing on the calling thread (glibc
+    /// reuses freed memory for a call's outputs, and zeroing them was 6-8% of a camera-ray call,
+    /// done before the threads started). Every job writes its chunk's entries "no hit" before
+    /// its hits (`jobs::no_hits`), on its own thread, and [`RayHits::fill`] then takes them.
+    fn fresh(n: usize, k: usize) -> Self {
         Self {
             k,
-            t: vec![0.0; n * k],
-            triangle: vec![0; n * k],
-            barycentric: vec![[0.0; 2]; n * k],
+            t: Vec::with_capacity(n * k),
+            triangle: Vec::with_capacity(n * k),
+            barycentric: Vec::with_capacity(n * k),
             ..Self::default()
         }
     }
 
-    fn slices(&mut self) -> HitSlices<'_> {
-        (&mut self.t, &mut self.triangle, &mut self.barycentric)
+    /// The outputs' memory, for the chunks' jobs to write.
+    fn spare(&mut self, len: usize) -> FreshHits<'_> {
+        (
+            &mut self.t.spare_capacity_mut()[..len],
+            &mut self.triangle.spare_capacity_mut()[..len],
+            &mut self.barycentric.spare_capacity_mut()[..len],
+        )
+    }
+
+    /// Run `f` over the chunks of the `n × k` fresh outputs (`schedule::run`), then take
+    /// them as written.
+    fn fill(
+        mut self,
+        q: &Query,
+        n: usize,
+        f: impl Fn(usize, FreshHits<'_>) + Sync,
+    ) -> Result<Self> {
+        let (k, len) = (self.k, n * self.k);
+        run(q, self.spare(len), k, f)?;
+        // SAFETY: `run` returned Ok, so every chunk's job ran, and each writes every entry of
+        // its chunk first (`jobs::no_hits`); the chunks tile the `len` entries.
+        unsafe {
+            self.t.set_len(len);
+            self.triangle.set_len(len);
+            self.barycentric.set_len(len);
+        }
+        Ok(self)
     }
 
     fn timed(mut self, s: Seconds) -> Self {
@@ -117,16 +144,15 @@ pub fn nearest_hits_facing(
         16,
     )?;
     let (hits, s) = drive(scene, origins, directions, q, |bvh| {
-        let mut hits = RayHits::zeroed(n, k);
+        let hits = RayHits::fresh(n, k);
         let rays = Rays::new(bvh, origins, directions, q);
         if k == 1 && !front_only {
             let job = ClosestJob::new(&rays);
-            run(q, hits.slices(), 1, |base, out| dispatch(&job, base, out))?;
+            hits.fill(q, n, |base, out| dispatch(&job, base, out))
         } else {
             let job = NearestJob(&rays, k, front_only);
-            run(q, hits.slices(), k, |base, out| dispatch(&job, base, out))?;
+            hits.fill(q, n, |base, out| dispatch(&job, base, out))
         }
-        Ok(hits)
     })?;
     Ok(hits.timed(s))
 }
@@ -152,15 +178,13 @@ pub fn cast_rays_kept(
     let n = origins.len();
     crate::limits::check(|| format!("{n} rays"), n as u128, 16)?;
     let (hits, s) = drive(scene, origins, directions, q, |bvh| {
-        let mut hits = RayHits::zeroed(n, 1);
         let rays = Rays::new(bvh, origins, directions, q);
         let sink = ClosestKept {
             closest: Closest::new(rays.range.1),
             keep,
         };
         let job = ClosestJob(&rays, sink);
-        run(q, hits.slices(), 1, |base, out| dispatch(&job, base, out))?;
-        Ok(hits)
+        RayHits::fresh(n, 1).fill(q, n, |base, out| dispatch(&job, base, out))
     })?;
     Ok(hits.timed(s))
 }

@@ -2,13 +2,15 @@
 //! the shared ray loop of `rays`. Closest hits (all triangles, or those kept), any hit, the k
 //! nearest hits, every hit, and how many hits.
 
+use std::mem::MaybeUninit;
+
 use glam::Vec3;
 
 use super::dispatch::{dispatch, Job};
 use super::node::Bvh8;
 use super::rays::{Hit, Rays, Scratch, Traced};
 use super::refine::Pending;
-use super::schedule::HitSlices;
+use super::schedule::{FreshHits, HitSlices};
 use super::sinks::{AnyHit, BlockHit, Closest, ClosestKept, Counted, WORLD};
 use super::traverse::{block_stops, traverse, Kernel, Sink, Stack, Tri4Hit, WIDEN};
 use crate::types::SAME_HIT;
@@ -19,10 +21,16 @@ use crate::types::SAME_HIT;
 /// calling thread, 786K rays' 12.6 MB took 4-5 ms of page faults and stores that no other core
 /// could share (on `intel_sponza_ivy`'s primary rays, 15% of the trace on two cores).
 #[inline(always)]
-fn no_hits((t, tri, bary): HitSlices<'_>) {
-    t.fill(f32::INFINITY);
-    tri.fill(-1);
-    bary.fill([0.0; 2]);
+fn no_hits<'o>((t, tri, bary): FreshHits<'o>) -> HitSlices<'o> {
+    /// Write `v` into every entry of `s` and give `s` back as written.
+    fn fill<T: Copy>(s: &mut [MaybeUninit<T>], v: T) -> &mut [T] {
+        for x in s.iter_mut() {
+            x.write(v);
+        }
+        // SAFETY: every entry was just written; `MaybeUninit<T>` has `T`'s layout.
+        unsafe { &mut *(s as *mut [MaybeUninit<T>] as *mut [T]) }
+    }
+    (fill(t, f32::INFINITY), fill(tri, -1), fill(bary, [0.0; 2]))
 }
 
 /// A closest-hit sink: what it kept.
@@ -54,16 +62,16 @@ impl<'a> ClosestJob<'a, Closest> {
 }
 
 impl<S: Best> Job for ClosestJob<'_, S> {
-    type Out<'o> = HitSlices<'o>;
+    type Out<'o> = FreshHits<'o>;
 
     #[inline(always)]
-    fn chunk<K: Kernel>(&self, k: K, base: usize, (t, tri, bary): HitSlices<'_>) {
+    fn chunk<K: Kernel>(&self, k: K, base: usize, fresh: FreshHits<'_>) {
         // Two passes per batch: traversal records each closest hit in f32; the f64 refinement
         // then runs over the batch's hits, free of the traversal's long dependency chains (the
         // processor overlaps one hit's refinement with the next's; inline it took as long as
         // the traversal of a primary ray).
         const BATCH: usize = 256;
-        no_hits((t, tri, bary));
+        let (t, tri, bary) = no_hits(fresh);
         let mut scratch = Scratch::new();
         let mut found = [0u32; BATCH];
         let mut pending = [Pending::default(); BATCH];
@@ -217,12 +225,12 @@ impl Job for ProbeJob<'_> {
 pub(crate) struct NearestJob<'a>(pub &'a Rays<'a>, pub usize, pub bool);
 
 impl Job for NearestJob<'_> {
-    type Out<'o> = HitSlices<'o>;
+    type Out<'o> = FreshHits<'o>;
 
     #[inline(always)]
-    fn chunk<K: Kernel>(&self, k: K, base: usize, (t, tri, bary): HitSlices<'_>) {
+    fn chunk<K: Kernel>(&self, k: K, base: usize, fresh: FreshHits<'_>) {
         let want = self.1;
-        no_hits((t, tri, bary));
+        let (t, tri, bary) = no_hits(fresh);
         // Memory for the hits found, not for `want` (which may be far larger).
         let mut found = Vec::with_capacity(want.min(64) + 1);
         let mut stack = Stack::new();

@@ -2,6 +2,8 @@
 //! rayon's pool of every core, or a pool of a given size; each chunk checks for an interruption
 //! and reports its progress.
 
+use std::mem::MaybeUninit;
+
 use rayon::prelude::*;
 
 use super::query::{Query, Threads};
@@ -28,7 +30,15 @@ impl<T: Send> Chunks for &mut [T] {
 /// `t`, triangle and barycentric per hit.
 pub type HitSlices<'o> = (&'o mut [f32], &'o mut [i32], &'o mut [[f32; 2]]);
 
-impl Chunks for HitSlices<'_> {
+/// The memory of [`HitSlices`] not yet written: a fresh output, which each chunk's job fills
+/// (`jobs::no_hits`) on the thread that runs it.
+pub type FreshHits<'o> = (
+    &'o mut [MaybeUninit<f32>],
+    &'o mut [MaybeUninit<i32>],
+    &'o mut [MaybeUninit<[f32; 2]>],
+);
+
+impl<A: Send, B: Send, C: Send> Chunks for (&mut [A], &mut [B], &mut [C]) {
     fn rays(&self, k: usize) -> usize {
         self.0.len() / k
     }

@@ -120,17 +120,36 @@ pub(crate) fn rays_toward(n: usize, seed: u64, at: &[[f32; 3]]) -> (Vec<[f32; 3]
     (o, d)
 }
 
-/// Closest hits on `tree` itself (`t`, triangle), with the portable kernel.
-pub(crate) fn closest_on(tree: &Bvh8, o: &[[f32; 3]], d: &[[f32; 3]]) -> (Vec<f32>, Vec<i32>) {
+/// `t`, triangle and barycentric of `n` rays, as `fill` writes them into fresh outputs.
+pub(crate) type Hits3 = (Vec<f32>, Vec<i32>, Vec<[f32; 2]>);
+
+/// The `n` hits that `fill` writes into fresh outputs (as a job's chunk does, `jobs::no_hits`
+/// first).
+pub(crate) fn written(n: usize, fill: impl FnOnce(super::schedule::FreshHits<'_>)) -> Hits3 {
+    let (mut t, mut tri, mut bary): Hits3 = (
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+    );
+    fill((
+        &mut t.spare_capacity_mut()[..n],
+        &mut tri.spare_capacity_mut()[..n],
+        &mut bary.spare_capacity_mut()[..n],
+    ));
+    // SAFETY: `fill` is a job's chunk over all `n` rays, which writes every entry.
+    unsafe {
+        t.set_len(n);
+        tri.set_len(n);
+        bary.set_len(n);
+    }
+    (t, tri, bary)
+}
+
+/// Closest hits on `tree` itself (`t`, triangle, barycentric), with the portable kernel.
+pub(crate) fn closest_on(tree: &Bvh8, o: &[[f32; 3]], d: &[[f32; 3]]) -> Hits3 {
     use super::dispatch::Job;
     let q = Query::new(0.0, f32::INFINITY);
     let rays = super::rays::Rays::new(tree, o, d, &q);
-    let n = o.len();
-    let mut p = (vec![f32::INFINITY; n], vec![-1; n], vec![[0.0; 2]; n]);
-    super::jobs::ClosestJob::new(&rays).chunk(
-        super::portable::Portable,
-        0,
-        (&mut p.0, &mut p.1, &mut p.2),
-    );
-    (p.0, p.1)
+    let job = super::jobs::ClosestJob::new(&rays);
+    written(o.len(), |out| job.chunk(super::portable::Portable, 0, out))
 }

@@ -229,10 +229,7 @@ fn kernels_packets_orders_and_threads_agree() {
     }
     // The portable kernel (no packets) over the same rays.
     let bvh = Bvh::of(&s);
-    let rays = Rays::new(&bvh.tree, &o, &d, &q);
-    let n = o.len();
-    let mut p = (vec![f32::INFINITY; n], vec![-1; n], vec![[0.0; 2]; n]);
-    ClosestJob::new(&rays).chunk(Portable, 0, (&mut p.0, &mut p.1, &mut p.2));
+    let p = super::testdata::closest_on(&bvh.tree, &o, &d);
     let portable = RayHits {
         k: 1,
         t: p.0,
@@ -244,13 +241,12 @@ fn kernels_packets_orders_and_threads_agree() {
     // Rays traced in turns, as on trees larger than INTERLEAVE_BYTES: both kernels, a count
     // of rays that is not a multiple of the packets' eight, camera rays (packets, on AVX2)
     // and random ones (turns).
-    let m = n - 3;
+    let m = o.len() - 3;
     let mut turns = Rays::new(&bvh.tree, &o[..m], &d[..m], &q);
     turns.interleave = true;
-    let mut a = (vec![f32::INFINITY; m], vec![-1; m], vec![[0.0; 2]; m]);
-    dispatch(&ClosestJob::new(&turns), 0, (&mut a.0, &mut a.1, &mut a.2));
-    let mut p = (vec![f32::INFINITY; m], vec![-1; m], vec![[0.0; 2]; m]);
-    ClosestJob::new(&turns).chunk(Portable, 0, (&mut p.0, &mut p.1, &mut p.2));
+    let job = ClosestJob::new(&turns);
+    let a = super::testdata::written(m, |out| dispatch(&job, 0, out));
+    let p = super::testdata::written(m, |out| job.chunk(Portable, 0, out));
     for (name, (t, tri, bary)) in [("dispatched", a), ("portable", p)] {
         let h = RayHits {
             k: 1,
