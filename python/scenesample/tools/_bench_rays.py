@@ -548,6 +548,12 @@ NOTES = [
     "shared last-level cache as they do here.",
     "- **The first call builds the tree**, in parallel above 8,192 triangles a range; its top "
     "levels split one range at a time, so the build scales less than the trace.",
+    "- **Rests between calls cost the second core.** Each timed call here follows a 50 ms rest "
+    "(`REST`), after which rayon's workers sleep and this virtual machine's idle core takes "
+    "milliseconds to wake. `intel_sponza_ivy`'s 786K primary rays, two threads over one: 1.87x "
+    "in 200 calls back to back (24.9 -> 13.3 ms, 1.8 cores busy under `perf stat`), 1.25-1.8x "
+    "with 50 ms rests in between, from run to run; two processes tracing on one thread each "
+    "run as fast as one alone, so the cores themselves do not contend.",
 ]
 
 
