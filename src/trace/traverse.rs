@@ -366,7 +366,9 @@ pub trait Sink {
         let _ = inst;
         self.take(bvh, block, h)
     }
-    /// Whether the sink wants no more hits (an any-hit query that has one).
+    /// Whether the sink wants no more hits: true once `take` has returned true (an any-hit
+    /// query that has one). A packet's lane that went on alone reads it (`Lanes::subtree`), so
+    /// every sink whose `take` can stop a traversal says so here too.
     #[inline(always)]
     fn done(&self) -> bool {
         false
