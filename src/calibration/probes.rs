@@ -242,8 +242,8 @@ fn probe_shape_seconds(
 /// not: on a shared 2-core machine the best of three runs of one call still varies by 10-20%,
 /// and the differences by far more. `auto` decides by the two factors' ratio, so the probes
 /// measure it robustly ([`rounds`], [`factors`]): the two backends in turn, view by view, so
-/// that passing load meets both; the median of the rounds' ratios; and more rounds while they
-/// disagree. (The calibration of a fresh-clone `make test` once ran beside cargo and came out
+/// that passing load meets both; each view at its best round; and more rounds while the
+/// rounds' sums disagree. (The calibration of a fresh-clone `make test` once ran beside cargo and came out
 /// 2.2 times too slow for the ray caster alone, when its probes ran before the raster's.) The
 /// BVH build is timed as it is. A hardware GPU, whose costs have another shape (a fixed cost
 /// per call, little per pixel), gets lines through its near views: per call and per triangle

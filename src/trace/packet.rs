@@ -16,9 +16,9 @@
 
 use std::arch::x86_64::*;
 
-use super::node::{leaf_blocks, node_at, Bvh8, Node8, EMPTY, LEAF, STACK};
+use super::node::{node_at, Bvh8, Node8, EMPTY, LEAF, STACK};
 use super::token::Avx2;
-use super::traverse::{Kernel, Lanes, PacketStack, Ray, WIDTH};
+use super::traverse::{Lanes, PacketStack, Ray, WIDTH};
 
 /// A packet's lanes go on alone below a node that at most this many of them enter (Embree's
 /// hybrid traversal switches the same way): the packet tests each child's box for all eight
@@ -59,8 +59,9 @@ pub fn traverse<S: Lanes>(
         let mut sp = 0usize;
         let (mut cur, mut mask) = (0u32, active);
         'visit: loop {
-            if cur & LEAF == 0 && mask.count_ones() <= SWITCH {
-                // Too few lanes left for a packet to pay: each goes on alone below this node.
+            if cur & LEAF != 0 || mask.count_ones() <= SWITCH {
+                // A leaf, or too few lanes left for a packet to pay: each lane goes on alone
+                // (at a leaf, the single-ray test of its blocks, ray by ray).
                 alone(
                     k,
                     bvh,
@@ -71,7 +72,7 @@ pub fn traverse<S: Lanes>(
                     &mut t_far,
                     stack,
                 );
-            } else if cur & LEAF == 0 {
+            } else {
                 let n = node_at(&bvh.nodes, cur);
                 let t_far_v = _mm256_loadu_ps(t_far.as_ptr());
                 // The children some lane may enter; only those get the lane-by-lane test below.
@@ -123,8 +124,6 @@ pub fn traverse<S: Lanes>(
                     (cur, mask) = entered[0];
                     continue 'visit;
                 }
-            } else {
-                leaf(k, bvh, rays, (cur, mask), &mut active, sinks, &mut t_far);
             }
             match pop(stack, &mut sp, active) {
                 Some(next) => (cur, mask) = next,
@@ -286,37 +285,6 @@ fn alone<S: Lanes>(
         m &= m - 1;
         if sinks.subtree(k, bvh, lane, &rays[lane], cur, &mut stack.single) {
             *active &= !(1 << lane);
-        }
-        t_far[lane] = sinks.t_far(lane);
-    }
-}
-
-/// Test leaf `cur`'s triangles against each lane of `mask`, ray by ray with the single-ray
-/// kernel; a lane whose sink is done leaves `active`, and each lane's `t_far` follows its
-/// sink.
-#[inline(always)]
-fn leaf<S: Lanes>(
-    k: Avx2,
-    bvh: &Bvh8,
-    rays: &[Ray; WIDTH],
-    (cur, mask): (u32, u32),
-    active: &mut u32,
-    sinks: &mut S,
-    t_far: &mut [f32; WIDTH],
-) {
-    let mut m = mask;
-    while m != 0 {
-        let lane = m.trailing_zeros() as usize;
-        m &= m - 1;
-        let ray = &rays[lane];
-        for b in leaf_blocks(cur) {
-            // SAFETY: a leaf's blocks are blocks of its BVH.
-            let block = unsafe { bvh.blocks.get_unchecked(b) };
-            let h = k.tri4(block, ray, ray, t_far[lane]);
-            if h.mask != 0 && sinks.take(bvh, lane, b, &h) {
-                *active &= !(1 << lane);
-                break;
-            }
         }
         t_far[lane] = sinks.t_far(lane);
     }

@@ -248,10 +248,9 @@ pub const WIDTH: usize = 8;
 pub trait Lanes {
     /// Lane `lane`'s current bound: hits at or beyond it are not wanted.
     fn t_far(&self, lane: usize) -> f32;
-    /// Lane `lane`'s hits in a block; true when the lane needs no more (an any-hit query).
-    fn take(&mut self, bvh: &Bvh8, lane: usize, block: usize, h: &Tri4Hit) -> bool;
-    /// Trace lane `lane`'s `ray` alone through the subtree at `root` (a packet's hybrid switch);
-    /// true when the lane needs no more.
+    /// Trace lane `lane`'s `ray` alone through the subtree (or leaf) at `root`, giving its
+    /// hits to the lane's sink: a packet's leaves and its hybrid switch. True when the lane
+    /// needs no more.
     fn subtree<K: Kernel>(
         &mut self,
         k: K,
@@ -267,11 +266,6 @@ impl<S: Sink> Lanes for [S; WIDTH] {
     #[inline(always)]
     fn t_far(&self, lane: usize) -> f32 {
         self[lane].t_far()
-    }
-
-    #[inline(always)]
-    fn take(&mut self, bvh: &Bvh8, lane: usize, block: usize, h: &Tri4Hit) -> bool {
-        self[lane].take(bvh, block, h)
     }
 
     #[inline(always)]
