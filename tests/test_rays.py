@@ -406,18 +406,38 @@ def _bits(a: np.ndarray) -> np.ndarray:
 
 @pytest.mark.parametrize("name", sorted(SHARED))
 def test_every_kernel_gives_the_same_answers_on_shared_scenes(name: str) -> None:
-    # The vector kernel traces coherent runs as packets and the portable one ray by ray: the
-    # answers must agree bit for bit all the same.
-    if ss.ray_kernel() == "portable":
+    # The vector kernels trace coherent runs as packets and the portable one ray by ray: the
+    # answers must agree bit for bit all the same. Each narrower kernel the CPU has is forced in
+    # turn, so an AVX-512 machine checks its AVX2 and portable code too.
+    best = ss.ray_kernel()
+    kernels = ["avx512", "avx2", "portable"]
+    kernels = kernels[kernels.index(best) :]
+    if len(kernels) == 1:
         pytest.skip("the CPU has only the portable kernel")
     scene = load_quiet(SHARED[name])
-    vector = _kernel_answers(scene)
+    answers = {}
     try:
-        assert ss.ray_kernel("portable") == "portable"
-        portable = _kernel_answers(scene)
+        for k in kernels:
+            assert ss.ray_kernel(k) == k
+            answers[k] = _kernel_answers(scene)
     finally:
-        assert ss.ray_kernel("best") != "portable"
-    for a, b in zip(vector, portable):
-        np.testing.assert_array_equal(_bits(a), _bits(b))
-    with pytest.raises(ValueError, match="ray_kernel"):
+        assert ss.ray_kernel("best") == best
+    for k in kernels[1:]:
+        for a, b in zip(answers[kernels[0]], answers[k]):
+            np.testing.assert_array_equal(_bits(a), _bits(b), err_msg=f"{kernels[0]} vs {k}")
+
+
+def test_ray_kernel_names_its_kernels() -> None:
+    best = ss.ray_kernel()
+    assert best in ("avx512", "avx2", "portable")
+    try:
+        # A kernel the CPU lacks is never used: asking for it gives the widest it has below.
+        assert ss.ray_kernel("avx512") == best
+        assert ss.ray_kernel("avx2") == ("portable" if best == "portable" else "avx2")
+        assert ss.ray_kernel("portable") == "portable"
+        assert ss.ray_kernel() == "portable"
+    finally:
+        assert ss.ray_kernel("best") == best
+    with pytest.raises(ss.InputError, match="ray_kernel"):
         ss.ray_kernel("avx512-please")
+    assert ss.ray_kernel() == best

@@ -104,11 +104,12 @@ def cast_rays(
     """Closest hit of each ray, or its ``max_hits`` nearest hits, on the CPU.
 
     The scene's BVH (8-wide, built on first use and cached with the scene) is traversed with
-    AVX2 where the CPU has it (:func:`ray_kernel`), eight neighbouring rays at a time where they
-    share an octant and nearly a direction (camera rays in pixel order do), else ray by ray; the
-    answers are the same either way, bit for bit. The GIL is released, and float32 C-contiguous
-    inputs are read in place, without a copy. The triangle test is watertight (Woop, Benthin
-    and Wald 2013): a ray through a shared edge or vertex of a closed mesh never slips through.
+    AVX-512 or AVX2 where the CPU has it (:func:`ray_kernel`), eight neighbouring rays at a time
+    where they share an octant and nearly a direction (camera rays in pixel order do), else ray
+    by ray; the answers are the same either way, bit for bit. The GIL is released, and float32
+    C-contiguous inputs are read in place, without a copy. The triangle test is watertight
+    (Woop, Benthin and Wald 2013): a ray through a shared edge or vertex of a closed mesh never
+    slips through.
     Both faces of a triangle count. Each reported hit's ``t`` and barycentrics are recomputed in
     float64 from the given direction.
 
@@ -304,26 +305,30 @@ def bvh_stats(scene: Scene) -> dict[str, Any]:
 
 
 def ray_kernel(use: Optional[str] = None) -> str:
-    """The instruction set that CPU ray and point queries run on: ``"avx2"`` or ``"portable"``.
+    """The instruction set that CPU ray queries run on: ``"avx512"``, ``"avx2"`` or
+    ``"portable"`` (point queries use AVX2 at most).
 
     Every query gives bit-identical answers on every kernel (the same ``t``, triangle ids and
-    barycentrics), so the kernel changes only speed. The best kernel the CPU has is chosen at run
-    time; ``use="portable"`` forces the portable one for the whole process (so that one machine
-    can check the portable code against its vector code), and ``use="best"`` goes back to the
-    best. Queries already running keep their kernel.
+    barycentrics), so the kernel changes only speed. The widest kernel the CPU has is chosen at
+    run time; ``use="avx2"`` or ``use="portable"`` allows none wider for the whole process (so
+    that one machine can check each narrower kernel against the code it would otherwise run),
+    and ``use="best"`` goes back to the widest. A kernel the CPU lacks is never used: asking
+    for ``"avx512"`` on a CPU without it gives the next one down. Queries already running keep
+    their kernel.
 
     Parameters
     ----------
-    use : {"best", "portable"}, optional
-        Change the kernel first; ``None`` (the default) only reports it.
+    use : {"best", "avx512", "avx2", "portable"}, optional
+        The widest kernel allowed from now on; ``None`` (the default) only reports the kernel.
 
     Returns
     -------
     str
         The kernel the next query runs on.
+
+    Raises
+    ------
+    InputError
+        ``use`` is not one of the names above.
     """
-    if use is None:
-        return str(_core.ray_kernel())
-    if use not in ("best", "portable"):
-        raise ValueError(f"ray_kernel: use must be 'best' or 'portable', not {use!r}")
-    return str(_core.ray_kernel(use == "portable"))
+    return str(_core.ray_kernel(use))

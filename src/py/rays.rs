@@ -167,13 +167,23 @@ pub fn bvh_stats<'py>(py: Python<'py>, scene: &PyScene) -> PyResult<Bound<'py, P
     Ok(d)
 }
 
-/// The kernel CPU queries run on (`"avx2"` or `"portable"`), after forcing the portable one
-/// (`portable=True`) or releasing it (`False`) where asked.
+/// The kernel CPU queries run on (`"avx512"`, `"avx2"` or `"portable"`), after allowing none
+/// wider than `widest` where asked (`"best"`: the widest the CPU has).
 #[pyfunction]
-#[pyo3(signature = (portable=None))]
-pub fn ray_kernel(portable: Option<bool>) -> &'static str {
-    if let Some(p) = portable {
-        trace::token::force_portable(p);
+#[pyo3(signature = (widest=None))]
+pub fn ray_kernel(py: Python<'_>, widest: Option<&str>) -> PyResult<&'static str> {
+    use trace::token::{force, kernel, Level};
+    if let Some(name) = widest {
+        let level = match name {
+            "best" => Level::Avx512,
+            _ => Level::named(name).ok_or_else(|| {
+                super::errors::input(
+                    py,
+                    format!("ray_kernel: widest must be 'best', 'avx512', 'avx2' or 'portable', not {name:?}"),
+                )
+            })?,
+        };
+        force(level);
     }
-    trace::token::kernel_name()
+    Ok(kernel().name())
 }

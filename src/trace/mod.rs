@@ -7,8 +7,9 @@
 //! - one driver every ray query goes through ([`driver`]), which checks the rays, gets the
 //!   scene's BVH ([`bvh`]) and runs the query's job on its threads;
 //! - scheduling: [`schedule`] (chunks of rays over threads, interruption, progress);
-//! - CPU dispatch: [`dispatch`] picks the kernel the CPU has at run time (`avx2`, with the
-//!   packets of `packet`, else `portable`; `token` proves the instruction set);
+//! - CPU dispatch: [`dispatch`] picks the widest kernel the CPU has at run time (`avx512`,
+//!   else `avx2`, both with the packets of `packet`, else `portable`; `token` proves the
+//!   instruction set);
 //! - the query jobs: [`jobs`] (closest hit, any hit, the k nearest, every hit, counts) over the
 //!   shared ray loop of [`rays`] (packets, single rays, rays in turns: `interleave`), with
 //!   their sinks ([`sinks`]) and the f64 refinement of each reported hit (`refine`);
@@ -18,6 +19,8 @@
 
 pub mod api;
 pub mod avx2;
+#[cfg(target_arch = "x86_64")]
+pub mod avx512;
 pub mod build;
 pub mod bvh;
 pub mod crossings;
