@@ -370,8 +370,8 @@ def test_one_origin_broadcasts_against_a_camera_s_pixel_rays() -> None:
 def _kernel_answers(scene: ss.Scene) -> list[np.ndarray]:
     """Every answer of the ray queries on rays that take each path of the traversal: camera rays
     in pixel order (packets, where the kernel has them), the same with a ``t`` window, shadow
-    rays from their hits toward one light, rays from inside the scene along the axes, and a
-    batch that mixes coherent runs with incoherent rays."""
+    rays from their hits toward one light, rays from inside the scene along the axes, a batch
+    that mixes coherent runs with incoherent rays, and the CPU images of the camera."""
     (cam,) = orbit_cameras(scene, 1, 64, 48, seed=3)
     o, d = (a.reshape(-1, 3) for a in cam.pixel_rays())
     hits = ss.cast_rays(scene, o, d)
@@ -396,6 +396,10 @@ def _kernel_answers(scene: ss.Scene) -> list[np.ndarray]:
     ]:
         h = ss.cast_rays(scene, ro_, rd_, **window)
         out += [h.t, h.triangle, h.barycentric, ss.occluded(scene, ro_, rd_, **window)]
+    # CPU images, with and without back faces (culled views take the front-face sink).
+    for cull in (False, True):
+        img = ss.discretize(scene, [cam], backend="cpu", cull_backfaces=cull)
+        out += [img.triangle, img.depth]
     return out
 
 

@@ -9,7 +9,7 @@ use super::jobs::{any_plan, AllJob, AnyJob, AnyPlan, ClosestJob, CountJob, Neare
 use super::query::Query;
 use super::rays::{Hit, Rays};
 use super::schedule::{collect, run, FreshHits, CHUNK};
-use super::sinks::{Closest, ClosestKept};
+use super::sinks::{Closest, ClosestFront, ClosestKept};
 use crate::error::Result;
 use crate::input_err;
 use crate::scene::Scene;
@@ -125,6 +125,8 @@ pub fn nearest_hits(
 /// [`nearest_hits`], optionally counting only the triangles whose counter-clockwise front
 /// faces the ray (`front_only`: a back face is passed through, as a culling rasterizer skips
 /// it; a back face coincident with a front one then cannot take its place as the surface).
+/// One hit per ray is the closest-hit query (packets for coherent rays, [`cast_rays`]'s tie
+/// rule), with or without back faces; more go the k-nearest way, ray by ray.
 pub fn nearest_hits_facing(
     scene: &Scene,
     origins: &[[f32; 3]],
@@ -148,6 +150,14 @@ pub fn nearest_hits_facing(
         let rays = Rays::new(bvh, origins, directions, q);
         if k == 1 && !front_only {
             let job = ClosestJob::new(&rays);
+            hits.fill(q, n, |base, out| dispatch(&job, base, out))
+        } else if k == 1 {
+            let sink = ClosestFront {
+                closest: Closest::new(rays.range.1),
+                rays: &rays,
+                d: glam::Vec3::ZERO,
+            };
+            let job = ClosestJob(&rays, sink);
             hits.fill(q, n, |base, out| dispatch(&job, base, out))
         } else {
             let job = NearestJob(&rays, k, front_only);

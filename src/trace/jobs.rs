@@ -11,7 +11,7 @@ use super::node::Bvh8;
 use super::rays::{Hit, Rays, Scratch, Traced};
 use super::refine::Pending;
 use super::schedule::{FreshHits, HitSlices};
-use super::sinks::{AnyHit, BlockHit, Closest, ClosestKept, Counted, WORLD};
+use super::sinks::{AnyHit, BlockHit, Closest, ClosestFront, ClosestKept, Counted, WORLD};
 use super::traverse::{block_stops, traverse, Kernel, Sink, Stack, Tri4Hit, WIDEN};
 use crate::types::SAME_HIT;
 
@@ -36,6 +36,12 @@ fn no_hits<'o>((t, tri, bary): FreshHits<'o>) -> HitSlices<'o> {
 /// A closest-hit sink: what it kept.
 pub(crate) trait Best: Sink + Copy + Sync {
     fn best(&self) -> Option<BlockHit>;
+    /// The sink for ray `i` of `rays`, from the job's prototype.
+    #[inline(always)]
+    fn for_ray(self, rays: &Rays, i: usize) -> Self {
+        let _ = (rays, i);
+        self
+    }
 }
 
 impl Best for Closest {
@@ -49,6 +55,21 @@ impl Best for ClosestKept<'_> {
     #[inline(always)]
     fn best(&self) -> Option<BlockHit> {
         self.closest.best
+    }
+}
+
+impl Best for ClosestFront<'_> {
+    #[inline(always)]
+    fn best(&self) -> Option<BlockHit> {
+        self.closest.best
+    }
+
+    #[inline(always)]
+    fn for_ray(self, rays: &Rays, i: usize) -> Self {
+        Self {
+            d: Vec3::from(rays.input(i).1),
+            ..self
+        }
     }
 }
 
@@ -87,7 +108,7 @@ impl<S: Best> Job for ClosestJob<'_, S> {
                 start..end,
                 &mut scratch,
                 #[inline(always)]
-                |_| self.1,
+                |j| self.1.for_ray(rays, base + j),
                 // Inlined, so compiled with the kernel's instructions: a closure does not
                 // inherit its caller's target features, and a call from AVX2 code into this
                 // one, for every ray, spilled the traversal's registers around it.

@@ -5,7 +5,8 @@ use std::num::NonZeroUsize;
 use glam::Vec3;
 
 use super::api::{
-    all_hits, cast_rays, cast_rays_kept, cast_rays_with, nearest_hits, occluded, RayHits,
+    all_hits, cast_rays, cast_rays_kept, cast_rays_with, nearest_hits, nearest_hits_facing,
+    occluded, RayHits,
 };
 use super::bvh::{bvh_for_with, Bvh};
 use super::dispatch::{dispatch, Job};
@@ -423,6 +424,45 @@ fn kept_hits_are_the_nearest_kept_triangle() {
     assert_eq!(every.triangle, plain.triangle);
     assert_eq!(every.t, plain.t);
     assert!(cast_rays_kept(&s, &o, &d, &q, &keep[1..]).is_err());
+}
+
+/// With back faces culled, one hit per ray is the nearest front face on the brute-force list
+/// (counter-clockwise towards the ray), by packets (camera rays) and one by one (random rays):
+/// the same `t`, and on a tie (duplicated faces, shared edges) one of the tied triangles; the
+/// k-nearest path's first hit lies at the same depth.
+#[test]
+fn front_only_hits_are_the_nearest_front_face() {
+    let s = soup(1500, 41);
+    let q = Query::new(0.0, f32::INFINITY);
+    let (mut o, mut d) = random_rays(1000, 42);
+    let (co, cd) = camera_rays(32, [0.2, 0.1, 3.0]);
+    o.extend(co);
+    d.extend(cd);
+    let front = |i: usize, tri: u32| {
+        let [a, b, c] = s.faces()[tri as usize].map(|k| Vec3::from(s.vertices()[k as usize]));
+        (b - a).cross(c - a).dot(Vec3::from(d[i])) < 0.0
+    };
+    let h = nearest_hits_facing(&s, &o, &d, 1, &q, true).unwrap();
+    let two = nearest_hits_facing(&s, &o, &d, 2, &q, true).unwrap();
+    let (mut met, mut same) = (0, 0);
+    for i in 0..o.len() {
+        let want: Vec<(f64, u32)> = brute(&s, o[i], d[i], f64::INFINITY)
+            .into_iter()
+            .filter(|&(_, tri)| front(i, tri))
+            .collect();
+        let Some(&(t, _)) = want.first() else {
+            assert_eq!(h.triangle[i], -1, "ray {i}");
+            continue;
+        };
+        assert!(((h.t[i] as f64 - t) / t).abs() < 1e-5, "ray {i}");
+        let close = |a: f32, b: f32| (a - b).abs() <= 1e-6 * a.max(b);
+        assert!(close(two.t[2 * i], h.t[i]), "ray {i}");
+        let mut tied = want.iter().take_while(|&&(u, _)| u <= t * (1.0 + 1e-6));
+        same += usize::from(tied.any(|&(_, k)| k as i32 == h.triangle[i]));
+        met += 1;
+    }
+    assert!(met > 300, "{met}");
+    assert!(same >= met * 999 / 1000, "{same} of {met} front faces agree");
 }
 
 #[test]
