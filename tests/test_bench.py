@@ -107,6 +107,22 @@ def test_bench_backends_quick_compares_gpu_cpu_and_auto(tmp_path, gpu):
     assert md.count("(gpu) |") + md.count("(cpu) |") >= 2  # conventional and peeling rows
     assert "Worst scene:" in md and ("met." in md)
     assert "Depth peeling, 4 layers" in md and "first difference not a tie |" in md
+    assert "| 320x240 | orbit |" in md and "| 320x240 | sparse |" in md  # the crossover rows
+
+
+def test_the_predicted_crossover_is_where_the_model_changes_its_mind(gpu):
+    from scenesample.tools import _bench_backends as bb
+
+    at = bb.predicted_crossover(640, 480)
+    if at is None:
+        pytest.skip("the model prefers one backend at every size on this machine")
+
+    def picks(triangles: int) -> str:
+        return ss.device_info(triangles=triangles, pixels=640 * 480, images=bb.VIEWS)["auto"][
+            "backend"
+        ]
+
+    assert picks(at) == "cpu" and picks(int(at / 1.06)) == "gpu"
 
 
 def check_methods_report(md: str) -> None:

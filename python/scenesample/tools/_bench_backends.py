@@ -14,7 +14,8 @@ the two backends' own times (best of the same rounds), since ``auto``'s call run
 it picks; its own time is printed beside them, and differs from that backend's by lavapipe's
 noise and the decision (a grid of at most 64x64 box tests per view). Also printed: ``auto``'s
 prediction for both backends beside the measured times, and where the CPU's triangle ids
-differ from the GPU's.
+differ from the GPU's, and the crossover: the smallest scene on which the CPU was faster, per
+size and kind of views, beside the size from which the cost model predicts it.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from __future__ import annotations
 import re
 import time
 import warnings
-from typing import Any
+from typing import Any, Optional
 
 import numpy as np
 
@@ -103,6 +104,44 @@ def _predicted(reason: str) -> tuple[float, float]:
     return (float(m[1]) / 1e3, float(m[2]) / 1e3) if m else (float("nan"), float("nan"))
 
 
+def predicted_crossover(width: int, height: int, images: int = VIEWS) -> Optional[int]:
+    """The smallest scene (triangles, to within 5%) for which this machine's cost model
+    predicts the CPU faster than the GPU, for ``images`` images of ``width`` x ``height``
+    (three quarters of their pixels on the scene's box, BVH built, scene uploaded): bisection
+    on ``device_info``'s predictions. None when the CPU is predicted faster at every size from
+    100 to 10^9 triangles or at none (no adapter: always)."""
+
+    def cpu_faster(triangles: int) -> bool:
+        a = ss.device_info(triangles=triangles, pixels=width * height, images=images)["auto"]
+        return a["gpu_seconds"] is None or a["cpu_seconds"] < a["gpu_seconds"]
+
+    lo, hi = 100, 10**9
+    if cpu_faster(lo) or not cpu_faster(hi):
+        return None
+    while hi > lo * 1.05:
+        mid = int(np.sqrt(lo * hi))
+        lo, hi = (lo, mid) if cpu_faster(mid) else (mid, hi)
+    return hi
+
+
+def measured_crossover(rows: list[dict[str, Any]], size: list[int], kind: str) -> dict[str, Any]:
+    """Of the rows of one image size and kind of views: the smallest scene (triangles) on
+    which the CPU was faster, and how many larger scenes the GPU still won and smaller ones
+    the CPU did (the scenes differ in more than size, so the line is not sharp)."""
+    mine = sorted(
+        (r for r in rows if r["size"] == size and r["views"] == kind), key=lambda r: r["triangles"]
+    )
+    cpu = [r["triangles"] for r in mine if r["cpu"] < r["gpu"]]
+    first = cpu[0] if cpu else None
+    return {
+        "size": size,
+        "views": kind,
+        "first_cpu": first,
+        "gpu_above": sum(r["cpu"] >= r["gpu"] for r in mine if first and r["triangles"] > first),
+        "scenes": len(mine),
+    }
+
+
 def run(quick: bool = False, repeats: int = 5) -> dict[str, Any]:
     """Measure every scene, size and set of views; returns the rows and the device."""
     sizes = ((320, 240),) if quick else SIZES
@@ -148,8 +187,17 @@ def run(quick: bool = False, repeats: int = 5) -> dict[str, Any]:
         )
         print(_peel_row(peel_rows[-1]), flush=True)
     info = ss.device_info()
+    crossover = [
+        {
+            **measured_crossover(rows, [w, h], kind),
+            "predicted": predicted_crossover(w, h) if info["available"] else None,
+        }
+        for w, h in sizes
+        for kind in ("orbit", "sparse")
+    ]
     return {
         "rows": rows,
+        "crossover": crossover,
         "peeling": peel_rows,
         "size": size,
         "sizes": [list(x) for x in sizes],
@@ -275,6 +323,28 @@ def report(r: dict[str, Any]) -> str:
         f"the faster backend (target <= {TARGET:.2f}x on every row): {verdict}. Rows over the "
         f"target: {sum(x > TARGET for x in ratios)} of {len(ratios)}.",
     ]
+    cross = r.get("crossover", [])
+    if cross:
+        lines += [
+            "",
+            "Crossover: the smallest scene on which the CPU backend was faster than the GPU "
+            f"one, per image size and kind of views ({VIEWS} images per call), with the larger "
+            "scenes the GPU still won; and the size from which this machine's cost model "
+            "predicts the CPU faster (three quarters of the pixels on the scene's box, as "
+            "`device_info(triangles=, pixels=, images=)` predicts).",
+            "",
+            "| size | views | CPU faster from (measured) | larger scenes the GPU won | "
+            "CPU faster from (model) |",
+            "|---|---|---:|---:|---:|",
+            *[
+                f"| {c['size'][0]}x{c['size'][1]} | {c['views']} | "
+                + (f"{c['first_cpu']:,}" if c["first_cpu"] else "never")
+                + f" | {c['gpu_above']} of {c['scenes']} | "
+                + (f"{c['predicted']:,}" if c["predicted"] else "n/a")
+                + " |"
+                for c in cross
+            ],
+        ]
     peel = r.get("peeling", [])
     if peel:
         lines += [
