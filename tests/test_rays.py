@@ -396,10 +396,16 @@ def _kernel_answers(scene: ss.Scene) -> list[np.ndarray]:
     ]:
         h = ss.cast_rays(scene, ro_, rd_, **window)
         out += [h.t, h.triangle, h.barycentric, ss.occluded(scene, ro_, rd_, **window)]
-    # CPU images, with and without back faces (culled views take the front-face sink).
+        three = ss.cast_rays(scene, ro_, rd_, max_hits=3, **window)
+        out += [three.t, three.triangle, three.barycentric]
+    # CPU images, with and without back faces (culled views take the front-face sink), and
+    # peeling (the k-nearest sink).
     for cull in (False, True):
         img = ss.discretize(scene, [cam], backend="cpu", cull_backfaces=cull)
-        out += [img.triangle, img.depth]
+        peeled = ss.discretize(
+            scene, [cam], "peeling", layers=3, backend="cpu", cull_backfaces=cull
+        )
+        out += [img.triangle, img.depth, peeled.triangle, peeled.depth]
     return out
 
 

@@ -125,9 +125,11 @@ def cast_rays(
         Accept hits with ``t_min <= t < t_max``, in units of each direction's length.
     max_hits : int
         With 1, the closest hit. With k > 1, the first k hits along each ray, nearest first:
-        the ray-cast counterpart of k depth-peeling layers. Two hits whose ``t`` agree within
-        a relative 1e-5 (coincident or duplicated triangles) count once, as the triangle with
-        the smaller ``t``, then the smaller index.
+        the ray-cast counterpart of k depth-peeling layers. Hits whose ``t`` agree within a
+        relative 1e-5 (coincident or duplicated triangles) count once: in order of ``t``, then
+        index, a hit within 1e-5 of the hit that began the current surface joins it, and the
+        surface is reported as that first hit (so the answer does not depend on the order the
+        tree is searched in).
     threads : int, optional
         None: every core. 1: the calling thread only. k: a pool of k threads (made once).
     progress : bool, callable or None

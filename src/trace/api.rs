@@ -110,8 +110,10 @@ pub fn cast_rays_with(
 
 /// The first `k` hits along each ray, nearest first, in `[t_min, t_max)`. Hits whose `t` agree
 /// within [`SAME_HIT`](crate::types::SAME_HIT) (relative) are one surface met twice (coincident
-/// or duplicated triangles) and count once, as the triangle with the smaller `t` (then the
-/// smaller index).
+/// or duplicated triangles) and count once: in `(t, index)` order, a hit within the tolerance
+/// of the hit that began the current surface joins it, and the surface is reported as that
+/// first hit (`jobs::Nearest`; the answer does not depend on the traversal's order, so
+/// coherent rays travel as packets).
 pub fn nearest_hits(
     scene: &Scene,
     origins: &[[f32; 3]],

@@ -12,7 +12,9 @@ use super::rays::{Hit, Rays, Scratch, Traced};
 use super::refine::Pending;
 use super::schedule::{FreshHits, HitSlices};
 use super::sinks::{AnyHit, BlockHit, Closest, ClosestFront, ClosestKept, Counted, WORLD};
-use super::traverse::{block_stops, traverse, Kernel, Sink, Stack, Tri4Hit, WIDEN};
+use super::traverse::{
+    block_stops, coherent, traverse, Kernel, PacketStack, Sink, Stack, Tri4Hit, WIDEN, WIDTH,
+};
 use crate::types::SAME_HIT;
 
 /// Mark every entry of a chunk "no hit" (`t` +inf, triangle −1, barycentrics 0), before the
@@ -250,18 +252,55 @@ impl Job for NearestJob<'_> {
 
     #[inline(always)]
     fn chunk<K: Kernel>(&self, k: K, base: usize, fresh: FreshHits<'_>) {
-        let want = self.1;
+        let (rays, want) = (self.0, self.1);
         let (t, tri, bary) = no_hits(fresh);
+        let n = t.len() / want;
         // Memory for the hits found, not for `want` (which may be far larger).
-        let mut found = Vec::with_capacity(want.min(64) + 1);
+        let mut found: [Vec<Hit>; WIDTH] =
+            std::array::from_fn(|_| Vec::with_capacity(want.min(64) + 1));
         let mut stack = Stack::new();
-        for j in 0..t.len() / want {
-            nearest(k, self.0, base + j, want, self.2, &mut found, &mut stack);
-            for (m, h) in found.iter().enumerate() {
-                t[j * want + m] = h.t;
-                tri[j * want + m] = h.triangle as i32;
-                bary[j * want + m] = h.bary;
+        let mut packet = PacketStack::new();
+        // A packet's rays, set up in place by plain loops (see `Rays::trace`).
+        let none = rays.ray(base);
+        let mut traced = [none; WIDTH];
+        let mut lanes = [none.ray; WIDTH];
+        let mut dirs = [none.d; WIDTH];
+        let mut j = 0;
+        while j < n {
+            // Runs of eight coherent rays (a camera's pixels: peeling) as packets; a ray's
+            // surfaces do not depend on the order its hits arrive in (`Nearest`).
+            let mut done = 1;
+            if K::PACKETS && rays.packets && j + WIDTH <= n {
+                for i in 0..WIDTH {
+                    traced[i] = rays.ray(base + j + i);
+                    (lanes[i], dirs[i]) = (traced[i].ray, traced[i].d);
+                }
+                if coherent(&lanes, &dirs, rays.origin_extent) {
+                    let mut sinks = {
+                        let (mut f, mut r) = (found.iter_mut(), traced.iter());
+                        std::array::from_fn(|i| {
+                            let (found, r) = (f.next().expect("a lane"), r.next().expect("a lane"));
+                            found.clear();
+                            Nearest::new(rays, base + j + i, r, want, self.2, found)
+                        })
+                    };
+                    k.packet(rays.bvh, &lanes, (1 << WIDTH) - 1, &mut sinks, &mut packet);
+                    sinks.into_iter().for_each(Nearest::finish);
+                    done = WIDTH;
+                }
             }
+            if done == 1 {
+                nearest(k, rays, base + j, want, self.2, &mut found[0], &mut stack);
+            }
+            for (i, found) in found[..done].iter().enumerate() {
+                let at = (j + i) * want;
+                for (m, h) in found.iter().enumerate() {
+                    t[at + m] = h.t;
+                    tri[at + m] = h.triangle as i32;
+                    bary[at + m] = h.bary;
+                }
+            }
+            j += done;
         }
     }
 }
@@ -332,52 +371,116 @@ fn nearest<K: Kernel>(
 ) {
     let r = rays.ray(i);
     found.clear();
-    let mut sink = Nearest {
-        rays,
-        i,
-        r: &r,
-        want,
-        found,
-        t_far: r.t_far,
-        front_only,
-    };
+    let mut sink = Nearest::new(rays, i, &r, want, front_only, found);
     traverse(k, rays.bvh, &r.ray, &mut sink, stack);
+    sink.finish();
 }
 
-/// The k-nearest-hits sink: up to `want` distinct hits, refined as they are found, nearest
-/// first.
+/// The k-nearest-hits sink: the first `want` distinct surfaces along the ray, each hit refined
+/// as it is found.
+///
+/// Hits whose `t` agree within [`SAME_HIT`] are one surface met twice (a shared edge, a
+/// duplicated face). Which hits count as one is decided on the sorted list, not in the order
+/// they arrive: in `(t, triangle)` order, a hit joins the surface of the last hit that started
+/// one if it lies within the tolerance of it ([`same_surface`]), else starts the next, and each
+/// surface is reported as the hit that started it. So the answer does not depend on the order
+/// the traversal visits the tree (a packet's, a single ray's, any kernel's), which a merge of
+/// each new hit into the list would (three hits each within the tolerance of the next). The
+/// search stops at the `want`-th surface: a hit beyond it cannot come before it, and a later
+/// hit in front can only move it nearer (the surfaces are a greedy cover of the hits by
+/// intervals, and no cover of more hits needs fewer intervals).
 struct Nearest<'a> {
     rays: &'a Rays<'a>,
     /// The ray's index.
     i: usize,
     r: &'a Traced,
     want: usize,
+    /// Every hit kept so far, sorted by `(t, triangle)`; [`Nearest::finish`] leaves the
+    /// surfaces.
     found: &'a mut Vec<Hit>,
-    /// Traversal bound: `t_max` until `want` hits are in hand, then the last one's `t` widened
-    /// by the same-hit tolerance.
+    /// Traversal bound: `t_max` until `want` surfaces are in hand, then the last one's `t`
+    /// widened by twice the same-hit tolerance.
     t_far: f32,
     /// Skip triangles whose front (counter-clockwise) faces away from the ray.
     front_only: bool,
 }
 
-impl Nearest<'_> {
+/// Whether a hit at `t` (at or after `start` on the sorted list) is on the surface that
+/// `start` began: within [`SAME_HIT`] of it, relative.
+#[inline(always)]
+fn same_surface(start: f32, t: f32) -> bool {
+    t - start <= SAME_HIT * t
+}
+
+impl<'a> Nearest<'a> {
+    fn new(
+        rays: &'a Rays<'a>,
+        i: usize,
+        r: &'a Traced,
+        want: usize,
+        front_only: bool,
+        found: &'a mut Vec<Hit>,
+    ) -> Self {
+        Self {
+            rays,
+            i,
+            r,
+            want,
+            found,
+            t_far: r.t_far,
+            front_only,
+        }
+    }
+
     fn add(&mut self, h: Hit) {
-        let same = |a: f32, b: f32| (a - b).abs() <= SAME_HIT * a.max(b);
-        if let Some(e) = self.found.iter_mut().find(|e| same(e.t, h.t)) {
-            if (h.t, h.triangle) < (e.t, e.triangle) {
-                *e = h;
-                self.found.sort_by(|a, b| a.t.total_cmp(&b.t));
-            }
+        let at = self
+            .found
+            .partition_point(|e| (e.t, e.triangle) < (h.t, h.triangle));
+        if self.found.get(at).is_some_and(|e| e.triangle == h.triangle) {
+            // The same triangle from another leaf: the same hit.
             return;
         }
-        let at = self.found.partition_point(|e| e.t <= h.t);
         self.found.insert(at, h);
-        self.found.truncate(self.want);
-        if self.found.len() == self.want {
-            let last = self.found[self.want - 1].t as f64;
-            let bound = last * (1.0 + 2.0 * SAME_HIT as f64);
+        if self.want == usize::MAX {
+            return;
+        }
+        // The `want`-th surface, if there are that many yet: nothing beyond its tolerance can
+        // come before it, now or after more hits.
+        let (mut surfaces, mut start) = (0, f32::NAN);
+        for (k, e) in self.found.iter().enumerate() {
+            if surfaces > 0 && same_surface(start, e.t) {
+                continue;
+            }
+            if surfaces == self.want {
+                self.found.truncate(k);
+                break;
+            }
+            (surfaces, start) = (surfaces + 1, e.t);
+        }
+        if surfaces == self.want {
+            let bound = start as f64 * (1.0 + 2.0 * SAME_HIT as f64);
             self.t_far = self.t_far.min(bound as f32 * WIDEN);
         }
+    }
+
+    /// Leave only the surfaces in `found`: the first hit of each, at most `want`.
+    fn finish(self) {
+        let (found, want) = (self.found, self.want);
+        let mut kept = 0;
+        let mut start = f32::NAN;
+        for k in 0..found.len() {
+            let e = found[k];
+            if kept > 0 && same_surface(start, e.t) {
+                continue;
+            }
+            if kept == want {
+                break;
+            }
+            start = e.t;
+            found[kept] = e;
+            kept += 1;
+        }
+        found.truncate(kept);
     }
 }
 
@@ -407,5 +510,68 @@ impl Sink for Nearest<'_> {
             self.add(hit);
         }
         false
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::trace::query::Query;
+
+    /// The k-nearest sink reports the same surfaces whatever order its hits arrive in (a chain
+    /// of hits each within the tolerance of the next, a duplicate, a triangle met twice), hits
+    /// at or beyond its bound being dropped as the traversal drops them.
+    #[test]
+    fn surfaces_do_not_depend_on_the_order_hits_arrive_in() {
+        let scene = crate::trace::testdata::spheres(1);
+        let bvh = crate::trace::bvh::Bvh::of(&scene);
+        let (o, d) = ([[0.0, 0.0, 5.0]], [[0.0, 0.0, -1.0]]);
+        let q = Query::new(0.0, f32::INFINITY);
+        let rays = Rays::new(&bvh.tree, &o, &d, &q);
+        let r = rays.ray(0);
+        let e = SAME_HIT;
+        let hit = |t: f32, triangle: u32| Hit {
+            t,
+            triangle,
+            bary: [0.25, 0.5],
+        };
+        let hits = [
+            hit(1.0, 7),
+            hit(1.0 + 0.6 * e, 3),
+            hit(1.0 + 1.2 * e, 9),
+            hit(1.0 + 1.8 * e, 1),
+            hit(2.0, 5),
+            hit(2.0, 2),
+            hit(3.0, 4),
+            hit(3.0 + 0.5 * e, 0),
+            hit(4.0, 8),
+            hit(3.0, 4),
+        ];
+        // Greedy in (t, triangle) order: 1.0 takes 1 + 0.6e; 1 + 1.2e starts a surface and
+        // takes 1 + 1.8e; 2.0 is triangle 2's; 3.0 takes 3 + 0.5e.
+        let surfaces = [(1.0, 7), (1.0 + 1.2 * e, 9), (2.0, 2), (3.0, 4), (4.0, 8)];
+        let mut seed = 5u32;
+        for want in [1, 2, 3, 4, 5, 6, usize::MAX] {
+            let expect = &surfaces[..want.min(surfaces.len())];
+            for round in 0..300 {
+                let mut order = hits;
+                if round > 0 {
+                    for i in (1..order.len()).rev() {
+                        seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                        order.swap(i, (seed >> 16) as usize % (i + 1));
+                    }
+                }
+                let mut found = Vec::new();
+                let mut sink = Nearest::new(&rays, 0, &r, want, false, &mut found);
+                for h in order {
+                    if h.t < sink.t_far {
+                        sink.add(h);
+                    }
+                }
+                sink.finish();
+                let got: Vec<(f32, u32)> = found.iter().map(|h| (h.t, h.triangle)).collect();
+                assert_eq!(got, expect, "want {want}, round {round}");
+            }
+        }
     }
 }

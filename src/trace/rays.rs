@@ -83,6 +83,7 @@ impl<S> Scratch<S> {
 }
 
 /// One ray in traversal form.
+#[derive(Clone, Copy)]
 pub(crate) struct Traced {
     pub d: Vec3A,
     pub ray: Ray,

@@ -462,7 +462,10 @@ fn front_only_hits_are_the_nearest_front_face() {
         met += 1;
     }
     assert!(met > 300, "{met}");
-    assert!(same >= met * 999 / 1000, "{same} of {met} front faces agree");
+    assert!(
+        same >= met * 999 / 1000,
+        "{same} of {met} front faces agree"
+    );
 }
 
 #[test]
