@@ -409,6 +409,18 @@ def _kernel_answers(scene: ss.Scene) -> list[np.ndarray]:
     return out
 
 
+def _moves(scene: ss.Scene) -> np.ndarray:
+    """One small rigid move per object of ``scene``: a turn about y and a shift of a few
+    percent of the scene's size."""
+    lo, hi = scene.bounds.astype(np.float64)
+    out = np.tile(np.eye(4), (len(scene.objects), 1, 1))
+    for i in range(len(out)):
+        a = 0.05 * (i % 5)
+        out[i, [0, 0, 2, 2], [0, 2, 0, 2]] = [np.cos(a), np.sin(a), -np.sin(a), np.cos(a)]
+        out[i, :3, 3] = 0.02 * (hi - lo) * [i % 3, 0, (i + 1) % 2]
+    return out
+
+
 def _bits(a: np.ndarray) -> np.ndarray:
     a = np.ascontiguousarray(a)
     return a.view(np.uint32) if a.dtype == np.float32 else a
@@ -425,11 +437,15 @@ def test_every_kernel_gives_the_same_answers_on_shared_scenes(name: str) -> None
     if len(kernels) == 1:
         pytest.skip("the CPU has only the portable kernel")
     scene = load_quiet(SHARED[name])
+    scenes = [scene]
+    if len(scene.objects) > 1:
+        # A rigid pose: a two-level tree, whose packets enter each instance together.
+        scenes.append(scene.posed(_moves(scene)))
     answers = {}
     try:
         for k in kernels:
             assert ss.ray_kernel(k) == k
-            answers[k] = _kernel_answers(scene)
+            answers[k] = [a for s in scenes for a in _kernel_answers(s)]
     finally:
         assert ss.ray_kernel("best") == best
     for k in kernels[1:]:

@@ -152,7 +152,7 @@ impl Kernel for Avx2 {
         sinks: &mut L,
         stack: &mut PacketStack,
     ) -> bool {
-        super::packet::traverse(self, bvh, rays, active, sinks, stack);
+        super::packet::traverse(self, bvh, rays, active, sinks, stack, 0);
         true
     }
 

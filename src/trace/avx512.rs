@@ -94,7 +94,7 @@ impl Kernel for Avx512 {
         sinks: &mut L,
         stack: &mut PacketStack,
     ) -> bool {
-        super::packet::traverse(self.avx2(), bvh, rays, active, sinks, stack);
+        super::packet::traverse(self.avx2(), bvh, rays, active, sinks, stack, 0);
         true
     }
 

@@ -270,7 +270,7 @@ impl Job for NearestJob<'_> {
             // Runs of eight coherent rays (a camera's pixels: peeling) as packets; a ray's
             // surfaces do not depend on the order its hits arrive in (`Nearest`).
             let mut done = 1;
-            if K::PACKETS && rays.packets && j + WIDTH <= n {
+            if K::PACKETS && j + WIDTH <= n {
                 for i in 0..WIDTH {
                     traced[i] = rays.ray(base + j + i);
                     (lanes[i], dirs[i]) = (traced[i].ray, traced[i].d);

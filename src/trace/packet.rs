@@ -13,20 +13,29 @@
 //! test (on camera rays of the tiled bunny, 79% of the children are culled this way). Below a
 //! node that at most [`SWITCH`] lanes enter, each goes on alone with the single-ray traversal
 //! (Embree's hybrid mode switches the same way): 74% of those rays finish alone.
+//!
+//! On a two-level tree (a rigid pose), the packet traverses the top tree, and the lanes that
+//! reach an instance together enter it together ([`instance`]): each moved into the object's
+//! frame as a lone ray would be, then one packet through the object's subtree, whose sinks see
+//! the frame's distances (`traverse::InFrame`). Posed 2M-triangle tilings, camera rays, one
+//! thread: 0.50-0.66x the flat tree's time before, 0.75-0.80x with packets.
 
 use std::arch::x86_64::*;
 
-use super::node::{node_at, Bvh8, Node8, EMPTY, LEAF, STACK};
+use glam::Vec3A;
+
+use super::node::{leaf_first, node_at, Bvh8, Node8, EMPTY, LEAF, STACK};
 use super::token::Avx2;
-use super::traverse::{Lanes, PacketStack, Ray, WIDTH};
+use super::traverse::{coherent, InFrame, Lanes, PacketStack, Ray, Sink, WIDTH};
 
 /// A packet's lanes go on alone below a node that at most this many of them enter (Embree's
 /// hybrid traversal switches the same way): the packet tests each child's box for all eight
 /// lanes, a lone ray all eight boxes at once.
 const SWITCH: u32 = 4;
 
-/// Traverse `bvh` with the eight `rays` (lanes not in `active` hold copies and are ignored),
-/// giving each lane's leaf hits to `sinks`.
+/// Traverse `bvh` from its node `root` with the eight `rays` (lanes not in `active` hold copies
+/// and are ignored), giving each lane's leaf hits to `sinks`. In a two-level tree's top tree,
+/// the lanes that reach an instance enter it together where they can ([`instance`]).
 ///
 /// # Safety
 /// Must run inside a function compiled for AVX2 (the `Avx2` token proves the CPU has it).
@@ -38,6 +47,7 @@ pub fn traverse<S: Lanes>(
     mut active: u32,
     sinks: &mut S,
     stack: &mut PacketStack,
+    root: u32,
 ) {
     // SAFETY: `k` proves AVX2; every load reads a whole array of the right size.
     unsafe {
@@ -57,9 +67,21 @@ pub fn traverse<S: Lanes>(
         let frustum = Frustum::of(o, inv, inv_far, t_min);
         let mut t_far: [f32; WIDTH] = std::array::from_fn(|lane| sinks.t_far(lane));
         let mut sp = 0usize;
-        let (mut cur, mut mask) = (0u32, active);
+        let (mut cur, mut mask) = (root, active);
         'visit: loop {
-            if cur & LEAF != 0 || mask.count_ones() <= SWITCH {
+            let many = mask.count_ones() > SWITCH;
+            if cur & LEAF != 0 && many && sinks.instance(k, bvh, rays, cur, mask) {
+                // The lanes entered the instance as a packet: each lane's bound follows its sink.
+                let mut m = mask;
+                while m != 0 {
+                    let lane = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    t_far[lane] = sinks.t_far(lane);
+                    if sinks.done(lane) {
+                        active &= !(1 << lane);
+                    }
+                }
+            } else if cur & LEAF != 0 || !many {
                 // A leaf, or too few lanes left for a packet to pay: each lane goes on alone
                 // (at a leaf, the single-ray test of its blocks, ray by ray).
                 alone(
@@ -131,6 +153,60 @@ pub fn traverse<S: Lanes>(
             }
         }
     }
+}
+
+/// The lanes `mask` of `rays` at `leaf` of a two-level tree's top tree `top`, entering its
+/// instance as one packet: each lane moved into the instance's frame as a lone ray would be
+/// (`Instance::ray_in`), then traversed from the instance's subtree as a packet whose sinks see
+/// the frame's distances ([`InFrame`]). False, with nothing traced, where `top` is not a
+/// two-level tree or the moved lanes do not make a packet (their directions must share an
+/// octant).
+#[inline(always)]
+pub fn instance<S: Sink>(
+    k: Avx2,
+    top: &Bvh8,
+    rays: &[Ray; WIDTH],
+    leaf: u32,
+    mask: u32,
+    sinks: &mut [S; WIDTH],
+) -> bool {
+    let Some(inst) = &top.inst else {
+        return false;
+    };
+    // SAFETY: top leaves name one entry of `refs` each (`instances::pose`).
+    let to = unsafe { *inst.refs.get_unchecked(leaf_first(leaf)) };
+    let instance = &inst.instances[to.inst as usize];
+    // Lanes outside `mask` copy the first lane of it.
+    let first = mask.trailing_zeros() as usize;
+    let mut frame = [rays[first]; WIDTH];
+    let mut dirs = [Vec3A::ZERO; WIDTH];
+    let mut shift = [0.0f32; WIDTH];
+    for lane in 0..WIDTH {
+        let from = if mask >> lane & 1 == 1 { lane } else { first };
+        (frame[lane], shift[lane]) = instance.ray_in(&rays[from]);
+        dirs[lane] = frame[lane].d;
+    }
+    // The moved origins lie where each lane enters the object's box, as far apart as the
+    // packet's footprint there: only the directions need to agree (the bounds take the
+    // origins' spread).
+    if !coherent(&frame, &dirs, f32::INFINITY) {
+        return false;
+    }
+    let mut lanes = InFrame {
+        sinks,
+        shift,
+        inst: to.inst,
+    };
+    traverse(
+        k,
+        &inst.objects,
+        &frame,
+        mask,
+        &mut lanes,
+        &mut PacketStack::new(),
+        to.node,
+    );
+    true
 }
 
 /// Pop the next entry of `stack` (height `sp`) that some lane of `active` still needs, with those

@@ -25,9 +25,6 @@ pub(crate) struct Rays<'a> {
     /// (`interleave`): where the tree (a two-level tree's objects' trees included) is larger
     /// than [`INTERLEAVE_BYTES`].
     pub interleave: bool,
-    /// Whether coherent rays may travel as packets: on a flat tree (a two-level tree's rays go
-    /// one by one).
-    pub packets: bool,
 }
 
 /// Trees larger than this trace their closest-hit rays in turns (`interleave`), on x86-64 (where
@@ -51,7 +48,6 @@ impl<'a> Rays<'a> {
             range: (q.t_min, q.t_max),
             origin_extent: 0.05 * bvh.diagonal(),
             interleave: cfg!(target_arch = "x86_64") && bvh.bytes() > INTERLEAVE_BYTES,
-            packets: bvh.inst.is_none(),
         }
     }
 }
@@ -115,7 +111,7 @@ impl Rays<'_> {
         scratch.lone.clear();
         let mut j = range.start;
         while j < range.end {
-            if K::PACKETS && S::PACKETS && self.packets && j + WIDTH <= range.end {
+            if K::PACKETS && S::PACKETS && j + WIDTH <= range.end {
                 for i in 0..WIDTH {
                     (scratch.rays[i], scratch.dirs[i]) = self.traversal_ray(base + j + i);
                 }

@@ -561,3 +561,29 @@ fn a_posed_flat_tree_finds_what_a_fresh_build_finds() {
     let (tree, _) = bvh_for_with(&again, Threads::One, true).unwrap();
     assert_eq!(closest_on(&tree.tree, &o, &d), a);
 }
+
+/// On a two-level tree (a rigid pose), packets, which enter each instance together, find what
+/// the portable kernel's lone rays find, bit for bit; so do the k nearest hits.
+#[test]
+fn two_level_packets_find_what_lone_rays_find() {
+    let (_, posed, _) = super::testdata::posed_and_flat(6);
+    let (o, d) = camera_rays(128, [0.1, 0.2, 6.0]);
+    let tree = Bvh::of(&posed);
+    assert!(
+        tree.tree.inst.is_some(),
+        "a rigid pose traces a two-level tree"
+    );
+    let h = cast_rays(&posed, &o, &d, 0.0, f32::INFINITY).unwrap();
+    assert!(h.triangle.iter().filter(|&&t| t >= 0).count() > 1000);
+    let p = closest_on(&tree.tree, &o, &d);
+    let bits = |t: &[f32]| t.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(h.triangle, p.1);
+    assert_eq!(bits(&h.t), bits(&p.0));
+    let q = Query::new(0.0, f32::INFINITY);
+    let two = nearest_hits(&posed, &o, &d, 2, &q).unwrap();
+    let rays = Rays::new(&tree.tree, &o, &d, &q);
+    let job = super::jobs::NearestJob(&rays, 2, false);
+    let lone = super::testdata::written(2 * o.len(), |out| job.chunk(Portable, 0, out));
+    assert_eq!(two.triangle, lone.1);
+    assert_eq!(bits(&two.t), bits(&lone.0));
+}
