@@ -5,11 +5,13 @@
 
 use super::dispatch::dispatch;
 use super::driver::{drive, Seconds};
-use super::jobs::{any_plan, AllJob, AnyJob, AnyPlan, ClosestJob, CountJob, NearestJob};
+use super::jobs::{
+    any_plan, AllJob, AnyJob, AnyPlan, ClosestFront, ClosestJob, CountJob, NearestJob,
+};
 use super::query::Query;
 use super::rays::{Hit, Rays};
 use super::schedule::{collect, run, FreshHits, CHUNK};
-use super::sinks::{Closest, ClosestFront, ClosestKept};
+use super::sinks::{Closest, ClosestKept};
 use crate::error::Result;
 use crate::input_err;
 use crate::scene::Scene;

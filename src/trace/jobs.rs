@@ -11,7 +11,7 @@ use super::node::Bvh8;
 use super::rays::{Hit, Rays, Scratch, Traced};
 use super::refine::Pending;
 use super::schedule::{FreshHits, HitSlices};
-use super::sinks::{AnyHit, BlockHit, Closest, ClosestFront, ClosestKept, Counted, WORLD};
+use super::sinks::{AnyHit, BlockHit, Closest, ClosestKept, Counted, WORLD};
 use super::traverse::{
     block_stops, coherent, traverse, Kernel, PacketStack, Sink, Stack, Tri4Hit, WIDEN, WIDTH,
 };
@@ -36,6 +36,49 @@ fn no_hits<'o>((t, tri, bary): FreshHits<'o>) -> HitSlices<'o> {
 }
 
 /// A closest-hit sink: what it kept.
+/// Closest-hit sink that meets only the triangles whose counter-clockwise front faces the ray
+/// (direction `d`, as given): the traversal passes through back faces, as a rasteriser that
+/// culls them skips them (views with `cull_backfaces`). A plain sink per ray, so coherent rays
+/// travel as packets; before it, culled views took the k-nearest path ray by ray.
+#[derive(Clone, Copy)]
+pub(crate) struct ClosestFront<'a> {
+    pub closest: Closest,
+    pub rays: &'a Rays<'a>,
+    pub d: Vec3,
+}
+
+impl Sink for ClosestFront<'_> {
+    const INTERLEAVE: bool = true;
+
+    #[inline(always)]
+    fn t_far(&self) -> f32 {
+        self.closest.t_far
+    }
+
+    #[inline(always)]
+    fn take(&mut self, bvh: &Bvh8, block: usize, h: &Tri4Hit) -> bool {
+        self.take_in(bvh, block, h, WORLD)
+    }
+
+    #[inline(always)]
+    fn take_in(&mut self, bvh: &Bvh8, block: usize, h: &Tri4Hit, inst: u32) -> bool {
+        let mut front = *h;
+        let mut m = h.mask;
+        while m != 0 {
+            let lane = m.trailing_zeros() as usize;
+            m &= m - 1;
+            let [a, b, c] = self
+                .rays
+                .corners(&BlockHit::of(bvh, block, lane, h, inst))
+                .map(Vec3::from);
+            if (b - a).cross(c - a).dot(self.d) >= 0.0 {
+                front.mask &= !(1 << lane);
+            }
+        }
+        self.closest.take_in(bvh, block, &front, inst)
+    }
+}
+
 pub(crate) trait Best: Sink + Copy + Sync {
     fn best(&self) -> Option<BlockHit>;
     /// The sink for ray `i` of `rays`, from the job's prototype.
@@ -389,7 +432,7 @@ fn nearest<K: Kernel>(
 /// search stops at the `want`-th surface: a hit beyond it cannot come before it, and a later
 /// hit in front can only move it nearer (the surfaces are a greedy cover of the hits by
 /// intervals, and no cover of more hits needs fewer intervals).
-struct Nearest<'a> {
+pub(crate) struct Nearest<'a> {
     rays: &'a Rays<'a>,
     /// The ray's index.
     i: usize,
@@ -400,7 +443,7 @@ struct Nearest<'a> {
     found: &'a mut Vec<Hit>,
     /// Traversal bound: `t_max` until `want` surfaces are in hand, then the last one's `t`
     /// widened by twice the same-hit tolerance.
-    t_far: f32,
+    pub(crate) t_far: f32,
     /// Skip triangles whose front (counter-clockwise) faces away from the ray.
     front_only: bool,
 }
@@ -413,7 +456,7 @@ fn same_surface(start: f32, t: f32) -> bool {
 }
 
 impl<'a> Nearest<'a> {
-    fn new(
+    pub(crate) fn new(
         rays: &'a Rays<'a>,
         i: usize,
         r: &'a Traced,
@@ -432,7 +475,7 @@ impl<'a> Nearest<'a> {
         }
     }
 
-    fn add(&mut self, h: Hit) {
+    pub(crate) fn add(&mut self, h: Hit) {
         let at = self
             .found
             .partition_point(|e| (e.t, e.triangle) < (h.t, h.triangle));
@@ -464,7 +507,7 @@ impl<'a> Nearest<'a> {
     }
 
     /// Leave only the surfaces in `found`: the first hit of each, at most `want`.
-    fn finish(self) {
+    pub(crate) fn finish(self) {
         let (found, want) = (self.found, self.want);
         let mut kept = 0;
         let mut start = f32::NAN;
@@ -510,68 +553,5 @@ impl Sink for Nearest<'_> {
             self.add(hit);
         }
         false
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::trace::query::Query;
-
-    /// The k-nearest sink reports the same surfaces whatever order its hits arrive in (a chain
-    /// of hits each within the tolerance of the next, a duplicate, a triangle met twice), hits
-    /// at or beyond its bound being dropped as the traversal drops them.
-    #[test]
-    fn surfaces_do_not_depend_on_the_order_hits_arrive_in() {
-        let scene = crate::trace::testdata::spheres(1);
-        let bvh = crate::trace::bvh::Bvh::of(&scene);
-        let (o, d) = ([[0.0, 0.0, 5.0]], [[0.0, 0.0, -1.0]]);
-        let q = Query::new(0.0, f32::INFINITY);
-        let rays = Rays::new(&bvh.tree, &o, &d, &q);
-        let r = rays.ray(0);
-        let e = SAME_HIT;
-        let hit = |t: f32, triangle: u32| Hit {
-            t,
-            triangle,
-            bary: [0.25, 0.5],
-        };
-        let hits = [
-            hit(1.0, 7),
-            hit(1.0 + 0.6 * e, 3),
-            hit(1.0 + 1.2 * e, 9),
-            hit(1.0 + 1.8 * e, 1),
-            hit(2.0, 5),
-            hit(2.0, 2),
-            hit(3.0, 4),
-            hit(3.0 + 0.5 * e, 0),
-            hit(4.0, 8),
-            hit(3.0, 4),
-        ];
-        // Greedy in (t, triangle) order: 1.0 takes 1 + 0.6e; 1 + 1.2e starts a surface and
-        // takes 1 + 1.8e; 2.0 is triangle 2's; 3.0 takes 3 + 0.5e.
-        let surfaces = [(1.0, 7), (1.0 + 1.2 * e, 9), (2.0, 2), (3.0, 4), (4.0, 8)];
-        let mut seed = 5u32;
-        for want in [1, 2, 3, 4, 5, 6, usize::MAX] {
-            let expect = &surfaces[..want.min(surfaces.len())];
-            for round in 0..300 {
-                let mut order = hits;
-                if round > 0 {
-                    for i in (1..order.len()).rev() {
-                        seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-                        order.swap(i, (seed >> 16) as usize % (i + 1));
-                    }
-                }
-                let mut found = Vec::new();
-                let mut sink = Nearest::new(&rays, 0, &r, want, false, &mut found);
-                for h in order {
-                    if h.t < sink.t_far {
-                        sink.add(h);
-                    }
-                }
-                sink.finish();
-                let got: Vec<(f32, u32)> = found.iter().map(|h| (h.t, h.triangle)).collect();
-                assert_eq!(got, expect, "want {want}, round {round}");
-            }
-        }
     }
 }

@@ -26,7 +26,9 @@ use glam::Vec3A;
 
 use super::node::{leaf_first, node_at, Bvh8, Node8, EMPTY, LEAF, STACK};
 use super::token::Avx2;
-use super::traverse::{coherent, InFrame, Lanes, PacketStack, Ray, Sink, WIDTH};
+use super::traverse::{
+    coherent, visit, Kernel, Lanes, PacketStack, Ray, Sink, Stack, Tri4Hit, WIDTH,
+};
 
 /// A packet's lanes go on alone below a node that at most this many of them enter (Embree's
 /// hybrid traversal switches the same way): the packet tests each child's box for all eight
@@ -70,17 +72,9 @@ pub fn traverse<S: Lanes>(
         let (mut cur, mut mask) = (root, active);
         'visit: loop {
             let many = mask.count_ones() > SWITCH;
-            if cur & LEAF != 0 && many && sinks.instance(k, bvh, rays, cur, mask) {
+            if cur & LEAF != 0 && many && entered(k, bvh, rays, cur, mask, sinks) {
                 // The lanes entered the instance as a packet: each lane's bound follows its sink.
-                let mut m = mask;
-                while m != 0 {
-                    let lane = m.trailing_zeros() as usize;
-                    m &= m - 1;
-                    t_far[lane] = sinks.t_far(lane);
-                    if sinks.done(lane) {
-                        active &= !(1 << lane);
-                    }
-                }
+                follow(sinks, mask, &mut active, &mut t_far);
             } else if cur & LEAF != 0 || !many {
                 // A leaf, or too few lanes left for a packet to pay: each lane goes on alone
                 // (at a leaf, the single-ray test of its blocks, ray by ray).
@@ -155,6 +149,38 @@ pub fn traverse<S: Lanes>(
     }
 }
 
+/// Whether the lanes `mask` at `leaf` entered a two-level tree's instance as one packet
+/// ([`instance`]; only world lanes can, see `Lanes::sinks`).
+#[inline(always)]
+fn entered<L: Lanes>(
+    k: Avx2,
+    bvh: &Bvh8,
+    rays: &[Ray; WIDTH],
+    leaf: u32,
+    mask: u32,
+    lanes: &mut L,
+) -> bool {
+    match lanes.sinks() {
+        Some(sinks) if bvh.inst.is_some() => instance(k, bvh, rays, leaf, mask, sinks),
+        _ => false,
+    }
+}
+
+/// After lanes `mask` traced on elsewhere: each one's bound follows its sink, and a lane whose
+/// sink is done leaves `active`.
+#[inline(always)]
+fn follow<L: Lanes>(sinks: &L, mask: u32, active: &mut u32, t_far: &mut [f32; WIDTH]) {
+    let mut m = mask;
+    while m != 0 {
+        let lane = m.trailing_zeros() as usize;
+        m &= m - 1;
+        t_far[lane] = sinks.t_far(lane);
+        if sinks.done(lane) {
+            *active &= !(1 << lane);
+        }
+    }
+}
+
 /// The lanes `mask` of `rays` at `leaf` of a two-level tree's top tree `top`, entering its
 /// instance as one packet: each lane moved into the instance's frame as a lone ray would be
 /// (`Instance::ray_in`), then traversed from the instance's subtree as a packet whose sinks see
@@ -162,7 +188,7 @@ pub fn traverse<S: Lanes>(
 /// two-level tree or the moved lanes do not make a packet (their directions must share an
 /// octant).
 #[inline(always)]
-pub fn instance<S: Sink>(
+fn instance<S: Sink>(
     k: Avx2,
     top: &Bvh8,
     rays: &[Ray; WIDTH],
@@ -207,6 +233,94 @@ pub fn instance<S: Sink>(
         to.node,
     );
     true
+}
+
+/// A world sink seen from inside an instance's frame, as `traverse::visit_two` treats it there: its
+/// distances less the frame's `shift`, and its hits given back as the instance's
+/// ([`Sink::take_in`], with the shift added back).
+pub(crate) struct Shifted<'a, S> {
+    pub sink: &'a mut S,
+    pub shift: f32,
+    pub inst: u32,
+}
+
+impl<S: Sink> Sink for Shifted<'_, S> {
+    const ORDERED: bool = S::ORDERED;
+    const PREFETCH: bool = S::PREFETCH;
+    const PACKETS: bool = S::PACKETS;
+
+    #[inline(always)]
+    fn t_far(&self) -> f32 {
+        self.sink.t_far() - self.shift
+    }
+
+    #[inline(always)]
+    fn take(&mut self, bvh: &Bvh8, block: usize, h: &Tri4Hit) -> bool {
+        let mut h = *h;
+        for t in &mut h.t {
+            *t += self.shift;
+        }
+        self.sink.take_in(bvh, block, &h, self.inst)
+    }
+
+    #[inline(always)]
+    fn done(&self) -> bool {
+        self.sink.done()
+    }
+
+    #[inline(always)]
+    fn count(&mut self, nodes: u32, blocks: u32) {
+        self.sink.count(nodes, blocks)
+    }
+}
+
+/// A packet's lanes inside one instance of a two-level tree (`packet::instance`): each lane's
+/// sink is its world sink, [`Shifted`] by the lane's own shift into the frame.
+pub(crate) struct InFrame<'a, S> {
+    pub sinks: &'a mut [S; WIDTH],
+    pub shift: [f32; WIDTH],
+    pub inst: u32,
+}
+
+impl<S: Sink> Lanes for InFrame<'_, S> {
+    type Sink = S;
+
+    #[inline(always)]
+    fn sinks(&mut self) -> Option<&mut [S; WIDTH]> {
+        None
+    }
+
+    #[inline(always)]
+    fn t_far(&self, lane: usize) -> f32 {
+        self.sinks[lane].t_far() - self.shift[lane]
+    }
+
+    #[inline(always)]
+    fn done(&self, lane: usize) -> bool {
+        self.sinks[lane].done()
+    }
+
+    #[inline(always)]
+    fn subtree<K: Kernel>(
+        &mut self,
+        k: K,
+        bvh: &Bvh8,
+        lane: usize,
+        ray: &Ray,
+        root: u32,
+        stack: &mut Stack,
+    ) -> bool {
+        let mut sink = Shifted {
+            sink: &mut self.sinks[lane],
+            shift: self.shift[lane],
+            inst: self.inst,
+        };
+        let (mut cur, mut sp) = (root, 0usize);
+        while let Some(next) = visit(k, bvh, cur, ray, ray, &mut sink, stack, &mut sp) {
+            cur = next;
+        }
+        sink.done()
+    }
 }
 
 /// Pop the next entry of `stack` (height `sp`) that some lane of `active` still needs, with those

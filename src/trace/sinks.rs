@@ -1,11 +1,7 @@
 //! Where a traversal's hits go: the closest hit (with or without a mask of the triangles
-//! kept, or of front faces only) and any hit. The k-nearest and crossing sinks live with their
-//! queries.
-
-use glam::Vec3;
+//! kept) and any hit. The front-face, k-nearest and crossing sinks live with their queries.
 
 use super::node::Bvh8;
-use super::rays::Rays;
 use super::traverse::{Sink, Tri4Hit};
 
 /// No instance: a hit in a flat tree, whose blocks hold world corners.
@@ -143,49 +139,6 @@ impl Sink for ClosestKept<'_> {
             }
         }
         self.closest.take_in(bvh, block, &kept, inst)
-    }
-}
-
-/// Closest-hit sink that meets only the triangles whose counter-clockwise front faces the ray
-/// (direction `d`, as given): the traversal passes through back faces, as a rasteriser that
-/// culls them skips them (views with `cull_backfaces`). A plain sink per ray, so coherent rays
-/// travel as packets; before it, culled views took the k-nearest path ray by ray.
-#[derive(Clone, Copy)]
-pub(crate) struct ClosestFront<'a> {
-    pub closest: Closest,
-    pub rays: &'a Rays<'a>,
-    pub d: Vec3,
-}
-
-impl Sink for ClosestFront<'_> {
-    const INTERLEAVE: bool = true;
-
-    #[inline(always)]
-    fn t_far(&self) -> f32 {
-        self.closest.t_far
-    }
-
-    #[inline(always)]
-    fn take(&mut self, bvh: &Bvh8, block: usize, h: &Tri4Hit) -> bool {
-        self.take_in(bvh, block, h, WORLD)
-    }
-
-    #[inline(always)]
-    fn take_in(&mut self, bvh: &Bvh8, block: usize, h: &Tri4Hit, inst: u32) -> bool {
-        let mut front = *h;
-        let mut m = h.mask;
-        while m != 0 {
-            let lane = m.trailing_zeros() as usize;
-            m &= m - 1;
-            let [a, b, c] = self
-                .rays
-                .corners(&BlockHit::of(bvh, block, lane, h, inst))
-                .map(Vec3::from);
-            if (b - a).cross(c - a).dot(self.d) >= 0.0 {
-                front.mask &= !(1 << lane);
-            }
-        }
-        self.closest.take_in(bvh, block, &front, inst)
     }
 }
 

@@ -587,3 +587,60 @@ fn two_level_packets_find_what_lone_rays_find() {
     assert_eq!(two.triangle, lone.1);
     assert_eq!(bits(&two.t), bits(&lone.0));
 }
+
+/// The k-nearest sink reports the same surfaces whatever order its hits arrive in (a chain
+/// of hits each within the tolerance of the next, a duplicate, a triangle met twice), hits
+/// at or beyond its bound being dropped as the traversal drops them.
+#[test]
+fn surfaces_do_not_depend_on_the_order_hits_arrive_in() {
+    let scene = super::testdata::spheres(1);
+    let bvh = Bvh::of(&scene);
+    let (o, d) = ([[0.0, 0.0, 5.0]], [[0.0, 0.0, -1.0]]);
+    let q = Query::new(0.0, f32::INFINITY);
+    let rays = Rays::new(&bvh.tree, &o, &d, &q);
+    let r = rays.ray(0);
+    let e = crate::types::SAME_HIT;
+    let hit = |t: f32, triangle: u32| super::rays::Hit {
+        t,
+        triangle,
+        bary: [0.25, 0.5],
+    };
+    let hits = [
+        hit(1.0, 7),
+        hit(1.0 + 0.6 * e, 3),
+        hit(1.0 + 1.2 * e, 9),
+        hit(1.0 + 1.8 * e, 1),
+        hit(2.0, 5),
+        hit(2.0, 2),
+        hit(3.0, 4),
+        hit(3.0 + 0.5 * e, 0),
+        hit(4.0, 8),
+        hit(3.0, 4),
+    ];
+    // Greedy in (t, triangle) order: 1.0 takes 1 + 0.6e; 1 + 1.2e starts a surface and
+    // takes 1 + 1.8e; 2.0 is triangle 2's; 3.0 takes 3 + 0.5e.
+    let surfaces = [(1.0, 7), (1.0 + 1.2 * e, 9), (2.0, 2), (3.0, 4), (4.0, 8)];
+    let mut seed = 5u32;
+    for want in [1, 2, 3, 4, 5, 6, usize::MAX] {
+        let expect = &surfaces[..want.min(surfaces.len())];
+        for round in 0..300 {
+            let mut order = hits;
+            if round > 0 {
+                for i in (1..order.len()).rev() {
+                    seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                    order.swap(i, (seed >> 16) as usize % (i + 1));
+                }
+            }
+            let mut found = Vec::new();
+            let mut sink = super::jobs::Nearest::new(&rays, 0, &r, want, false, &mut found);
+            for h in order {
+                if h.t < sink.t_far {
+                    sink.add(h);
+                }
+            }
+            sink.finish();
+            let got: Vec<(f32, u32)> = found.iter().map(|h| (h.t, h.triangle)).collect();
+            assert_eq!(got, expect, "want {want}, round {round}");
+        }
+    }
+}

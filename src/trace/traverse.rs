@@ -262,22 +262,11 @@ pub trait Lanes {
     ) -> bool;
     /// Whether lane `lane`'s sink wants no more hits.
     fn done(&self, lane: usize) -> bool;
-    /// At `leaf`, a leaf of a two-level tree's top tree, let the lanes of `mask` enter its
-    /// instance together: one packet in the instance's frame. False where they cannot (their
-    /// directions in the frame do not share an octant, or these lanes are an instance's
-    /// already); they then go on alone.
-    #[inline(always)]
-    fn instance(
-        &mut self,
-        k: super::token::Avx2,
-        top: &Bvh8,
-        rays: &[Ray; WIDTH],
-        leaf: u32,
-        mask: u32,
-    ) -> bool {
-        let _ = (k, top, rays, leaf, mask);
-        false
-    }
+    /// The sink type of each lane.
+    type Sink: Sink;
+    /// The lanes' own sinks, where they are world sinks (a two-level tree's instance is entered
+    /// as a packet only from them: `packet::instance`); none inside an instance's frame.
+    fn sinks(&mut self) -> Option<&mut [Self::Sink; WIDTH]>;
 }
 
 impl<S: Sink> Lanes for [S; WIDTH] {
@@ -291,17 +280,11 @@ impl<S: Sink> Lanes for [S; WIDTH] {
         self[lane].done()
     }
 
-    #[cfg(target_arch = "x86_64")]
+    type Sink = S;
+
     #[inline(always)]
-    fn instance(
-        &mut self,
-        k: super::token::Avx2,
-        top: &Bvh8,
-        rays: &[Ray; WIDTH],
-        leaf: u32,
-        mask: u32,
-    ) -> bool {
-        super::packet::instance(k, top, rays, leaf, mask, self)
+    fn sinks(&mut self) -> Option<&mut [S; WIDTH]> {
+        Some(self)
     }
 
     #[inline(always)]
@@ -326,87 +309,6 @@ impl<S: Sink> Lanes for [S; WIDTH] {
             while let Some(next) = visit(k, bvh, cur, ray, ray, sink, stack, &mut sp) {
                 cur = next;
             }
-        }
-        sink.done()
-    }
-}
-
-/// A world sink seen from inside an instance's frame, as [`visit_two`] treats it there: its
-/// distances less the frame's `shift`, and its hits given back as the instance's
-/// ([`Sink::take_in`], with the shift added back).
-pub(crate) struct Shifted<'a, S> {
-    pub sink: &'a mut S,
-    pub shift: f32,
-    pub inst: u32,
-}
-
-impl<S: Sink> Sink for Shifted<'_, S> {
-    const ORDERED: bool = S::ORDERED;
-    const PREFETCH: bool = S::PREFETCH;
-    const PACKETS: bool = S::PACKETS;
-
-    #[inline(always)]
-    fn t_far(&self) -> f32 {
-        self.sink.t_far() - self.shift
-    }
-
-    #[inline(always)]
-    fn take(&mut self, bvh: &Bvh8, block: usize, h: &Tri4Hit) -> bool {
-        let mut h = *h;
-        for t in &mut h.t {
-            *t += self.shift;
-        }
-        self.sink.take_in(bvh, block, &h, self.inst)
-    }
-
-    #[inline(always)]
-    fn done(&self) -> bool {
-        self.sink.done()
-    }
-
-    #[inline(always)]
-    fn count(&mut self, nodes: u32, blocks: u32) {
-        self.sink.count(nodes, blocks)
-    }
-}
-
-/// A packet's lanes inside one instance of a two-level tree (`packet::instance`): each lane's
-/// sink is its world sink, [`Shifted`] by the lane's own shift into the frame.
-pub(crate) struct InFrame<'a, S> {
-    pub sinks: &'a mut [S; WIDTH],
-    pub shift: [f32; WIDTH],
-    pub inst: u32,
-}
-
-impl<S: Sink> Lanes for InFrame<'_, S> {
-    #[inline(always)]
-    fn t_far(&self, lane: usize) -> f32 {
-        self.sinks[lane].t_far() - self.shift[lane]
-    }
-
-    #[inline(always)]
-    fn done(&self, lane: usize) -> bool {
-        self.sinks[lane].done()
-    }
-
-    #[inline(always)]
-    fn subtree<K: Kernel>(
-        &mut self,
-        k: K,
-        bvh: &Bvh8,
-        lane: usize,
-        ray: &Ray,
-        root: u32,
-        stack: &mut Stack,
-    ) -> bool {
-        let mut sink = Shifted {
-            sink: &mut self.sinks[lane],
-            shift: self.shift[lane],
-            inst: self.inst,
-        };
-        let (mut cur, mut sp) = (root, 0usize);
-        while let Some(next) = visit(k, bvh, cur, ray, ray, &mut sink, stack, &mut sp) {
-            cur = next;
         }
         sink.done()
     }
