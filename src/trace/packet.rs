@@ -27,7 +27,7 @@ use glam::Vec3A;
 use super::node::{leaf_first, node_at, Bvh8, Node8, EMPTY, LEAF, STACK};
 use super::token::Avx2;
 use super::traverse::{
-    coherent, visit, Kernel, Lanes, PacketStack, Ray, Sink, Stack, Tri4Hit, WIDTH,
+    coherent, walk, Kernel, Lanes, PacketStack, Ray, Sink, Stack, Tri4Hit, WIDTH,
 };
 
 /// A packet's lanes go on alone below a node that at most this many of them enter (Embree's
@@ -315,10 +315,7 @@ impl<S: Sink> Lanes for InFrame<'_, S> {
             shift: self.shift[lane],
             inst: self.inst,
         };
-        let (mut cur, mut sp) = (root, 0usize);
-        while let Some(next) = visit(k, bvh, cur, ray, ray, &mut sink, stack, &mut sp) {
-            cur = next;
-        }
+        walk(k, bvh, root, ray, &mut sink, stack);
         sink.done()
     }
 }

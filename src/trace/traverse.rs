@@ -306,9 +306,7 @@ impl<S: Sink> Lanes for [S; WIDTH] {
                 cur = next;
             }
         } else {
-            while let Some(next) = visit(k, bvh, cur, ray, ray, sink, stack, &mut sp) {
-                cur = next;
-            }
+            walk(k, bvh, root, ray, sink, stack);
         }
         sink.done()
     }
@@ -422,8 +420,23 @@ pub fn traverse<K: Kernel, S: Sink>(k: K, bvh: &Bvh8, ray: &Ray, sink: &mut S, s
             return;
         }
     }
-    let (mut cur, mut sp) = (0u32, 0usize);
-    while let Some(next) = visit(k, bvh, cur, r, ray, sink, stack, &mut sp) {
+    walk(k, bvh, 0, ray, sink, stack);
+}
+
+/// Visit the subtree of the flat tree `bvh` at `root` (a node or a leaf) along `ray`, giving
+/// every leaf block's hits to `sink`: a traversal, a packet's lane on its own, a lane inside an
+/// instance's frame.
+#[inline(always)]
+pub(crate) fn walk<K: Kernel, S: Sink>(
+    k: K,
+    bvh: &Bvh8,
+    root: u32,
+    ray: &Ray,
+    sink: &mut S,
+    stack: &mut Stack,
+) {
+    let (mut cur, mut sp) = (root, 0usize);
+    while let Some(next) = visit(k, bvh, cur, ray, ray, sink, stack, &mut sp) {
         cur = next;
     }
 }
